@@ -1,0 +1,5 @@
+"""``python -m robocore`` runs the CLI."""
+
+from robocore.cli import main
+
+main()

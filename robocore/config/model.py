@@ -1,0 +1,258 @@
+"""The robot.yaml model: frozen pydantic models, unknown keys rejected.
+
+Field-level rules live here; rules that look across fields or at the file system
+live in :mod:`robocore.config.checks` so that every problem carries its own key path.
+"""
+
+from __future__ import annotations
+
+import re
+from enum import Enum
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+NAME_PATTERN = r"^[A-Za-z][A-Za-z0-9_\-]{0,62}$"
+Name = Annotated[str, Field(pattern=NAME_PATTERN, description="Identifier: a letter, then letters, digits, '_' or '-'.")]
+
+#: ROS 2 distributions robocore knows, with the Fast DDS line each ships.
+FASTDDS_LINE: dict[str, int] = {"humble": 2, "jazzy": 2, "kilted": 3, "rolling": 3}
+
+_PORT_RE = re.compile(
+    r"^(?:(?P<ip>[0-9.]+|\[[0-9a-fA-F:]+\]):)?(?P<host>\d{1,5})(?:-(?P<host_end>\d{1,5}))?"
+    r":(?P<cont>\d{1,5})(?:-(?P<cont_end>\d{1,5}))?(?:/(?P<proto>tcp|udp|sctp))?$"
+)
+
+
+class Strict(BaseModel):
+    """Base for every robot.yaml model: frozen, unknown keys are errors."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class RosDistro(str, Enum):
+    """ROS 2 distributions robocore can target."""
+
+    humble = "humble"
+    jazzy = "jazzy"
+    kilted = "kilted"
+    rolling = "rolling"
+
+
+class Arch(str, Enum):
+    """CPU architectures of hosts (Docker platform names)."""
+
+    amd64 = "amd64"
+    arm64 = "arm64"
+
+
+class DockerAccess(str, Enum):
+    """How robocore reaches a host's Docker daemon."""
+
+    local = "local"
+    ssh = "ssh"
+    tls = "tls"
+    tcp = "tcp"
+
+
+class TlsFiles(Strict):
+    """Client certificate files for a Docker daemon served over TLS."""
+
+    ca_cert: str = Field(description="CA certificate that signed the daemon's certificate.")
+    client_cert: str = Field(description="Client certificate.")
+    client_key: str = Field(description="Client private key (kept on the dev machine, never copied).")
+
+
+class Host(Strict):
+    """A machine of the robot (or the dev machine) that runs components."""
+
+    name: Name
+    ip: str = Field(min_length=1, description="Address or hostname used for SSH, rsync and Docker.")
+    user: str = Field(default="root", pattern=r"^[a-z_][a-z0-9_\-.]{0,31}$", description="SSH user.")
+    arch: Arch = Arch.amd64
+    docker: DockerAccess | None = Field(
+        default=None,
+        description="How the Docker daemon is reached: local (this machine's socket), ssh "
+        "(default for remote hosts), tls (TCP with client certificates), tcp (plain, needs insecure: true).",
+    )
+    docker_port: int | None = Field(default=None, ge=1, le=65535, description="TCP port of the daemon (tls: 2376, tcp: 2375).")
+    ssh_port: int = Field(default=22, ge=1, le=65535)
+    tls: TlsFiles | None = None
+    insecure: bool = Field(default=False, description="Allow plain unauthenticated TCP to this host's daemon.")
+    mount_root: str | None = Field(
+        default=None,
+        description="Absolute folder on the host that receives synced install trees (default /home/<user>/robocore, /root/robocore for root).",
+    )
+
+    @field_validator("ip")
+    @classmethod
+    def _no_spaces(cls, value: str) -> str:
+        if any(ch.isspace() for ch in value) or "/" in value:
+            raise ValueError("must be an IP address or a hostname")
+        return value
+
+    @field_validator("mount_root")
+    @classmethod
+    def _absolute(cls, value: str | None) -> str | None:
+        if value is not None and not value.startswith("/"):
+            raise ValueError("must be an absolute path")
+        return value
+
+    @property
+    def is_local(self) -> bool:
+        """True when the host is this machine."""
+        return self.access is DockerAccess.local
+
+    @property
+    def access(self) -> DockerAccess:
+        """The effective Docker access: explicit, else local for loopback addresses, else ssh."""
+        if self.docker is not None:
+            return self.docker
+        if self.ip in {"127.0.0.1", "localhost", "::1"}:
+            return DockerAccess.local
+        return DockerAccess.ssh
+
+    @property
+    def deploy_root(self) -> str:
+        """The folder on the host that receives synced trees."""
+        if self.mount_root:
+            return self.mount_root.rstrip("/") or "/"
+        return "/root/robocore" if self.user == "root" else f"/home/{self.user}/robocore"
+
+
+class CommonPackage(Strict):
+    """A ROS package shared by every component, built into the base image."""
+
+    name: Name
+    folder: str | None = Field(default=None, description="Local folder of the package (inside the project).")
+    repo: str | None = Field(default=None, description="Git URL, fetched on the dev machine.")
+    branch: str | None = Field(default=None, description="Branch, tag or commit of repo.")
+
+
+class Repository(Strict):
+    """A source dependency in vcstool's .repos terms."""
+
+    url: str = Field(min_length=1)
+    version: str | None = None
+    folder: str | None = Field(default=None, description="Folder name under the workspace's src/ (default: from the URL).")
+    type: Literal["git"] = "git"
+
+
+class BaseKind(str, Enum):
+    """Where the ROS installation of the base image comes from."""
+
+    official = "official"
+    wheels = "wheels"
+
+
+class BaseImage(Strict):
+    """The base image every component image starts from."""
+
+    kind: BaseKind = Field(default=BaseKind.official, description="official: ros:<distro>-ros-base; wheels: Debian 12 + ROS 2 from PyPI.")
+    image: str | None = Field(default=None, description="Override of the FROM image (official) or of the root image (wheels).")
+
+
+class DiscoveryServer(Strict):
+    """One Fast DDS discovery server."""
+
+    host: Name
+    port: int = Field(default=11811, ge=1024, le=65535)
+
+
+class Discovery(Strict):
+    """How nodes find each other."""
+
+    servers: list[DiscoveryServer] = Field(default_factory=list, description="Default: one server on the first host.")
+    transport: Literal["shm", "udp"] = Field(
+        default="shm",
+        description="shm: shared memory between containers of one host (ipc: host); udp: UDP only.",
+    )
+
+
+class Component(Strict):
+    """A group of ROS nodes with its dependencies, run as one container on one host."""
+
+    name: Name
+    runs_on: Name
+    folder: str | None = Field(default=None, description="The component's ROS workspace (packages under it, or under its src/).")
+    image: str | None = Field(default=None, description="A pre-built image; excludes folder, apt_packages and repositories.")
+    apt_packages: list[Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9+.\-]*(=[A-Za-z0-9.+:~\-]+)?$")]] = Field(default_factory=list)
+    pip_packages: list[Annotated[str, Field(min_length=1, pattern=r"^[^\s;]+$")]] = Field(default_factory=list)
+    repositories: list[Repository] = Field(default_factory=list)
+    postinstall: list[str] = Field(default_factory=list, description="Shell commands run in the image after dependencies are installed.")
+    entrypoint: str | None = Field(default=None, description="Command run at container start, ROS sourced.")
+    launch_args: str | None = Field(default=None, description="Arguments appended to entrypoint.")
+    devices: list[str] = Field(default_factory=list, description="host_path[:container_path[:permissions]]")
+    ports: list[str] = Field(default_factory=list, description="[ip:]host:container[/proto]; only used off host networking.")
+    environment: dict[str, str] = Field(default_factory=dict)
+    volumes: list[str] = Field(default_factory=list, description="host_path:container_path[:ro|rw]")
+    nvidia: bool = False
+    gui: bool = False
+    privileged: bool = False
+
+    @field_validator("environment", mode="before")
+    @classmethod
+    def _stringify_env(cls, value: object) -> object:
+        if isinstance(value, dict):
+            return {k: (v if isinstance(v, str) else _scalar_text(v)) for k, v in value.items()}
+        return value
+
+    @property
+    def has_workspace(self) -> bool:
+        """True when the component has a local workspace to build."""
+        return self.folder is not None
+
+
+def _scalar_text(value: object) -> object:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return str(value)
+    return value
+
+
+class Robot(Strict):
+    """A whole robot: one robot.yaml."""
+
+    ros_distro: RosDistro
+    ros_domain_id: int = Field(default=0, ge=0, le=232, description="DDS domain id (0-232).")
+    registry: str | None = Field(default=None, description="Registry images are pushed to; without one, images are streamed to hosts.")
+    image_prefix: str = Field(default="", pattern=r"^[a-z0-9._\-/]*$", description="Prefix of every image name.")
+    base: BaseImage = Field(default_factory=BaseImage)
+    discovery: Discovery = Field(default_factory=Discovery)
+    hosts: list[Host] = Field(min_length=1)
+    common_packages: list[CommonPackage] = Field(default_factory=list)
+    components: list[Component] = Field(default_factory=list)
+
+    def host(self, name: str) -> Host:
+        """The host called ``name`` (KeyError if none)."""
+        for host in self.hosts:
+            if host.name == name:
+                return host
+        raise KeyError(name)
+
+    def component(self, name: str) -> Component:
+        """The component called ``name`` (KeyError if none)."""
+        for comp in self.components:
+            if comp.name == name:
+                return comp
+        raise KeyError(name)
+
+    def components_on(self, host: str) -> list[Component]:
+        """Components that run on ``host``, in file order."""
+        return [c for c in self.components if c.runs_on == host]
+
+    @property
+    def discovery_servers(self) -> list[DiscoveryServer]:
+        """Configured discovery servers, or one on the first host."""
+        return list(self.discovery.servers) or [DiscoveryServer(host=self.hosts[0].name)]
+
+    @property
+    def fastdds_line(self) -> int:
+        """The Fast DDS major version of the distro (2 or 3)."""
+        return FASTDDS_LINE[self.ros_distro.value]
+
+
+def port_pattern() -> re.Pattern[str]:
+    """The regular expression that port mappings must match."""
+    return _PORT_RE

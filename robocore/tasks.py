@@ -1,0 +1,235 @@
+"""The invoke task collection: ``invoke <task>`` in a project, ``robocore <task>`` anywhere.
+
+Tasks are thin: parse flags, load the project, hand over to :mod:`robocore.commands`.
+Every :class:`~robocore.errors.RobocoreError` is translated here, and only here, into
+one line per problem on stderr and a non-zero exit code. Heavy imports (pydantic,
+docker-py, copier) happen inside the task bodies so that ``robocore --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TypeVar
+
+from invoke import Collection, Context, task
+from invoke.exceptions import Exit
+
+from robocore.errors import RobocoreError
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+PROJECT_ENV = "ROBOCORE_PROJECT"
+
+
+def project_dir(c: Context) -> Path:
+    """The project folder: ``-p``/``ROBOCORE_PROJECT``, else the current folder."""
+    configured = os.environ.get(PROJECT_ENV)
+    return Path(configured) if configured else Path.cwd()
+
+
+def reported(body: F) -> F:
+    """Translate robocore errors into one line per problem and an exit code."""
+
+    @functools.wraps(body)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return body(*args, **kwargs)
+        except RobocoreError as error:
+            for line in error.lines():
+                print(f"error: {line}" if not line.startswith("hint:") else line, file=sys.stderr)
+            raise Exit(code=error.exit_code) from None
+        except KeyboardInterrupt:
+            print("interrupted", file=sys.stderr)
+            raise Exit(code=130) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+def _options(c: Context, **flags: Any) -> Any:
+    from robocore.commands.context import Options
+
+    return Options(project_dir=project_dir(c), **flags)
+
+
+@task(help={"dry_run": "Only print what would be checked."})
+@reported
+def validate(c: Context, dry_run: bool = False) -> None:
+    """Check robot.yaml: every problem, one line each, with file, line and key."""
+    from robocore.commands import validate as command
+
+    command.run(_options(c, dry_run=dry_run))
+
+
+@task(
+    help={
+        "defaults": "Use default answers, ask nothing.",
+        "distro": "ROS 2 distribution (humble, jazzy, kilted, rolling).",
+        "base": "Base image kind: official or wheels.",
+        "dry_run": "Only print what would be written.",
+    },
+    optional=[],
+)
+@reported
+def init(c: Context, path: str, defaults: bool = False, distro: str = "", base: str = "", dry_run: bool = False) -> None:
+    """Create a robot project in PATH from the copier template."""
+    from robocore.commands import init as command
+
+    command.run(Path(path), defaults=defaults, distro=distro or None, base=base or None, dry_run=dry_run)
+
+
+@task
+def schema(c: Context) -> None:
+    """Print the JSON Schema of robot.yaml."""
+    from robocore.config.schema import schema_json
+
+    print(schema_json())
+
+
+@task(name="prepare-base", help={"force": "Rebuild even if inputs are unchanged.", "dry_run": "Print the plan only.",
+                                 "quiet": "Only errors.", "json": "Machine-readable result on stdout."})
+@reported
+def prepare_base(c: Context, force: bool = False, dry_run: bool = False, quiet: bool = False, json: bool = False) -> None:
+    """Build the base image: ROS distro + common_packages; only when its inputs changed."""
+    from robocore.commands import images
+
+    images.prepare_base(_options(c, dry_run=dry_run, quiet=quiet, json=json), force=force)
+
+
+@task(help={"refresh": "Only rewrite the per-host compose files.", "component": "Stage only this component.",
+            "force": "Rebuild even if inputs are unchanged.", "dry_run": "Print the plan only.",
+            "quiet": "Only errors.", "json": "Machine-readable result on stdout."})
+@reported
+def stage(c: Context, refresh: bool = False, component: str = "", force: bool = False,
+          dry_run: bool = False, quiet: bool = False, json: bool = False) -> None:
+    """Build one image per component (dependencies, no user code) and write compose files."""
+    from robocore.commands import images
+
+    images.stage(_options(c, dry_run=dry_run, quiet=quiet, json=json), refresh=refresh,
+                 component=component or None, force=force)
+
+
+@task(help={"component": "Build only this component.", "dry_run": "Print the plan only.",
+            "quiet": "Only errors.", "json": "Machine-readable result on stdout."})
+@reported
+def build(c: Context, component: str = "", dry_run: bool = False, quiet: bool = False, json: bool = False) -> None:
+    """colcon-build each component's workspace inside its staged image."""
+    from robocore.commands import images
+
+    images.build(_options(c, dry_run=dry_run, quiet=quiet, json=json), component=component or None)
+
+
+@task(help={"host": "Sync only this host.", "dry_run": "Print the rsync commands only.", "quiet": "Only errors.",
+            "json": "Machine-readable result on stdout."})
+@reported
+def sync(c: Context, host: str = "", dry_run: bool = False, quiet: bool = False, json: bool = False) -> None:
+    """Copy compiled install trees and runtime files to each host; only what changed."""
+    from robocore.commands import deploy
+
+    deploy.sync(_options(c, dry_run=dry_run, quiet=quiet, json=json), host=host or None)
+
+
+@task(help={"host": "Start/restart only this host.", "tag": "Deploy this released version.",
+            "dry_run": "Print the container plan only.", "quiet": "Only errors.", "json": "Machine-readable result."})
+@reported
+def run(c: Context, host: str = "", tag: str = "", dry_run: bool = False, quiet: bool = False, json: bool = False) -> None:
+    """(Re)start each host's containers and the discovery server."""
+    from robocore.commands import deploy
+
+    deploy.run(_options(c, dry_run=dry_run, quiet=quiet, json=json), host=host or None, tag=tag or None)
+
+
+@task(help={"host": "Stop only this host.", "dry_run": "Print what would be removed."})
+@reported
+def down(c: Context, host: str = "", dry_run: bool = False) -> None:
+    """Stop and remove the robot's containers."""
+    from robocore.commands import deploy
+
+    deploy.down(_options(c, dry_run=dry_run), host=host or None)
+
+
+@task(help={"json": "Machine-readable output.", "dry_run": "Print what would be queried."})
+@reported
+def status(c: Context, json: bool = False, dry_run: bool = False) -> None:
+    """Table of components (host, state, uptime, restarts, image) and live ROS nodes."""
+    from robocore.commands import deploy
+
+    deploy.status(_options(c, json=json, dry_run=dry_run))
+
+
+@task(help={"component": "Only this component.", "follow": "Keep following.", "tail": "Lines per container.",
+            "dry_run": "Print what would be read."})
+@reported
+def logs(c: Context, component: str = "", follow: bool = False, tail: int = 100, dry_run: bool = False) -> None:
+    """Logs of the robot's containers on all hosts, each line prefixed by its component."""
+    from robocore.commands import deploy
+
+    deploy.logs(_options(c, dry_run=dry_run), component=component or None, follow=follow, tail=tail)
+
+
+@task(help={"component": "The component to open a shell in (required).", "cmd": "Run this instead of a shell.",
+            "new": "Start another container instead of joining a running one.",
+            "devices": "'all' to pass every device of /dev.", "gpus": "Force GPUs on.", "no_gpus": "Force GPUs off.",
+            "privileged": "Run privileged.", "dry_run": "Print the container spec only."})
+@reported
+def shell(c: Context, component: str, cmd: str = "", new: bool = False, devices: str = "", gpus: bool = False,
+          no_gpus: bool = False, privileged: bool = False, dry_run: bool = False) -> None:
+    """Interactive dev container in a component's environment (source mounted, ROS sourced)."""
+    from robocore.commands import devshell
+
+    code = devshell.run(_options(c, dry_run=dry_run), component=component, cmd=cmd or None, new=new,
+                        devices=devices or None, gpus=True if gpus else (False if no_gpus else None),
+                        privileged=privileged)
+    if code:
+        raise Exit(code=code)
+
+
+@task(help={"component": "The component whose live container to enter (required).",
+            "cmd": "Run this instead of a shell.", "dry_run": "Print what would be run."})
+@reported
+def connect(c: Context, component: str, cmd: str = "", dry_run: bool = False) -> None:
+    """Shell inside the running container of a component on its host, as a ROS super client."""
+    from robocore.commands import deploy
+
+    code = deploy.connect(_options(c, dry_run=dry_run), component=component, cmd=cmd or None)
+    if code:
+        raise Exit(code=code)
+
+
+@task(help={"tag": "Version (default: git describe).", "dry_run": "Print what would be pushed."})
+@reported
+def release(c: Context, tag: str = "", dry_run: bool = False) -> None:
+    """Tag every image with a version and push it to the registry."""
+    from robocore.commands import deploy
+
+    deploy.release(_options(c, dry_run=dry_run), tag=tag or None)
+
+
+@task(help={"host": "Only this host.", "dry_run": "Print what would be done."})
+@reported
+def rollback(c: Context, host: str = "", dry_run: bool = False) -> None:
+    """Return each host to the version it ran before the last run."""
+    from robocore.commands import deploy
+
+    deploy.rollback(_options(c, dry_run=dry_run), host=host or None)
+
+
+@task(help={"host": "Only this host."})
+@reported
+def doctor(c: Context, host: str = "") -> None:
+    """Check every host: reachable, Docker version, arch, free disk, rsync."""
+    from robocore.commands import deploy
+
+    deploy.doctor(_options(c), host=host or None)
+
+
+PROJECT_TASKS = (validate, prepare_base, stage, build, sync, run, down, status, logs, shell, connect,
+                 release, rollback, doctor)
+
+#: The collection a project's tasks.py re-exports (``from robocore.tasks import namespace``).
+namespace = Collection(*PROJECT_TASKS)
+#: The collection of the ``robocore`` command: the project tasks plus init and schema.
+cli_namespace = Collection(init, schema, *PROJECT_TASKS)

@@ -1,0 +1,40 @@
+# Sourced by scripts/demo and scripts/test: make .venv with robocore and its tools,
+# and the few Debian tools robocore drives (mmdebstrap, rsync, ssh, Xvfb for the GUI tests).
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="$ROOT/.venv"
+
+need_debs=()
+command -v mmdebstrap >/dev/null || need_debs+=(mmdebstrap)
+command -v rsync >/dev/null || need_debs+=(rsync)
+command -v ssh >/dev/null || need_debs+=(openssh-client)
+if [ "${ROBOCORE_GUI_TOOLS:-0}" = 1 ]; then
+  command -v Xvfb >/dev/null || need_debs+=(xvfb)
+  command -v xauth >/dev/null || need_debs+=(xauth)
+fi
+if [ ${#need_debs[@]} -gt 0 ]; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    echo "installing ${need_debs[*]} with apt-get" >&2
+    apt-get update -qq >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${need_debs[@]}" >/dev/null
+  elif command -v sudo >/dev/null && command -v apt-get >/dev/null; then
+    echo "installing ${need_debs[*]} with sudo apt-get" >&2
+    sudo apt-get update -qq >/dev/null && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${need_debs[@]}" >/dev/null
+  else
+    echo "warning: please install ${need_debs[*]} (Debian/Ubuntu: apt-get install ${need_debs[*]})" >&2
+  fi
+fi
+
+command -v docker >/dev/null || { echo "error: docker is not installed; robocore needs a Docker Engine" >&2; exit 1; }
+docker info >/dev/null 2>&1 || { echo "error: cannot reach the Docker daemon (is it running? may this user use it?)" >&2; exit 1; }
+
+PY="${PYTHON:-python3}"
+if [ ! -x "$VENV/bin/python" ]; then
+  "$PY" -m venv "$VENV"
+fi
+stamp="$VENV/.robocore-installed"
+if [ ! -f "$stamp" ] || [ "$ROOT/pyproject.toml" -nt "$stamp" ]; then
+  "$VENV/bin/python" -m pip install -q --upgrade pip >/dev/null
+  "$VENV/bin/python" -m pip install -q -e "$ROOT[dev]"
+  touch "$stamp"
+fi
+export PATH="$VENV/bin:$PATH"
