@@ -186,6 +186,11 @@ class Component(Strict):
     ports: list[str] = Field(default_factory=list, description="[ip:]host:container[/proto]; only used off host networking.")
     environment: dict[str, str] = Field(default_factory=dict)
     volumes: list[str] = Field(default_factory=list, description="host_path:container_path[:ro|rw]")
+    network: Literal["host", "bridge"] | None = Field(
+        default=None,
+        description="host (default; DDS across hosts needs it) or bridge (default when ports are given, which host networking ignores).",
+    )
+    restart: Literal["no", "always", "unless-stopped", "on-failure"] = "unless-stopped"
     nvidia: bool = False
     gui: bool = False
     privileged: bool = False
@@ -196,6 +201,13 @@ class Component(Strict):
         if isinstance(value, dict):
             return {k: (v if isinstance(v, str) else _scalar_text(v)) for k, v in value.items()}
         return value
+
+    @property
+    def network_mode(self) -> str:
+        """The effective network: explicit, else bridge when ports are published, else host."""
+        if self.network is not None:
+            return self.network
+        return "bridge" if self.ports else "host"
 
     @property
     def has_workspace(self) -> bool:
