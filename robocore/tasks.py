@@ -127,9 +127,9 @@ def build(c: Context, component: str = "", dry_run: bool = False, quiet: bool = 
 @reported
 def sync(c: Context, host: str = "", dry_run: bool = False, quiet: bool = False, json: bool = False) -> None:
     """Copy compiled install trees and runtime files to each host; only what changed."""
-    from robocore.commands import deploy
+    from robocore.commands import sync as command
 
-    deploy.sync(_options(c, dry_run=dry_run, quiet=quiet, json=json), host=host or None)
+    command.sync(_options(c, dry_run=dry_run, quiet=quiet, json=json), host=host or None)
 
 
 @task(help={"host": "Start/restart only this host.", "tag": "Deploy this released version.",
@@ -137,27 +137,27 @@ def sync(c: Context, host: str = "", dry_run: bool = False, quiet: bool = False,
 @reported
 def run(c: Context, host: str = "", tag: str = "", dry_run: bool = False, quiet: bool = False, json: bool = False) -> None:
     """(Re)start each host's containers and the discovery server."""
-    from robocore.commands import deploy
+    from robocore.commands import run as command
 
-    deploy.run(_options(c, dry_run=dry_run, quiet=quiet, json=json), host=host or None, tag=tag or None)
+    command.run(_options(c, dry_run=dry_run, quiet=quiet, json=json), host=host or None, tag=tag or None)
 
 
 @task(help={"host": "Stop only this host.", "dry_run": "Print what would be removed."})
 @reported
 def down(c: Context, host: str = "", dry_run: bool = False) -> None:
     """Stop and remove the robot's containers."""
-    from robocore.commands import deploy
+    from robocore.commands import run as command
 
-    deploy.down(_options(c, dry_run=dry_run), host=host or None)
+    command.down(_options(c, dry_run=dry_run), host=host or None)
 
 
 @task(help={"json": "Machine-readable output.", "dry_run": "Print what would be queried."})
 @reported
 def status(c: Context, json: bool = False, dry_run: bool = False) -> None:
     """Table of components (host, state, uptime, restarts, image) and live ROS nodes."""
-    from robocore.commands import deploy
+    from robocore.commands import observe
 
-    deploy.status(_options(c, json=json, dry_run=dry_run))
+    observe.status(_options(c, json=json, dry_run=dry_run))
 
 
 @task(help={"component": "Only this component.", "follow": "Keep following.", "tail": "Lines per container.",
@@ -165,9 +165,9 @@ def status(c: Context, json: bool = False, dry_run: bool = False) -> None:
 @reported
 def logs(c: Context, component: str = "", follow: bool = False, tail: int = 100, dry_run: bool = False) -> None:
     """Logs of the robot's containers on all hosts, each line prefixed by its component."""
-    from robocore.commands import deploy
+    from robocore.commands import observe
 
-    deploy.logs(_options(c, dry_run=dry_run), component=component or None, follow=follow, tail=tail)
+    observe.logs(_options(c, dry_run=dry_run), component=component or None, follow=follow, tail=tail)
 
 
 @task(help={"component": "The component to open a shell in (required).", "cmd": "Run this instead of a shell.",
@@ -192,9 +192,9 @@ def shell(c: Context, component: str, cmd: str = "", new: bool = False, devices:
 @reported
 def connect(c: Context, component: str, cmd: str = "", dry_run: bool = False) -> None:
     """Shell inside the running container of a component on its host, as a ROS super client."""
-    from robocore.commands import deploy
+    from robocore.commands import observe
 
-    code = deploy.connect(_options(c, dry_run=dry_run), component=component, cmd=cmd or None)
+    code = observe.connect(_options(c, dry_run=dry_run), component=component, cmd=cmd or None)
     if code:
         raise Exit(code=code)
 
@@ -203,27 +203,27 @@ def connect(c: Context, component: str, cmd: str = "", dry_run: bool = False) ->
 @reported
 def release(c: Context, tag: str = "", dry_run: bool = False) -> None:
     """Tag every image with a version and push it to the registry."""
-    from robocore.commands import deploy
+    from robocore.commands import release as command
 
-    deploy.release(_options(c, dry_run=dry_run), tag=tag or None)
+    command.release(_options(c, dry_run=dry_run), tag=tag or None)
 
 
 @task(help={"host": "Only this host.", "dry_run": "Print what would be done."})
 @reported
 def rollback(c: Context, host: str = "", dry_run: bool = False) -> None:
     """Return each host to the version it ran before the last run."""
-    from robocore.commands import deploy
+    from robocore.commands import release as command
 
-    deploy.rollback(_options(c, dry_run=dry_run), host=host or None)
+    command.rollback(_options(c, dry_run=dry_run), host=host or None)
 
 
 @task(help={"host": "Only this host."})
 @reported
 def doctor(c: Context, host: str = "") -> None:
     """Check every host: reachable, Docker version, arch, free disk, rsync."""
-    from robocore.commands import deploy
+    from robocore.commands import doctor as command
 
-    deploy.doctor(_options(c), host=host or None)
+    command.doctor(_options(c), host=host or None)
 
 
 PROJECT_TASKS = (validate, prepare_base, stage, build, sync, run, down, status, logs, shell, connect,
