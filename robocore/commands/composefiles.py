@@ -1,12 +1,44 @@
-"""Write the per-host compose files (``.robocore/compose/<host>.yaml``) from the container specs."""
+"""Write the per-host compose files (``.robocore/compose/<host>.yaml``) and the DDS profiles."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from robocore.files import write_atomic
+from robocore.plan import compose, dds
 from robocore.project import Project
 
 
-def write_compose_files(project: Project) -> list[Path]:
-    """Write one compose file per host; return their paths. (Filled by the deploy work, issue #4.)"""
-    return []
+def dds_dir(project: Project) -> Path:
+    """``.robocore/dds/``: the generated Fast DDS profiles, mounted at naming.CONTAINER_DDS."""
+    return project.state_dir / "dds"
+
+
+def write_dds_profiles(project: Project) -> list[Path]:
+    """Write every DDS profile file; remove stale ones robocore wrote before; return the paths."""
+    folder = dds_dir(project)
+    files = dds.profile_files(project.robot)
+    paths = []
+    for name, text in files.items():
+        path = folder / name
+        write_atomic(path, text)
+        paths.append(path)
+    for stale in folder.glob("*.xml"):
+        if stale.name not in files:
+            stale.unlink()
+    return paths
+
+
+def write_compose_files(project: Project, *, tag: str | None = None) -> list[Path]:
+    """Write one compose file per host (and the DDS profiles they mount); return the compose paths."""
+    write_dds_profiles(project)
+    paths = []
+    for host in project.robot.hosts:
+        path = project.compose_file(host.name)
+        write_atomic(path, compose.render(project, host.name, tag=tag))
+        paths.append(path)
+    known = {p.name for p in paths}
+    for stale in project.compose_file("x").parent.glob("*.yaml"):
+        if stale.name not in known:
+            stale.unlink()
+    return paths

@@ -119,14 +119,15 @@ def client_environment(robot: Robot, *, super_client: bool = False) -> dict[str,
 
 
 def server_environment(robot: Robot, index: int) -> dict[str, str]:
-    """Environment of discovery server ``index``: the other servers (redundancy), own slot empty."""
+    """Environment of discovery server ``index``: the other servers (redundancy), own slot empty.
+
+    Servers need no profile file: clients restricted to UDP simply use the server's UDP locators.
+    """
     env = {"ROS_DOMAIN_ID": str(robot.ros_domain_id)}
     others = discovery_server_value(robot, exclude=index)
     if others.strip(";"):
         env["ROS_DISCOVERY_SERVER"] = others
     env.update(transport_environment(robot))
-    if needs_client_profile(robot):
-        env.update(_profile_env(CLIENT_PROFILE))
     return env
 
 

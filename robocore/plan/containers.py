@@ -1,0 +1,315 @@
+"""Container specs: what each deployed container is, as data.
+
+One :class:`ContainerSpec` per component and per discovery server, built by pure functions
+from the project. The same spec renders to docker-py ``containers.create`` keyword arguments
+(what ``run`` does) and to a compose service (what ``.robocore/compose/<host>.yaml`` holds),
+so the two can never disagree. The spec's hash is stored as a label; ``run`` recreates a
+container only when that hash (or the image behind the tag) changed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shlex
+from dataclasses import asdict, dataclass, field
+from pathlib import PurePosixPath
+from typing import Any
+
+from robocore.config.model import Component, Host, port_pattern
+from robocore.plan import dds, naming
+from robocore.plan.layout import host_paths
+from robocore.project import Project
+
+ROLE_COMPONENT = "component"
+ROLE_DISCOVERY = "discovery"
+DEFAULT_TAG = "latest"
+#: Command of a component that has no entrypoint: stay up so that ``connect`` can enter it.
+IDLE_COMMAND = ("sleep", "infinity")
+X11_SOCKET = "/tmp/.X11-unix"
+
+
+@dataclass(frozen=True)
+class Mount:
+    """A bind mount (absolute ``source``) or a named volume (bare ``source``)."""
+
+    source: str
+    target: str
+    read_only: bool = False
+
+    @property
+    def is_named_volume(self) -> bool:
+        """True for a named volume (``logs:/logs``), False for a bind mount of a host path."""
+        return not self.source.startswith("/")
+
+    @property
+    def text(self) -> str:
+        """``source:target[:ro]``: docker-py's and compose's short form."""
+        return f"{self.source}:{self.target}" + (":ro" if self.read_only else "")
+
+
+@dataclass(frozen=True)
+class ContainerSpec:
+    """Everything ``run`` needs to create one container, and nothing host-specific beyond it."""
+
+    name: str  # container name
+    service: str  # compose service name
+    host: str
+    role: str  # ROLE_COMPONENT | ROLE_DISCOVERY
+    project: str
+    image: str  # repository:tag
+    entrypoint: tuple[str, ...] | None  # None: the image's own
+    command: tuple[str, ...] | None  # None: the image's own
+    environment: tuple[tuple[str, str], ...]  # sorted by name
+    network_mode: str  # host | bridge
+    ipc_mode: str | None = None  # "host" when same-host containers share memory (Fast DDS SHM)
+    ports: tuple[str, ...] = ()  # only on bridge
+    devices: tuple[str, ...] = ()
+    mounts: tuple[Mount, ...] = ()
+    gpus: bool = False
+    privileged: bool = False
+    restart: str = "unless-stopped"
+    depends_on: tuple[str, ...] = ()  # services started first (same host)
+    extra_labels: tuple[tuple[str, str], ...] = field(default=())
+
+    @property
+    def env(self) -> dict[str, str]:
+        """The environment as a dict."""
+        return dict(self.environment)
+
+    @property
+    def spec_hash(self) -> str:
+        """A short content hash of the spec: equal hashes mean nothing to recreate."""
+        payload = json.dumps(asdict(self), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(payload.encode()).hexdigest()[:16]
+
+    @property
+    def labels(self) -> dict[str, str]:
+        """The container's labels, the spec hash included."""
+        labels = {
+            naming.LABEL_PROJECT: self.project,
+            naming.LABEL_COMPONENT: self.service,
+            naming.LABEL_ROLE: self.role,
+            naming.LABEL_SPEC: self.spec_hash,
+        }
+        labels.update(self.extra_labels)
+        return labels
+
+    def docker_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of docker-py's ``client.containers.create(**kwargs)``."""
+        kwargs: dict[str, Any] = {
+            "image": self.image,
+            "name": self.name,
+            "detach": True,
+            "environment": self.env,
+            "labels": self.labels,
+            "network_mode": self.network_mode,
+            "restart_policy": {"Name": "" if self.restart == "no" else self.restart},
+            "privileged": self.privileged,
+            "init": self.role == ROLE_COMPONENT,
+        }
+        if self.entrypoint is not None:
+            kwargs["entrypoint"] = list(self.entrypoint)
+        if self.command is not None:
+            kwargs["command"] = list(self.command)
+        if self.ipc_mode:
+            kwargs["ipc_mode"] = self.ipc_mode
+        if self.mounts:
+            from docker.types import Mount as DockerMount
+
+            # Typed mounts: a missing bind source is an error, not a silently created empty folder.
+            kwargs["mounts"] = [
+                DockerMount(m.target, m.source, type="volume" if m.is_named_volume else "bind", read_only=m.read_only)
+                for m in self.mounts
+            ]
+        if self.devices:
+            kwargs["devices"] = list(self.devices)
+        if self.ports:
+            kwargs["ports"] = docker_ports(self.ports)
+        if self.gpus:
+            from docker.types import DeviceRequest
+
+            kwargs["device_requests"] = [DeviceRequest(driver="nvidia", count=-1, capabilities=[["gpu"]])]
+        return kwargs
+
+    def compose_service(self) -> dict[str, Any]:
+        """The compose-file service of this spec (compose specification, plain YAML types)."""
+        service: dict[str, Any] = {"image": self.image, "container_name": self.name}
+        if self.entrypoint is not None:
+            service["entrypoint"] = list(self.entrypoint)
+        if self.command is not None:
+            service["command"] = list(self.command)
+        service["network_mode"] = self.network_mode
+        if self.ipc_mode:
+            service["ipc"] = self.ipc_mode
+        if self.role == ROLE_COMPONENT:
+            service["init"] = True
+        if self.depends_on:
+            service["depends_on"] = list(self.depends_on)
+        service["environment"] = self.env
+        if self.mounts:
+            service["volumes"] = [m.text for m in self.mounts]
+        if self.devices:
+            service["devices"] = list(self.devices)
+        if self.ports:
+            service["ports"] = list(self.ports)
+        if self.privileged:
+            service["privileged"] = True
+        if self.gpus:
+            service["deploy"] = {
+                "resources": {
+                    "reservations": {"devices": [{"driver": "nvidia", "count": "all", "capabilities": ["gpu"]}]}
+                }
+            }
+        service["restart"] = self.restart
+        service["labels"] = self.labels
+        return service
+
+
+def docker_ports(ports: tuple[str, ...]) -> dict[str, Any]:
+    """docker-py's ``ports`` mapping (``"8080/tcp": ("0.0.0.0", 80)``) from ``[ip:]host:container[/proto]``.
+
+    Ranges (``8000-8002:9000-9002``) expand to one entry per port.
+    """
+    out: dict[str, Any] = {}
+    pattern = port_pattern()
+    for text in ports:
+        match = pattern.match(text)
+        if match is None:
+            raise ValueError(f"invalid port mapping {text!r}")
+        host_start = int(match["host"])
+        host_end = int(match["host_end"] or host_start)
+        cont_start = int(match["cont"])
+        cont_end = int(match["cont_end"] or cont_start)
+        if host_end - host_start != cont_end - cont_start:
+            raise ValueError(f"port ranges of different lengths in {text!r}")
+        proto = match["proto"] or "tcp"
+        ip = match["ip"].strip("[]") if match["ip"] else None
+        for offset in range(cont_end - cont_start + 1):
+            binding: Any = (ip, host_start + offset) if ip else host_start + offset
+            out[f"{cont_start + offset}/{proto}"] = binding
+    return out
+
+
+def image_ref(project: Project, repository: str, tag: str | None) -> str:
+    """``repository:tag``; a released ``tag`` is taken from the robot's registry."""
+    if tag is None:
+        return f"{repository}:{DEFAULT_TAG}"
+    return f"{naming.registry_image(project.robot, repository)}:{tag}"
+
+
+def component_command(component: Component) -> tuple[str, ...] | None:
+    """argv of a component: its entrypoint then launch_args, split like a shell would (no shell).
+
+    Without an entrypoint, a workspace component idles (so it can be entered) and an
+    ``image:`` component runs its image's own command.
+    """
+    if component.entrypoint:
+        return tuple(shlex.split(component.entrypoint) + shlex.split(component.launch_args or ""))
+    return None if component.image else IDLE_COMMAND
+
+
+def _user_mount(text: str, base: PurePosixPath) -> Mount:
+    """A robot.yaml volume ``source:target[:ro|rw]``; relative sources are taken from ``base``."""
+    parts = text.split(":")
+    source, target = parts[0], parts[1] if len(parts) > 1 else parts[0]
+    read_only = len(parts) > 2 and parts[2] == "ro"
+    if source.startswith(("./", "../")) or source in {".", ".."}:
+        source = str(base / source)
+    return Mount(source=source, target=target, read_only=read_only)
+
+
+def ipc_mode(project: Project) -> str | None:
+    """``host`` when the robot uses shared memory between containers, else private IPC.
+
+    Applies to host-networked containers only: on a bridge network Fast DDS does not see
+    the others as local and uses UDP anyway. Containers with host networking look co-located
+    to Fast DDS, which then sends data through shared memory: without a shared IPC namespace
+    they discover each other and receive nothing.
+    """
+    return "host" if project.robot.discovery.transport == "shm" else None
+
+
+def component_spec(project: Project, component: Component, *, tag: str | None = None) -> ContainerSpec:
+    """The container of ``component`` on its host."""
+    robot = project.robot
+    host: Host = robot.host(component.runs_on)
+    paths = host_paths(project, host, component.name)
+    env = dds.client_environment(robot)
+    mounts: list[Mount] = []
+    if component.has_workspace:
+        mounts.append(Mount(paths.install, naming.CONTAINER_INSTALL, read_only=True))
+    mounts.append(Mount(paths.dds, naming.CONTAINER_DDS, read_only=True))
+    if component.gui:
+        env["DISPLAY"] = ":0"
+        mounts.append(Mount(X11_SOCKET, X11_SOCKET, read_only=True))
+    base = PurePosixPath(str(project.root)) if host.is_local else PurePosixPath(host.deploy_root) / component.name
+    mounts.extend(_user_mount(v, base) for v in component.volumes)
+    env.update(component.environment)
+    if component.image:
+        image = component.image
+        entrypoint = None
+    else:
+        image = image_ref(project, naming.component_image(robot, project.name, component.name), tag)
+        entrypoint = (naming.ENTRYPOINT,)
+    network = component.network_mode
+    servers_here = [s.index for s in dds.servers(robot) if s.host == host.name]
+    return ContainerSpec(
+        name=naming.container_name(project.name, component.name),
+        service=component.name,
+        host=host.name,
+        role=ROLE_COMPONENT,
+        project=project.name,
+        image=image,
+        entrypoint=entrypoint,
+        command=component_command(component),
+        environment=tuple(sorted(env.items())),
+        network_mode=network,
+        ipc_mode=ipc_mode(project) if network == "host" else None,
+        ports=tuple(component.ports) if network == "bridge" else (),
+        devices=tuple(component.devices),
+        mounts=tuple(mounts),
+        gpus=component.nvidia,
+        privileged=component.privileged,
+        restart=component.restart,
+        depends_on=tuple(discovery_service(i) for i in servers_here),
+    )
+
+
+def discovery_service(index: int) -> str:
+    """The compose service name of discovery server ``index``."""
+    return f"discovery-{index}"
+
+
+def discovery_spec(project: Project, index: int, *, tag: str | None = None) -> ContainerSpec:
+    """The container of discovery server ``index``: the base image running ``fastdds discovery``."""
+    robot = project.robot
+    endpoint = dds.servers(robot)[index]
+    env = dds.server_environment(robot, index)
+    return ContainerSpec(
+        name=naming.discovery_container_name(project.name, index),
+        service=discovery_service(index),
+        host=endpoint.host,
+        role=ROLE_DISCOVERY,
+        project=project.name,
+        image=image_ref(project, naming.base_image(robot, project.name), tag),
+        entrypoint=(naming.ENTRYPOINT,),
+        command=tuple(dds.server_command(robot, index)),
+        environment=tuple(sorted(env.items())),
+        network_mode="host",
+        ipc_mode=ipc_mode(project),
+        restart="unless-stopped",
+    )
+
+
+def host_specs(project: Project, host: str, *, tag: str | None = None) -> list[ContainerSpec]:
+    """Every container of ``host``: its discovery servers first, then its components in file order."""
+    robot = project.robot
+    specs = [discovery_spec(project, s.index, tag=tag) for s in dds.servers(robot) if s.host == host]
+    specs += [component_spec(project, c, tag=tag) for c in robot.components_on(host)]
+    return specs
+
+
+def plan(project: Project, *, tag: str | None = None) -> dict[str, list[ContainerSpec]]:
+    """Host name -> its container specs, for every host of the robot (hosts with nothing included)."""
+    return {h.name: host_specs(project, h.name, tag=tag) for h in project.robot.hosts}
