@@ -1,0 +1,145 @@
+"""SSH to robot hosts: the ``ssh`` binary for commands and rsync, paramiko for Docker.
+
+Both read the same OpenSSH client configuration: ``$ROBOCORE_SSH_CONFIG`` when set (an
+``ssh_config`` file; the test suites use it to point at a throw-away key and known_hosts),
+else the user's ``~/.ssh/config``. Authentication is key-based only (``BatchMode=yes``): robocore
+never asks for or stores a password.
+
+Remote commands are argv lists. OpenSSH sends one command string to the remote shell, so each
+argument is quoted with :func:`shlex.quote` here, in one place, and never interpolated.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import subprocess
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from robocore.config.model import Host
+from robocore.errors import HostError, ToolMissing
+
+CONFIG_ENV = "ROBOCORE_SSH_CONFIG"
+#: Seconds to wait for a TCP connection and for the SSH handshake before calling a host unreachable.
+CONNECT_TIMEOUT = 6
+
+
+def config_file() -> Path | None:
+    """The ssh_config file robocore passes to ssh (``-F``), or None for OpenSSH's default."""
+    configured = os.environ.get(CONFIG_ENV)
+    return Path(configured).expanduser() if configured else None
+
+
+def destination(host: Host) -> str:
+    """``user@ip`` of a host."""
+    return f"{host.user}@{host.ip}"
+
+
+def ssh_options(host: Host, *, connect_timeout: int = CONNECT_TIMEOUT) -> list[str]:
+    """The ssh options (no command) robocore uses for ``host``: config file, port, timeouts, batch mode."""
+    argv: list[str] = []
+    config = config_file()
+    if config is not None:
+        argv += ["-F", str(config)]
+    argv += [
+        "-p", str(host.ssh_port),
+        "-o", "BatchMode=yes",
+        "-o", f"ConnectTimeout={connect_timeout}",
+        "-o", "ServerAliveInterval=5",
+        "-o", "ServerAliveCountMax=3",
+    ]
+    return argv
+
+
+def ssh_argv(host: Host, remote: Sequence[str], *, connect_timeout: int = CONNECT_TIMEOUT) -> list[str]:
+    """The local argv that runs ``remote`` (an argv list) on ``host``, each argument quoted."""
+    return ["ssh", *ssh_options(host, connect_timeout=connect_timeout), "--", destination(host), shlex.join(remote)]
+
+
+def rsh_command(host: Host, *, connect_timeout: int = CONNECT_TIMEOUT) -> str:
+    """The ``rsync -e`` value: ssh with robocore's options (rsync splits it into argv itself)."""
+    return shlex.join(["ssh", *ssh_options(host, connect_timeout=connect_timeout)])
+
+
+def require_ssh() -> None:
+    """Raise ToolMissing unless the ssh client is installed."""
+    from shutil import which
+
+    if which("ssh") is None:
+        raise ToolMissing("ssh (OpenSSH client) is not installed", hint="apt-get install openssh-client")
+
+
+def run(host: Host, remote: Sequence[str], *, timeout: float = 120, stdin: bytes | None = None,
+        check: bool = True) -> subprocess.CompletedProcess[bytes]:
+    """Run ``remote`` on ``host`` over ssh; raise HostError naming the host on failure."""
+    require_ssh()
+    argv = ssh_argv(host, remote)
+    try:
+        proc = subprocess.run(argv, input=stdin, capture_output=True, timeout=timeout, check=False)
+    except subprocess.TimeoutExpired:
+        raise HostError(f"host {host.name} ({host.ip}): `{shlex.join(remote)}` timed out after {timeout:.0f} s",
+                        hint="is the host up and reachable over ssh?") from None
+    if check and proc.returncode != 0:
+        raise HostError(f"host {host.name} ({host.ip}): {describe_failure(proc, remote)}", hint=_hint(proc))
+    return proc
+
+
+def describe_failure(proc: subprocess.CompletedProcess[bytes], remote: Sequence[str]) -> str:
+    """One line: what ran, its exit code and the last line it printed on stderr."""
+    err = proc.stderr.decode(errors="replace").strip().splitlines()
+    last = err[-1] if err else "no output"
+    if proc.returncode == 255:
+        return f"ssh failed: {last}"
+    return f"`{shlex.join(remote)}` exited {proc.returncode}: {last}"
+
+
+def _hint(proc: subprocess.CompletedProcess[bytes]) -> str:
+    if proc.returncode != 255:
+        return "run the command on the host by hand to see the full output"
+    text = proc.stderr.decode(errors="replace")
+    if "Permission denied" in text:
+        return "robocore uses key-based ssh only: add your public key to the host's authorized_keys (ssh-copy-id)"
+    if "Host key verification failed" in text:
+        return "add the host's key to known_hosts (ssh-keyscan HOST >> ~/.ssh/known_hosts) after checking it"
+    config = config_file() or "~/.ssh/config"
+    return f"check that the host is up and that `ssh -p PORT USER@HOST` works (config: {config})"
+
+
+@dataclass(frozen=True)
+class ParamikoSettings:
+    """Connection parameters for paramiko, resolved from the same ssh_config file."""
+
+    params: dict[str, Any]
+    known_hosts: list[str]
+    strict: bool
+
+
+def paramiko_settings(host: Host, *, connect_timeout: int = CONNECT_TIMEOUT) -> ParamikoSettings:
+    """paramiko ``connect`` keyword arguments for ``host`` (identity, port, known hosts, timeouts)."""
+    import paramiko
+
+    config_path = config_file() or Path("~/.ssh/config").expanduser()
+    found: dict[str, Any] = {}
+    if config_path.is_file():
+        conf = paramiko.SSHConfig.from_path(str(config_path))
+        found = dict(conf.lookup(host.ip))
+    params: dict[str, Any] = {
+        "hostname": found.get("hostname", host.ip),
+        "port": host.ssh_port,
+        "username": host.user,
+        "timeout": connect_timeout,
+        "banner_timeout": connect_timeout,
+        "auth_timeout": connect_timeout,
+        "allow_agent": True,
+        "look_for_keys": True,
+    }
+    if "identityfile" in found:
+        params["key_filename"] = [str(Path(p).expanduser()) for p in found["identityfile"]]
+    if "proxycommand" in found:
+        params["sock"] = paramiko.ProxyCommand(found["proxycommand"])
+    known = [str(Path(p).expanduser()) for p in str(found.get("userknownhostsfile", "")).split() if p]
+    strict = str(found.get("stricthostkeychecking", "ask")).lower() not in {"no", "off", "accept-new"}
+    return ParamikoSettings(params=params, known_hosts=known, strict=strict)
