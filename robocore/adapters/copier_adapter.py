@@ -84,7 +84,7 @@ def _copier_errors(what: str) -> Iterator[None]:
     except CopierError as error:
         raise TemplateError(f"{what}: {_one_line(error)}") from None
     except ValueError as error:  # copier's answer validation (pydantic / validator messages)
-        raise TemplateError(f"{what}: invalid answer: {_one_line(error)}") from None
+        raise TemplateError(f"{what}: {_one_line(error)}") from None
 
 
 def _one_line(error: BaseException) -> str:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import getpass
 import platform
+import re
 import sys
 from pathlib import Path
 from typing import Any
@@ -39,6 +40,12 @@ def current_user() -> str:
 def default_hosts() -> list[dict[str, str]]:
     """The default host list: just this machine."""
     return [{"name": "devmachine", "ip": "127.0.0.1", "user": current_user(), "arch": machine_arch()}]
+
+
+def project_name(destination: Path) -> str:
+    """The default project name: the folder name, with characters the template refuses replaced by '-'."""
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "-", destination.name).strip("-._")
+    return name[:63] or "robot"
 
 
 def _choice(value: str | None, allowed: type[RosDistro] | type[BaseKind], flag: str) -> str | None:
@@ -87,7 +94,7 @@ def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry
         template=copier_adapter.template_source(),
         destination=destination,
         data=data,
-        user_defaults={"hosts": default_hosts()},
+        user_defaults={"project_name": project_name(destination), "hosts": default_hosts()},
         defaults=defaults,
         pretend=dry_run,
         keep_existing=existing,
