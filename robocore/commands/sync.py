@@ -1,12 +1,243 @@
-"""sync: install trees and runtime files to each host, atomically (issue #4)."""
+"""sync: install trees and runtime files to each remote host, atomically (issue #4).
+
+For every component on a remote host: its colcon install tree, the DDS profiles and the host's
+compose file go to ``<mount_root>/<component>/releases/<id>/`` and ``current`` is switched to
+it only once the copy is complete (see :mod:`robocore.plan.sync`). Hosts are synced in
+parallel; a host that fails is named and the others still get their files. Components on this
+machine use the build output in place: nothing is copied.
+
+What each host received is recorded in ``.robocore/sync/<host>.json`` (release id and a digest
+of the trees per component); ``run`` may use the release id to restart a container whose files
+changed.
+"""
 
 from __future__ import annotations
 
+import json
+import os
+import shlex
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from robocore.adapters import rsync, ssh
 from robocore.commands.context import Options
-from robocore.errors import NotImplementedYet
+from robocore.config.model import Host
+from robocore.errors import GroupError, RobocoreError, UsageError
+from robocore.files import write_atomic
+from robocore.plan import layout
+from robocore.plan import sync as plan
+from robocore.project import Project
+
+
+@dataclass(frozen=True)
+class ComponentResult:
+    """What one component's sync did."""
+
+    component: str
+    host: str
+    release: str
+    changed: bool
+    sent: int
+    received: int
+    files: int
+    seconds: float
+
+
+def state_file(project: Project, host: str) -> Path:
+    """``.robocore/sync/<host>.json``: what was last synced to ``host``."""
+    return project.state_dir / "sync" / f"{host}.json"
+
+
+def synced_releases(project: Project, host: str) -> dict[str, str]:
+    """Component -> release id last synced to ``host`` (empty when never synced)."""
+    try:
+        data = json.loads(state_file(project, host).read_text())
+    except (OSError, ValueError):
+        return {}
+    comps = data.get("components", {}) if isinstance(data, dict) else {}
+    return {name: str(entry.get("release", "")) for name, entry in comps.items() if isinstance(entry, dict)}
+
+
+def plan_host(project: Project, host: Host) -> list[plan.ComponentSync]:
+    """The sync items of ``host`` (empty for this machine), or a UsageError if inputs are missing."""
+    if host.is_local:
+        return []
+    robot = project.robot
+    dds_dir = project.state_dir / "dds"
+    compose = project.compose_file(host.name)
+    items = []
+    for comp in robot.components_on(host.name):
+        sources: list[plan.Source] = []
+        if comp.has_workspace:
+            install = project.build_dir(comp.name) / "install"
+            if not install.is_dir():
+                raise UsageError(f"component {comp.name}: no install tree at {install}",
+                                 hint=f"run `build --component {comp.name}` first")
+            sources.append(plan.Source(install, "install"))
+        if not dds_dir.is_dir() or not compose.is_file():
+            raise UsageError(f"host {host.name}: {compose if not compose.is_file() else dds_dir} is missing",
+                             hint="run `stage` (or `stage --refresh`) first: it writes compose files and DDS profiles")
+        sources.append(plan.Source(dds_dir, "dds"))
+        sources.append(plan.Source(compose, compose.name))
+        items.append(plan.ComponentSync(
+            component=comp.name, host=host.name, root=layout.component_root(host, comp.name),
+            sources=tuple(sources), compose_name=compose.name,
+        ))
+    return items
 
 
 def sync(options: Options, *, host: str | None) -> None:
-    """Copy install trees to hosts."""
-    options.load()
-    raise NotImplementedYet("sync is not implemented yet")
+    """Copy install trees and runtime files to remote hosts; only what changed; atomic per component."""
+    from robocore.ui import console, stdout
+
+    project = options.load()
+    hosts = [project.host(host)] if host else list(project.robot.hosts)
+    plans = {h.name: plan_host(project, h) for h in hosts}
+    out = console()
+    if options.dry_run:
+        _print_dry_run(project, hosts, plans)
+        return
+    remote = [h for h in hosts if plans[h.name]]
+    for h in hosts:
+        if h.is_local and not options.quiet:
+            out.print(f"{h.name}: this machine, components use the build output in place (nothing to copy)")
+        elif not plans[h.name] and not options.quiet:
+            out.print(f"{h.name}: no components")
+    if not remote:
+        return
+    rsync.require_rsync()
+    ssh.require_ssh()
+    results: dict[str, list[ComponentResult]] = {}
+    failures: dict[str, RobocoreError] = {}
+    with ThreadPoolExecutor(max_workers=max(1, len(remote))) as pool:
+        futures = {h.name: pool.submit(sync_host, project, h, plans[h.name]) for h in remote}
+        for name, future in futures.items():
+            try:
+                results[name] = future.result()
+            except RobocoreError as exc:
+                failures[name] = exc
+    rows = [r for name in sorted(results) for r in results[name]]
+    if options.json:
+        stdout().print_json(json.dumps({"results": [asdict(r) for r in rows],
+                                        "failed": {k: v.lines() for k, v in failures.items()}}))
+    elif not options.quiet:
+        _print_table(rows)
+    if failures:
+        raise GroupError(failures, sorted(results))
+
+
+def sync_host(project: Project, host: Host, items: list[plan.ComponentSync]) -> list[ComponentResult]:
+    """Sync every item of one host, one release id for all; record what the host now runs."""
+    release_id = plan.new_release_id()
+    rsh = ssh.rsh_command(host)
+    recorded = _read_state(project, host.name)
+    results = []
+    for item in items:
+        start = time.monotonic()
+        digest = _tree_digest(item)
+        prep = plan.parse_keyvals(ssh.run(host, plan.prepare_argv(item), timeout=60).stdout.decode())
+        stats = rsync.run(host, plan.rsync_argv(item, host, rsh))
+        previous = recorded.get(item.component, {})
+        current = prep.get("current", "")
+        changed = (
+            stats.changed
+            or prep.get("staging") == "1"  # resuming an interrupted copy: its content is unknown
+            or not current
+            or current != f"{plan.RELEASES}/{previous.get('release', '')}"
+            or digest != previous.get("digest")
+        )
+        if changed:
+            ssh.run(host, plan.finalize_argv(item, release_id), timeout=120)
+            release = release_id
+        else:
+            ssh.run(host, plan.discard_argv(item), timeout=120)
+            release = current.removeprefix(f"{plan.RELEASES}/")
+        recorded[item.component] = {"release": release, "digest": digest}
+        _write_state(project, host.name, recorded)
+        results.append(ComponentResult(
+            component=item.component, host=host.name, release=release, changed=changed,
+            sent=stats.sent, received=stats.received, files=stats.files, seconds=time.monotonic() - start,
+        ))
+    return results
+
+
+def _tree_digest(item: plan.ComponentSync) -> str:
+    rows: list[tuple[str, int, int, int, str]] = []
+    for source in item.sources:
+        for path in _walk(source.path):
+            st = path.lstat()
+            target = os.readlink(path) if path.is_symlink() else ""
+            rel = f"{source.name}/{path.relative_to(source.path)}" if path != source.path else source.name
+            rows.append((rel, st.st_size, st.st_mtime_ns, st.st_mode, target))
+    return plan.manifest_digest(rows)
+
+
+def _walk(root: Path) -> list[Path]:
+    if not root.is_dir() or root.is_symlink():
+        return [root]
+    found = [root]
+    for dirpath, dirnames, filenames in os.walk(root):
+        base = Path(dirpath)
+        found.extend(base / d for d in dirnames)
+        found.extend(base / f for f in filenames)
+    return found
+
+
+def _read_state(project: Project, host: str) -> dict[str, dict[str, Any]]:
+    try:
+        data = json.loads(state_file(project, host).read_text())
+    except (OSError, ValueError):
+        return {}
+    comps = data.get("components", {}) if isinstance(data, dict) else {}
+    return {k: v for k, v in comps.items() if isinstance(v, dict)}
+
+
+def _write_state(project: Project, host: str, components: dict[str, dict[str, Any]]) -> None:
+    write_atomic(state_file(project, host), json.dumps({"host": host, "components": components}, indent=2) + "\n")
+
+
+def _print_dry_run(project: Project, hosts: list[Host], plans: dict[str, list[plan.ComponentSync]]) -> None:
+    from robocore.ui import stdout
+
+    out = stdout()
+    for h in hosts:
+        if h.is_local:
+            out.print(f"# {h.name}: this machine, nothing to copy")
+            continue
+        rsh = ssh.rsh_command(h)
+        for item in plans[h.name]:
+            out.print(f"# {h.name} / {item.component} -> {item.root}", markup=False)
+            out.print(shlex.join(ssh.ssh_argv(h, plan.prepare_argv(item))), markup=False, soft_wrap=True)
+            out.print(shlex.join(plan.rsync_argv(item, h, rsh)), markup=False, soft_wrap=True)
+            out.print(shlex.join(ssh.ssh_argv(h, plan.finalize_argv(item, plan.new_release_id()))),
+                      markup=False, soft_wrap=True)
+
+
+def _print_table(rows: list[ComponentResult]) -> None:
+    from rich.table import Table
+
+    from robocore.ui import stdout
+
+    table = Table(title="sync")
+    for col in ("host", "component", "release", "changed", "sent", "received", "files", "time"):
+        table.add_column(col, justify="right" if col in {"sent", "received", "files", "time"} else "left",
+                         no_wrap=col == "release")
+    for r in rows:
+        table.add_row(r.host, r.component, r.release, "yes" if r.changed else "no", _human(r.sent),
+                      _human(r.received), str(r.files), f"{r.seconds:.1f}s")
+    total = sum(r.sent for r in rows)
+    table.caption = f"{_human(total)} sent in total"
+    stdout().print(table)
+
+
+def _human(n: int) -> str:
+    size = float(n)
+    for unit in ("B", "KB", "MB"):
+        if size < 1024:
+            return f"{size:.0f} {unit}" if unit == "B" else f"{size:.1f} {unit}"
+        size /= 1024
+    return f"{size:.1f} GB"
+

@@ -1,0 +1,227 @@
+"""The sync plan: which files go to which host, and the exact commands that move them (pure).
+
+On a remote host every component gets ``<mount_root>/<component>/``::
+
+    releases/<id>/install/      colcon install tree (built on the dev machine)
+    releases/<id>/dds/          generated Fast DDS profiles
+    releases/<id>/<host>.yaml   the host's compose file (also hard-linked as compose.yaml)
+    staging/                    the release being copied (absent when idle)
+    current -> releases/<id>    switched atomically once a release is complete
+
+A sync (1) creates ``staging`` (``prepare``), (2) rsyncs into it with ``--link-dest`` against
+``current`` so unchanged files become hard links and changed ones move as rsync deltas, then
+(3) renames it to ``releases/<id>`` and switches ``current`` with ``ln -s`` to a temp name and
+``mv -T`` (a rename(2), atomic), and prunes old releases (``finalize``). If anything stops
+before (3), ``current`` still names the previous complete release; the next sync reuses the
+partial ``staging``. If nothing changed, ``staging`` is dropped and ``current`` is kept.
+
+Remote steps are argv lists: a fixed POSIX sh script run with ``sh -c SCRIPT sh ARG...``, its
+arguments passed as positional parameters, never interpolated into the script.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+from collections.abc import Iterable
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path, PurePosixPath
+
+from robocore.config.model import Host
+
+#: Complete releases kept per component (the current one always among them).
+KEEP_RELEASES = 3
+STAGING = "staging"
+RELEASES = "releases"
+CURRENT = "current"
+COMPOSE_NAME = "compose.yaml"
+_RELEASE_RE = re.compile(r"^\d{8}T\d{6}Z-[0-9a-f]{6}$")
+
+# $1 = component root. Prints "staging=<0|1>" and "current=<link target or empty>".
+PREPARE_SCRIPT = """\
+set -eu
+root=$1
+mkdir -p -- "$root/releases"
+if [ -d "$root/staging" ]; then echo staging=1; else echo staging=0; mkdir -p -- "$root/staging"; fi
+if [ -L "$root/current" ]; then echo "current=$(readlink -- "$root/current")"; else echo current=; fi
+"""
+
+# $1 = component root, $2 = release id, $3 = compose file name in the release ("" for none),
+# $4 = releases to keep.
+FINALIZE_SCRIPT = """\
+set -eu
+root=$1; id=$2; compose=$3; keep=$4
+cd -- "$root"
+if [ -n "$compose" ] && [ -f "staging/$compose" ]; then ln -f -- "staging/$compose" staging/compose.yaml; fi
+mv -T -- staging "releases/$id"
+rm -f -- .current.tmp
+ln -s -- "releases/$id" .current.tmp
+mv -T -- .current.tmp current
+live=$(readlink -- current)
+ls -1 releases | sort -r | tail -n "+$((keep + 1))" | while IFS= read -r old; do
+    [ "releases/$old" = "$live" ] || rm -rf -- "releases/$old"
+done
+echo "current=$live"
+"""
+
+# $1 = component root: drop an unchanged staging copy.
+DISCARD_SCRIPT = """\
+set -eu
+rm -rf -- "$1/staging"
+"""
+
+
+@dataclass(frozen=True)
+class Source:
+    """One local file or folder to copy, and where it lands inside the release."""
+
+    path: Path  # absolute local path
+    name: str  # name inside the release (install, dds, <host>.yaml)
+
+    @property
+    def rsync_arg(self) -> str:
+        """``parent/./name`` (folders without a trailing slash): rsync ``-R`` keeps ``name``."""
+        return f"{self.path.parent}/./{self.path.name}"
+
+
+@dataclass(frozen=True)
+class ComponentSync:
+    """Everything needed to sync one component to its host."""
+
+    component: str
+    host: str
+    root: PurePosixPath  # <mount_root>/<component> on the host
+    sources: tuple[Source, ...]
+    compose_name: str  # name of the compose file inside the release ("" when none)
+
+    @property
+    def staging(self) -> PurePosixPath:
+        """Where rsync writes."""
+        return self.root / STAGING
+
+    @property
+    def current(self) -> PurePosixPath:
+        """The symlink to the live release."""
+        return self.root / CURRENT
+
+
+def new_release_id(now: datetime | None = None, nonce: bytes | None = None) -> str:
+    """A sortable, unique release id: ``20260101T120000Z-1a2b3c``."""
+    now = (now or datetime.now(timezone.utc)).astimezone(timezone.utc)
+    suffix = hashlib.sha256(nonce if nonce is not None else os.urandom(8)).hexdigest()[:6]
+    return f"{now:%Y%m%dT%H%M%SZ}-{suffix}"
+
+
+def is_release_id(text: str) -> bool:
+    """True for ids made by :func:`new_release_id`."""
+    return bool(_RELEASE_RE.match(text))
+
+
+def remote_sh(script: str, *args: str) -> list[str]:
+    """``sh -c SCRIPT sh ARG...``: a fixed script with its arguments as positional parameters."""
+    return ["sh", "-c", script, "sh", *args]
+
+
+def prepare_argv(item: ComponentSync) -> list[str]:
+    """Remote argv that creates ``staging`` and reports whether it existed and where current points."""
+    return remote_sh(PREPARE_SCRIPT, str(item.root))
+
+
+def finalize_argv(item: ComponentSync, release_id: str, keep: int = KEEP_RELEASES) -> list[str]:
+    """Remote argv that turns ``staging`` into ``releases/<id>``, switches ``current`` and prunes."""
+    if not is_release_id(release_id):
+        raise ValueError(f"not a release id: {release_id!r}")
+    return remote_sh(FINALIZE_SCRIPT, str(item.root), release_id, item.compose_name, str(max(1, keep)))
+
+
+def discard_argv(item: ComponentSync) -> list[str]:
+    """Remote argv that removes ``staging`` (nothing changed)."""
+    return remote_sh(DISCARD_SCRIPT, str(item.root))
+
+
+def rsync_argv(item: ComponentSync, host: Host, rsh: str, *, io_timeout: int = 60) -> list[str]:
+    """The local rsync argv copying ``item``'s sources into ``staging`` on ``host``.
+
+    ``-a`` keeps modes and times (the quick check), ``--delete`` removes files gone locally,
+    ``--copy-unsafe-links`` turns symlinks that leave the tree (a ``--symlink-install`` build)
+    into the files they point to, ``--link-dest`` hard-links what is unchanged in ``current``,
+    ``--stats`` reports the bytes moved.
+    """
+    return [
+        "rsync",
+        "-a",
+        "-R",
+        "--delete",
+        "--copy-unsafe-links",
+        "--stats",
+        f"--timeout={io_timeout}",
+        f"--link-dest={item.current}/",
+        "-e",
+        rsh,
+        *(s.rsync_arg for s in item.sources),
+        f"{host.user}@{host.ip}:{item.staging}/",
+    ]
+
+
+@dataclass(frozen=True)
+class RsyncStats:
+    """What ``rsync --stats`` reported."""
+
+    files: int = 0
+    created: int = 0
+    deleted: int = 0
+    transferred: int = 0
+    literal: int = 0
+    sent: int = 0
+    received: int = 0
+
+    @property
+    def changed(self) -> bool:
+        """True when the copy differs from the link-dest release (new, changed or deleted files)."""
+        return bool(self.created or self.transferred or self.deleted)
+
+
+_STAT_KEYS = {
+    "Number of files": "files",
+    "Number of created files": "created",
+    "Number of deleted files": "deleted",
+    "Number of regular files transferred": "transferred",
+    "Literal data": "literal",
+    "Total bytes sent": "sent",
+    "Total bytes received": "received",
+}
+
+
+def parse_stats(output: str) -> RsyncStats:
+    """Read the numbers of ``rsync --stats`` output (rsync 3.1+, with or without thousands separators)."""
+    values: dict[str, int] = {}
+    for line in output.splitlines():
+        key, sep, rest = line.partition(":")
+        field = _STAT_KEYS.get(key.strip())
+        if field is None or not sep:
+            continue
+        match = re.match(r"\s*([\d,.]+)", rest)
+        if match:
+            values[field] = int(re.sub(r"[,.]", "", match.group(1)))
+    return RsyncStats(**values)
+
+
+def parse_keyvals(output: str) -> dict[str, str]:
+    """``key=value`` lines printed by the remote scripts."""
+    out: dict[str, str] = {}
+    for line in output.splitlines():
+        key, sep, value = line.partition("=")
+        if sep:
+            out[key.strip()] = value.strip()
+    return out
+
+
+def manifest_digest(entries: Iterable[tuple[str, int, int, int, str]]) -> str:
+    """Digest of (relative path, size, mtime_ns, mode, link target) rows: rsync's quick-check view of a tree."""
+    digest = hashlib.sha256()
+    for row in sorted(entries):
+        digest.update(repr(row).encode())
+        digest.update(b"\n")
+    return digest.hexdigest()
