@@ -356,7 +356,8 @@ def _report(results: dict[str, HostOutcome], failures: dict[str, RobocoreError],
         for h in hosts:
             for action in results[h.name].actions if h.name in results else []:
                 reason = f" ({action.reason})" if action.reason else ""
-                stdout().print(f"{h.name}: {'would ' if action.verb != 'keep' else ''}{action.verb} {action.name}{reason}")
+                verb = action.verb if action.verb == "keep" else f"would {action.verb}"
+                stdout().print(f"{h.name}: {verb} {action.name}{reason}")
     table = Table(title=f"robocore {title}", title_justify="left")
     for column in ("host", "result", "created", "replaced", "started", "kept", "removed", "detail"):
         table.add_column(column)
