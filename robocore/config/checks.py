@@ -155,6 +155,7 @@ def did_you_mean(word: str, choices: Iterable[str]) -> str:
 
 def unknown(kind: str, name: str, known: list[str]) -> str:
     """The message for a reference to something that is not defined."""
+    known = list(dict.fromkeys(known))
     hint = did_you_mean(name, known) if len(known) > 1 else ""
     return f"unknown {kind} {name!r} (known: {known_list(known)}){hint}"
 

@@ -158,6 +158,8 @@ def _friendly(error: Mapping_) -> str:
         return f"{shown(value)} is not one of: {expected}{did_you_mean(str(value), expected.split(', '))}"
     if kind == "string_pattern_mismatch":
         return f"{shown(value)} is not a valid value here (must match {ctx.get('pattern', '?')})"
+    if kind == "too_short" and isinstance(value, list):
+        return f"needs at least {ctx.get('min_length', 1)} item(s)"
     if kind in ("string_too_short", "too_short"):
         return f"{shown(value)} is too short (at least {ctx.get('min_length', 1)})"
     if kind in ("string_too_long", "too_long"):
@@ -232,8 +234,41 @@ def _yaml_error(exc: yaml.YAMLError, file: str) -> ConfigError:
         what = getattr(exc, "problem", None) or str(exc)
         context = getattr(exc, "context", None)
         if context:
-            what = f"{what} ({context})"
-    return ConfigError([problem(file, line, "", f"YAML syntax error: {what}")])
+            what = f"{context}, {what}"
+    label = "YAML error" if isinstance(exc, yaml.constructor.ConstructorError) else "YAML syntax error"
+    return ConfigError([problem(file, line, "", f"{label}: {what}")])
+
+
+#: Most values a robot.yaml may expand to (aliases included); far above any real robot.
+MAX_VALUES = 200_000
+
+
+def _check_size(root: yaml.Node, file: str) -> None:
+    """Refuse recursive aliases and alias bombs before anything walks the document."""
+    sizes: dict[int, int] = {}
+    active: set[int] = set()
+
+    def size(node: yaml.Node) -> int:
+        key = id(node)
+        if key in sizes:
+            return sizes[key]
+        if key in active:
+            line = node.start_mark.line + 1
+            raise ConfigError([problem(file, line, "", "an alias refers to itself (recursive anchor)")])
+        active.add(key)
+        total = 1
+        if isinstance(node, yaml.MappingNode):
+            total += sum(size(k) + size(v) for k, v in node.value)
+        elif isinstance(node, yaml.SequenceNode):
+            total += sum(size(item) for item in node.value)
+        active.discard(key)
+        if total > MAX_VALUES:
+            what = f"document expands to more than {MAX_VALUES} values (aliases?)"
+            raise ConfigError([problem(file, None, "", what)])
+        sizes[key] = total
+        return total
+
+    size(root)
 
 
 def _read(text: str, file: str) -> tuple[Any, LineMap]:
@@ -246,6 +281,7 @@ def _read(text: str, file: str) -> tuple[Any, LineMap]:
             node = loader.get_single_node()
             if node is None:
                 raise ConfigError([problem(file, None, "", "file is empty; see 'robocore schema' for its keys")])
+            _check_size(node, file)
             lines = LineMap()
             lines.add(node)
             data = loader.construct_document(node)
