@@ -90,6 +90,8 @@ def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry
         )
     if existing:
         console().print(f"{destination}: existing robocore project; only missing template files are added")
+        if data:
+            console().print("note: robot.yaml is kept as it is; change ros_distro or base.kind in it yourself")
     request = copier_adapter.CopyRequest(
         template=copier_adapter.template_source(),
         destination=destination,
@@ -101,6 +103,7 @@ def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry
     )
     copier_adapter.copy(request)
     if dry_run:
+        console().print(f"would write {destination / SCHEMA_FILE} and check {destination / 'robot.yaml'}")
         return
     _write_schema(destination)
     _check(destination)
