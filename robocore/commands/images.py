@@ -1,24 +1,675 @@
-"""prepare-base, stage and build (issue #3)."""
+"""prepare-base, stage and build (issue #3).
+
+- prepare-base: the base image (ROS + common packages), per arch of the hosts that need it;
+- stage: one image per component (dependencies, no user code), in parallel, then compose files;
+- build: colcon inside each component's staged image, workspace and outputs bind-mounted.
+
+Images are rebuilt only when the content hash of their inputs (label ``dev.robocore.inputs``)
+changes; colcon builds are skipped when no package's sources changed since the last success.
+"""
 
 from __future__ import annotations
 
+import json
+import os
+import platform as host_platform
+import time
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager, suppress
+from dataclasses import asdict, dataclass, field
+from pathlib import Path, PurePosixPath
+from typing import TYPE_CHECKING, Any
+
 from robocore.commands.context import Options
-from robocore.errors import NotImplementedYet
+from robocore.config.loader import ROBOT_FILE
+from robocore.config.model import BaseKind, Component
+from robocore.errors import BuildError, ConfigError, DockerError, Problem, ToolMissing, UsageError
+from robocore.files import write_atomic
+from robocore.plan import colcon, dockerfiles, naming
+from robocore.plan.dockerfiles import ContextEntry, ImagePlan
+from robocore.plan.inputs import FileDigest, digest_bytes, inputs_hash, tree_hash
+from robocore.project import Project
+
+if TYPE_CHECKING:
+    import docker
+
+    from robocore.adapters.image_builder import ContextFile, ImageState
+
+ARCH_OF_MACHINE = {"x86_64": "amd64", "amd64": "amd64", "aarch64": "arm64", "arm64": "arm64"}
+QEMU_NAME = {"arm64": "aarch64", "amd64": "x86_64"}
+BINFMT_DIR = Path("/proc/sys/fs/binfmt_misc")
+BUILD_STATE = ".robocore-build.json"
+SKIP_WS_DIRS = frozenset({"build", "install", "log"})
+MAX_PARALLEL = 4
+
+
+def native_arch() -> str:
+    """The dev machine's arch in Docker terms."""
+    machine = host_platform.machine().lower()
+    return ARCH_OF_MACHINE.get(machine, machine)
+
+
+def check_emulation(arch: str, native: str, who: str) -> None:
+    """Raise ToolMissing when ``arch`` binaries cannot run here (no binfmt/qemu registration)."""
+    if arch == native:
+        return
+    qemu = QEMU_NAME.get(arch, arch)
+    if (BINFMT_DIR / f"qemu-{qemu}").exists():
+        return
+    raise ToolMissing(
+        f"{who} needs {arch} images but this machine is {native} and cannot run {arch} binaries "
+        f"({BINFMT_DIR}/qemu-{qemu} is missing)",
+        hint=f"sudo apt-get install qemu-user-static binfmt-support (registers qemu-{qemu} with binfmt_misc), "
+        f"or run `docker run --privileged --rm tonistiigi/binfmt --install {arch}`",
+    )
+
+
+def find_ca_bundle() -> Path | None:
+    """The dev machine's trust store file (a public CA bundle plus any proxy CA), if any."""
+    import ssl
+
+    candidates = [os.environ.get(name) for name in ("REQUESTS_CA_BUNDLE", "PIP_CERT", "SSL_CERT_FILE")]
+    paths = ssl.get_default_verify_paths()
+    candidates += [paths.cafile, paths.openssl_cafile]
+    for candidate in candidates:
+        if candidate and Path(candidate).is_file():
+            return Path(candidate)
+    return None
+
+
+# ---------------------------------------------------------------------------------------------- output
+
+
+@dataclass
+class Outcome:
+    """What happened to one image or one colcon build."""
+
+    what: str  # image reference or component name
+    role: str  # base | component | build
+    action: str  # built | up-to-date | would-build | failed
+    reason: str = ""
+    image_id: str | None = None
+    seconds: float = 0.0
+    packages: list[str] = field(default_factory=list)
+
+
+class Reporter:
+    """Human progress on stderr (rich) unless quiet; a JSON result on stdout with --json."""
+
+    def __init__(self, options: Options) -> None:
+        self.options = options
+        self.human = not options.quiet and not options.json
+
+    def info(self, message: str) -> None:
+        """A line of progress."""
+        if self.human:
+            from robocore.ui import console
+
+            console().print(message)
+
+    def plain(self, text: str) -> None:
+        """Plan text (dry run), printed as is on stdout."""
+        if not self.options.json:
+            print(text, flush=True)
+
+    @contextmanager
+    def progress(self) -> Iterator[Callable[[str, str], None]]:
+        """``update(key, text)`` shows one live line per key while the block runs."""
+        if not self.human:
+            yield lambda key, text: None
+            return
+        from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+        from robocore.ui import console
+
+        tasks: dict[str, Any] = {}
+        with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(),
+                      console=console(), transient=True) as bar:
+
+            def update(key: str, text: str) -> None:
+                line = f"[bold]{key}[/]: {_escape(text)[:100]}"
+                if key not in tasks:
+                    tasks[key] = bar.add_task(line, total=None)
+                else:
+                    bar.update(tasks[key], description=line)
+
+            yield update
+
+    def done(self, outcomes: Sequence[Outcome]) -> None:
+        """Summary lines, or the JSON document."""
+        if self.options.json:
+            print(json.dumps({"results": [asdict(o) for o in outcomes]}, indent=2))
+            return
+        for o in outcomes:
+            mark = {"built": "[green]built[/]", "up-to-date": "[dim]up to date[/]",
+                    "would-build": "[yellow]would build[/]", "failed": "[red]failed[/]"}.get(o.action, o.action)
+            extra = f" ({o.reason})" if o.reason else ""
+            secs = f" in {o.seconds:.1f}s" if o.action == "built" else ""
+            self.info(f"{o.what}: {mark}{secs}{_escape(extra)}")
+
+
+def _escape(text: str) -> str:
+    from rich.markup import escape
+
+    return escape(text)
+
+
+# ---------------------------------------------------------------------------------------------- planning
+
+
+def _config_problems(project: Project, found: list[tuple[tuple[str | int, ...], str]]) -> None:
+    if found:
+        raise ConfigError([Problem(ROBOT_FILE, None, ".".join(str(p) for p in path), message)
+                           for path, message in found])
+
+
+def _arches(project: Project, components: Sequence[Component] | None = None) -> list[str]:
+    robot = project.robot
+    comps = robot.components if components is None else components
+    arches = sorted({robot.host(c.runs_on).arch.value for c in comps if c.image is None})
+    return arches or [native_arch()]
+
+
+def _cache(project: Project) -> Path:
+    return project.state_dir / "cache"
+
+
+def _fetch(project: Project, url: str, version: str | None, *, refresh: bool, dry_run: bool) -> Path:
+    from robocore.adapters import vcs
+
+    dest = _cache(project) / "git" / vcs.cache_key(url, version)
+    if not dry_run:
+        vcs.fetch(url, version, dest, refresh=refresh)
+    return dest
+
+
+def _resource(dest: str, name: str, *, executable: bool) -> ContextEntry:
+    from robocore import resources
+
+    return ContextEntry(dest=dest, data=resources.read(name), executable=executable)
+
+
+@dataclass(frozen=True)
+class Planned:
+    """An image plan with its resolved context, inputs hash and decision."""
+
+    plan: ImagePlan
+    files: tuple[ContextFile, ...]
+    parent_id: str
+    inputs: str
+    labels: dict[str, str]
+
+
+def _planned(project: Project, plan: ImagePlan, parent_id: str) -> Planned:
+    from robocore.adapters.image_builder import expand
+
+    files = tuple(expand(plan.context))
+    digest = inputs_hash(plan.dockerfile, [f.digest() for f in files], parent=parent_id, platform=plan.platform)
+    labels = {naming.LABEL_PROJECT: project.name, naming.LABEL_ROLE: plan.role, naming.LABEL_INPUTS: digest}
+    if plan.component:
+        labels[naming.LABEL_COMPONENT] = plan.component
+    return Planned(plan=plan, files=files, parent_id=parent_id, inputs=digest, labels=labels)
+
+
+def _base_parent(project: Project, client: docker.DockerClient, arch: str, *, dry_run: bool,
+                 say: Callable[[str], None]) -> tuple[str, str]:
+    """(FROM reference, its image ID) of the base for ``arch``."""
+    from robocore.adapters import rootfs
+    from robocore.adapters.image_builder import image_state
+
+    robot = project.robot
+    if robot.base.kind is BaseKind.wheels:
+        if dry_run:
+            for ref in ([robot.base.image] if robot.base.image else [rootfs.BOOTSTRAPPED, rootfs.UPSTREAM]):
+                state = image_state(client, ref)
+                if state is not None:
+                    return ref, state.id
+            return robot.base.image or rootfs.BOOTSTRAPPED, "(to be bootstrapped)"
+        return rootfs.ensure_root_image(client, robot.base.image, work_dir=_cache(project), status=say)
+    ref = dockerfiles.official_image(robot)
+    state = image_state(client, ref)
+    if state is None and not dry_run:
+        say(f"pulling {ref}")
+        from docker.errors import DockerException
+
+        with suppress(DockerException):
+            client.images.pull(ref, platform=dockerfiles.platform(arch))
+        state = image_state(client, ref)
+    if state is None:
+        if dry_run:
+            return ref, "(to be pulled)"
+        raise DockerError(
+            f"robot.yaml: base image {ref} is not present locally and cannot be pulled",
+            hint="pull or docker load it on this machine, or use base.kind: wheels (built from Debian and PyPI)",
+        )
+    return ref, state.id
+
+
+def plan_base(project: Project, client: docker.DockerClient, arch: str, *, dry_run: bool = False,
+              refresh_sources: bool = False, say: Callable[[str], None] = lambda _: None) -> Planned:
+    """The base image plan for ``arch`` (resolves the root image and fetches common packages)."""
+    robot = project.robot
+    _config_problems(project, dockerfiles.wheels_problems(robot))
+    native = native_arch()
+    if not dry_run:
+        check_emulation(arch, native, f"{ROBOT_FILE}: hosts of arch {arch}")
+    root_ref, root_id = _base_parent(project, client, arch, dry_run=dry_run, say=say)
+    ca = find_ca_bundle()
+    entries: list[ContextEntry] = [_resource("entrypoint.sh", "entrypoint.sh", executable=True)]
+    if robot.base.kind is BaseKind.wheels:
+        from robocore import resources
+
+        setup = resources.read("wheels-setup.bash").replace(b"@DISTRO@", robot.ros_distro.value.encode())
+        entries += [ContextEntry("wheels-setup.bash", data=setup), _resource("ros2", "ros2", executable=True)]
+    if ca is not None:
+        entries.append(ContextEntry("host-ca.pem", data=ca.read_bytes()))
+    common: list[str] = []
+    for pkg in robot.common_packages:
+        if pkg.repo:
+            source = _fetch(project, pkg.repo, pkg.branch, refresh=refresh_sources, dry_run=dry_run)
+        else:
+            source = project.root / (pkg.folder or pkg.name)
+        entries.append(ContextEntry(f"common/{pkg.name}", source=source))
+        common.append(pkg.name)
+    dockerfile = dockerfiles.base_dockerfile(robot, root_image=root_ref, has_ca=ca is not None, common=common)
+    plan = ImagePlan(role="base", name=naming.base_image(robot, project.name), tag=dockerfiles.base_tag(arch, native),
+                     arch=arch, dockerfile=dockerfile, parent=root_ref, context=tuple(entries))
+    return _planned(project, plan, root_id)
+
+
+def _workspace_files(ws: Path) -> Iterator[tuple[str, Path]]:
+    """Files of a workspace, without build outputs, VCS data, caches and COLCON_IGNOREd folders."""
+    from robocore.adapters.image_builder import SKIP_DIRS
+
+    for dirpath, dirnames, filenames in os.walk(ws):
+        here = Path(dirpath)
+        if "COLCON_IGNORE" in filenames:
+            dirnames[:] = []
+            continue
+        dirnames[:] = sorted(d for d in dirnames if d not in SKIP_DIRS and not (here == ws and d in SKIP_WS_DIRS)
+                             and not d.startswith("."))
+        for name in sorted(filenames):
+            if not name.endswith((".pyc", ".pyo")):
+                yield (here / name).relative_to(ws).as_posix(), here / name
+
+
+def package_xmls(ws: Path) -> list[str]:
+    """Workspace-relative paths of every package.xml of a component's workspace."""
+    return [rel for rel, _ in _workspace_files(ws) if rel.rsplit("/", 1)[-1] == "package.xml"]
+
+
+@dataclass(frozen=True)
+class BaseRef:
+    """A built base image as components see it: reference, arch and inputs hash."""
+
+    ref: str
+    arch: str
+    inputs: str
+
+
+def plan_component(project: Project, component: Component, base: BaseRef, *, dry_run: bool = False,
+                   refresh_sources: bool = False) -> Planned:
+    """The staged image plan of ``component`` on top of ``base``.
+
+    Components hash on the base's inputs hash: an unchanged base leaves them unchanged.
+    """
+    robot = project.robot
+    entries: list[ContextEntry] = []
+    xmls: list[str] = []
+    if robot.base.kind is BaseKind.official and component.folder:
+        ws = project.root / component.folder
+        for rel in package_xmls(ws):
+            dest = dockerfiles.rosdep_dest(PurePosixPath(rel))
+            entries.append(ContextEntry(dest, source=ws / rel))
+            xmls.append(dest)
+    folders: list[str] = []
+    for repo in component.repositories:
+        folder = dockerfiles.repo_folder(repo)
+        source = _fetch(project, repo.url, repo.version, refresh=refresh_sources, dry_run=dry_run)
+        entries.append(ContextEntry(f"repos/{folder}", source=source))
+        folders.append(folder)
+    dockerfile = dockerfiles.component_dockerfile(robot, component, base_ref=base.ref, package_xmls=xmls,
+                                                  repo_folders=folders)
+    plan = ImagePlan(role="component", name=naming.component_image(robot, project.name, component.name),
+                     tag="latest", arch=base.arch, dockerfile=dockerfile, parent=base.ref,
+                     context=tuple(entries), component=component.name)
+    return _planned(project, plan, base.inputs)
+
+
+def decide(state: ImageState | None, planned: Planned, *, force: bool) -> str | None:
+    """Why the image must be built, or None when it is up to date."""
+    if force:
+        return "--force"
+    if state is None:
+        return "not built yet"
+    if state.labels.get(naming.LABEL_INPUTS) != planned.inputs:
+        return "inputs changed"
+    return None
+
+
+# ---------------------------------------------------------------------------------------------- execution
+
+
+def _client() -> docker.DockerClient:
+    from robocore.adapters.docker_hosts import local_client
+
+    return local_client(timeout=3600)
+
+
+def _build_one(planned: Planned, reason: str, update: Callable[[str, str], None]) -> Outcome:
+    from robocore.adapters.image_builder import build_image
+
+    client = _client()
+    start = time.monotonic()
+    key = planned.plan.ref
+    update(key, f"building ({reason})")
+    try:
+        image_id = build_image(client, planned.plan, planned.files, labels=planned.labels, native_arch=native_arch(),
+                               output=lambda line: update(key, line))
+    finally:
+        client.close()
+    return Outcome(what=key, role=planned.plan.role, action="built", reason=reason, image_id=image_id,
+                   seconds=time.monotonic() - start)
+
+
+def _show_plan(report: Reporter, planned: Planned, reason: str | None) -> None:
+    status = f"would build ({reason})" if reason else "up to date"
+    report.plain(f"# {planned.plan.ref} [{planned.plan.platform}] inputs {planned.inputs[:19]}: {status}")
+    report.plain(planned.plan.dockerfile)
+
+
+def _run_builds(report: Reporter, work: Sequence[tuple[Planned, str]], *, parallel: bool) -> list[Outcome]:
+    outcomes: list[Outcome] = []
+    if not work:
+        return outcomes
+    errors: list[BaseException] = []
+    with report.progress() as update:
+        if parallel and len(work) > 1:
+            with ThreadPoolExecutor(max_workers=min(MAX_PARALLEL, len(work))) as pool:
+                futures = [pool.submit(_build_one, planned, reason, update) for planned, reason in work]
+                for future in futures:
+                    try:
+                        outcomes.append(future.result())
+                    except BaseException as exc:  # collected: every image is tried, then one error
+                        errors.append(exc)
+        else:
+            for planned, reason in work:
+                outcomes.append(_build_one(planned, reason, update))
+    if errors:
+        report.done(outcomes)
+        first = errors[0]
+        if len(errors) > 1 and isinstance(first, BuildError):
+            raise BuildError(first.message + f"\n(and {len(errors) - 1} more image(s) failed)", hint=first.hint)
+        raise first
+    return outcomes
 
 
 def prepare_base(options: Options, *, force: bool) -> None:
-    """Build the base image when its inputs changed."""
-    options.load()
-    raise NotImplementedYet("prepare-base is not implemented yet")
+    """Build the base image (per arch) when its inputs changed."""
+    project = options.load()
+    report = Reporter(options)
+    _config_problems(project, dockerfiles.wheels_problems(project.robot))
+    client = _client()
+    from robocore.adapters.image_builder import image_state
+
+    outcomes: list[Outcome] = []
+    work: list[tuple[Planned, str]] = []
+    for arch in _arches(project):
+        planned = plan_base(project, client, arch, dry_run=options.dry_run, refresh_sources=force, say=report.info)
+        reason = decide(image_state(client, planned.plan.ref), planned, force=force)
+        if options.dry_run:
+            _show_plan(report, planned, reason)
+        if reason is None:
+            outcomes.append(Outcome(what=planned.plan.ref, role="base", action="up-to-date"))
+        elif options.dry_run:
+            outcomes.append(Outcome(what=planned.plan.ref, role="base", action="would-build", reason=reason))
+        else:
+            work.append((planned, reason))
+    outcomes += _run_builds(report, work, parallel=False)
+    report.done(outcomes)
+
+
+def _selected(project: Project, component: str | None) -> list[Component]:
+    if component:
+        comp = project.component(component)
+        if comp.image is not None:
+            raise UsageError(f"component {component!r} uses the pre-built image {comp.image}; "
+                             "nothing to stage or build")
+        return [comp]
+    return [c for c in project.robot.components if c.image is None]
+
+
+def _existing_base(project: Project, client: docker.DockerClient, arch: str) -> BaseRef:
+    """The built base image for ``arch`` (stage does not rebuild it: that is prepare-base's job)."""
+    from robocore.adapters.image_builder import image_state
+
+    ref = f"{naming.base_image(project.robot, project.name)}:{dockerfiles.base_tag(arch, native_arch())}"
+    state = image_state(client, ref)
+    if state is None or naming.LABEL_INPUTS not in state.labels:
+        raise BuildError(f"no base image {ref}", hint="run `prepare-base` first")
+    return BaseRef(ref=ref, arch=arch, inputs=state.labels[naming.LABEL_INPUTS])
 
 
 def stage(options: Options, *, refresh: bool, component: str | None, force: bool) -> None:
-    """Build component images and write compose files."""
-    options.load()
-    raise NotImplementedYet("stage is not implemented yet")
+    """Build component images (in parallel), then write the per-host compose files."""
+    from robocore.commands.composefiles import write_compose_files
+
+    project = options.load()
+    report = Reporter(options)
+    if refresh:
+        if options.dry_run:
+            report.plain("would rewrite the per-host compose files")
+            return
+        for path in write_compose_files(project):
+            report.info(f"wrote {path.relative_to(project.root)}")
+        return
+    comps = _selected(project, component)
+    _config_problems(project, dockerfiles.wheels_problems(project.robot))
+    client = _client()
+    from robocore.adapters.image_builder import image_state
+
+    bases = {arch: _existing_base(project, client, arch) for arch in _arches(project, comps)}
+    outcomes: list[Outcome] = []
+    work: list[tuple[Planned, str]] = []
+    for comp in comps:
+        base = bases[project.robot.host(comp.runs_on).arch.value]
+        planned = plan_component(project, comp, base, dry_run=options.dry_run, refresh_sources=force)
+        reason = decide(image_state(client, planned.plan.ref), planned, force=force)
+        if options.dry_run:
+            _show_plan(report, planned, reason)
+        if reason is None:
+            outcomes.append(Outcome(what=planned.plan.ref, role="component", action="up-to-date"))
+        elif options.dry_run:
+            outcomes.append(Outcome(what=planned.plan.ref, role="component", action="would-build", reason=reason))
+        else:
+            work.append((planned, reason))
+    client.close()
+    outcomes += _run_builds(report, work, parallel=True)
+    if options.dry_run:
+        report.plain("then: rewrite the per-host compose files")
+    else:
+        for path in write_compose_files(project):
+            report.info(f"wrote {path.relative_to(project.root)}")
+    report.done(outcomes)
+
+
+# ---------------------------------------------------------------------------------------------- colcon build
+
+
+def package_hashes(ws: Path) -> dict[str, str]:
+    """``{package name: content hash of its folder}`` for every package of a workspace."""
+    folders: dict[str, list[tuple[str, Path]]] = {}
+    files = list(_workspace_files(ws))
+    roots = sorted((rel.rsplit("/", 1)[0] if "/" in rel else "" for rel, _ in files
+                    if rel.rsplit("/", 1)[-1] == "package.xml"), key=len, reverse=True)
+    names: dict[str, str] = {}
+    for root in roots:
+        name = colcon.package_name((ws / root / "package.xml").read_text(errors="replace")) or root or ws.name
+        names[root] = name
+        folders[root] = []
+    for rel, path in files:
+        owner = next((r for r in roots if r == "" or rel.startswith(r + "/")), None)
+        if owner is not None:
+            folders[owner].append((rel, path))
+    out: dict[str, str] = {}
+    for root, members in folders.items():
+        digests = []
+        for rel, path in members:
+            info = path.lstat()
+            data = os.readlink(path).encode() if path.is_symlink() else path.read_bytes()
+            digests.append(FileDigest(rel, bool(info.st_mode & 0o111), digest_bytes(data)))
+        out[names[root]] = tree_hash(digests)
+    return out
+
+
+@dataclass(frozen=True)
+class BuildPlan:
+    """What ``build`` does for one component."""
+
+    component: Component
+    image: str
+    image_id: str
+    arch: str
+    workspace: Path
+    out: Path
+    packages: dict[str, str]
+    changed: list[str] | None  # None: everything; []: nothing
+    reason: str
+
+    @property
+    def argv(self) -> list[str]:
+        """The colcon command line."""
+        return colcon.workspace_build_argv(self.changed or ())
+
+
+def _previous(out: Path) -> dict[str, Any]:
+    try:
+        data = json.loads((out / BUILD_STATE).read_text())
+        return data if isinstance(data, dict) else {}
+    except (OSError, ValueError):
+        return {}
+
+
+def plan_build(project: Project, comp: Component, image_id: str) -> BuildPlan:
+    """Which packages of ``comp`` must be (re)built, from the last successful build's state."""
+    assert comp.folder is not None
+    ws = project.root / comp.folder
+    out = project.build_dir(comp.name)
+    packages = package_hashes(ws)
+    before = _previous(out)
+    old: dict[str, str] = before.get("packages", {}) if isinstance(before.get("packages"), dict) else {}
+    changed: list[str] | None
+    if not (out / "install").is_dir() or before.get("image") != image_id:
+        changed, reason = None, "first build" if not before else "image changed"
+    elif set(old) != set(packages):
+        changed, reason = None, "packages added or removed"
+    else:
+        changed = sorted(name for name, digest in packages.items() if old.get(name) != digest)
+        reason = f"changed: {', '.join(changed)}" if changed else "up to date"
+    image = f"{naming.component_image(project.robot, project.name, comp.name)}:latest"
+    return BuildPlan(component=comp, image=image, image_id=image_id, arch=project.robot.host(comp.runs_on).arch.value,
+                     workspace=ws, out=out, packages=packages, changed=changed, reason=reason)
+
+
+def _log_tail(out: Path, package: str, lines: int = 30) -> str:
+    log = out / "log" / "latest_build" / package / "stdout_stderr.log"
+    try:
+        text = log.read_text(errors="replace").splitlines()
+    except OSError:
+        return f"(no log at {log})"
+    return "\n".join(f"  {line}" for line in text[-lines:])
+
+
+def _colcon(project: Project, plan: BuildPlan, report: Reporter) -> Outcome:
+    from robocore.adapters.image_builder import run_streaming
+
+    for sub in ("build", "install", "log"):
+        (plan.out / sub).mkdir(parents=True, exist_ok=True)
+    uid, gid = os.getuid(), os.getgid()
+    volumes = {
+        str(plan.workspace): naming.CONTAINER_WS,
+        str(plan.out / "build"): colcon.CONTAINER_BUILD,
+        str(plan.out / "install"): naming.CONTAINER_INSTALL,
+        str(plan.out / "log"): colcon.CONTAINER_LOG,
+    }
+    events: list[colcon.PackageEvent] = []
+    other: list[str] = []
+    start = time.monotonic()
+    name = plan.component.name
+    native = native_arch()
+    client = _client()
+    try:
+        with report.progress() as update:
+            update(name, "colcon build")
+
+            def on_line(line: str) -> None:
+                event = colcon.parse_event(line)
+                if event is None:
+                    if line.strip():
+                        other.append(line)
+                    return
+                events.append(event)
+                if event.state == "started":
+                    update(name, f"building {event.package}")
+                else:
+                    secs = f" {event.seconds:.1f}s" if event.seconds is not None else ""
+                    report.info(f"{name}: {event.package} {event.state}{secs}")
+
+            code = run_streaming(
+                client, plan.image, plan.argv, user=f"{uid}:{gid}", volumes=volumes,
+                environment={"HOME": "/tmp", "ROBOCORE_NO_INSTALL": "1", "PYTHONDONTWRITEBYTECODE": "1"},
+                labels={naming.LABEL_PROJECT: project.name, naming.LABEL_COMPONENT: name, naming.LABEL_ROLE: "build"},
+                platform=dockerfiles.platform(plan.arch) if plan.arch != native else None, on_line=on_line,
+            )
+    finally:
+        client.close()
+    if code != 0:
+        failed = [e.package for e in events if e.state == "failed"]
+        if failed:
+            raise BuildError(f"component {name}: colcon build failed in package {failed[0]} "
+                             f"(log: {plan.out.relative_to(project.root)}/log/latest_build/{failed[0]})\n"
+                             + _log_tail(plan.out, failed[0]),
+                             hint=f"fix it in {plan.component.folder}, then run build --component {name}")
+        tail = "\n".join(f"  {line}" for line in other[-20:])
+        raise BuildError(f"component {name}: colcon build exited {code}\n{tail}")
+    write_atomic(plan.out / BUILD_STATE, json.dumps({"image": plan.image_id, "packages": plan.packages}, indent=1))
+    built = [e.package for e in events if e.state == "finished"]
+    return Outcome(what=name, role="build", action="built", reason=plan.reason, image_id=plan.image_id,
+                   seconds=time.monotonic() - start, packages=built)
 
 
 def build(options: Options, *, component: str | None) -> None:
-    """colcon-build component workspaces inside their staged images."""
-    options.load()
-    raise NotImplementedYet("build is not implemented yet")
+    """colcon-build component workspaces inside their staged images (incremental)."""
+    project = options.load()
+    report = Reporter(options)
+    comps = [c for c in _selected(project, component) if c.folder is not None]
+    if component and not comps:
+        raise UsageError(f"component {component!r} has no folder: nothing to build")
+    from robocore.adapters.image_builder import image_state
+
+    client = _client()
+    plans: list[BuildPlan] = []
+    for comp in comps:
+        ref = f"{naming.component_image(project.robot, project.name, comp.name)}:latest"
+        state = image_state(client, ref)
+        if state is None:
+            if options.dry_run:
+                report.plain(f"# {comp.name}: no staged image {ref} yet (run stage)")
+                continue
+            raise BuildError(f"component {comp.name}: no staged image {ref}", hint="run `stage` first")
+        check_emulation(project.robot.host(comp.runs_on).arch.value, native_arch(), f"component {comp.name}")
+        plans.append(plan_build(project, comp, state.id))
+    client.close()
+    outcomes: list[Outcome] = []
+    for plan in plans:
+        if plan.changed == []:
+            outcomes.append(Outcome(what=plan.component.name, role="build", action="up-to-date"))
+            continue
+        if options.dry_run:
+            report.plain(f"# {plan.component.name} ({plan.reason}) in {plan.image}:")
+            report.plain("  " + " ".join(plan.argv))
+            outcomes.append(Outcome(what=plan.component.name, role="build", action="would-build", reason=plan.reason))
+            continue
+        outcomes.append(_colcon(project, plan, report))
+    report.done(outcomes)

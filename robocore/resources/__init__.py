@@ -1,0 +1,10 @@
+"""Files robocore bakes into images: entrypoint, wheels setup.bash, the ``ros2`` shim."""
+
+from __future__ import annotations
+
+from importlib import resources
+
+
+def read(name: str) -> bytes:
+    """The bytes of resource file ``name``."""
+    return resources.files(__name__).joinpath(name).read_bytes()

@@ -1,0 +1,15 @@
+#!/bin/bash
+# robocore entrypoint: source ROS, the image's underlays (common packages, repositories),
+# then the component's install tree if one is mounted, and run the command.
+# shellcheck disable=SC1090,SC1091
+source "/opt/ros/${ROS_DISTRO}/setup.bash"
+for _robocore_underlay in /opt/robocore/common /opt/robocore/deps; do
+    if [ -f "${_robocore_underlay}/local_setup.bash" ]; then
+        source "${_robocore_underlay}/local_setup.bash"
+    fi
+done
+unset _robocore_underlay
+if [ -z "${ROBOCORE_NO_INSTALL:-}" ] && [ -f /robocore/install/setup.bash ]; then
+    source /robocore/install/setup.bash
+fi
+exec "$@"

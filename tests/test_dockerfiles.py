@@ -1,0 +1,139 @@
+"""Golden-file tests of the generated Dockerfiles (set UPDATE_GOLDEN=1 to rewrite the goldens)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from robocore.config.model import Robot
+from robocore.plan import dockerfiles
+
+GOLDEN = Path(__file__).parent / "golden"
+
+
+def robot(**overrides: Any) -> Robot:
+    data: dict[str, Any] = {
+        "ros_distro": "jazzy",
+        "hosts": [{"name": "dev", "ip": "127.0.0.1"}, {"name": "pi", "ip": "10.0.0.2", "arch": "arm64"}],
+        "components": [
+            {
+                "name": "driver",
+                "runs_on": "dev",
+                "folder": "components/driver",
+                "apt_packages": ["libusb-1.0-0", "ros-jazzy-diagnostic-updater"],
+                "pip_packages": ["pyserial>=3.5", "numpy"],
+                "repositories": [{"url": "https://github.com/example/serial_tools.git", "version": "v1.2.0"}],
+                "postinstall": ["echo 'done' > /etc/driver-ready", "ros2 pkg list | grep -q rclpy"],
+            },
+            {"name": "plain", "runs_on": "dev", "folder": "components/plain"},
+        ],
+    }
+    data.update(overrides)
+    return Robot.model_validate(data)
+
+
+def check_golden(name: str, text: str) -> None:
+    path = GOLDEN / name
+    if os.environ.get("UPDATE_GOLDEN"):
+        path.write_text(text)
+    assert path.exists(), f"missing golden file {path}; run with UPDATE_GOLDEN=1"
+    assert text == path.read_text(), f"{name} differs from its golden file (UPDATE_GOLDEN=1 to accept)"
+
+
+def test_wheels_base_golden() -> None:
+    r = robot(base={"kind": "wheels"})
+    text = dockerfiles.base_dockerfile(r, root_image="robocore/debian:bookworm", has_ca=True, common=[])
+    check_golden("base-wheels.Dockerfile", text)
+
+
+def test_wheels_base_with_common_packages_golden() -> None:
+    r = robot(base={"kind": "wheels"}, ros_distro="kilted")
+    text = dockerfiles.base_dockerfile(r, root_image="debian:bookworm", has_ca=False, common=["my_msgs", "utils"])
+    check_golden("base-wheels-kilted-common.Dockerfile", text)
+
+
+def test_official_base_golden() -> None:
+    r = robot()
+    text = dockerfiles.base_dockerfile(r, root_image=dockerfiles.official_image(r), has_ca=True, common=["my_msgs"])
+    check_golden("base-official.Dockerfile", text)
+
+
+def test_component_official_golden() -> None:
+    r = robot()
+    comp = r.component("driver")
+    text = dockerfiles.component_dockerfile(
+        r, comp, base_ref="proj-base:latest",
+        package_xmls=["rosdep/src/driver/package.xml"],
+        repo_folders=[dockerfiles.repo_folder(comp.repositories[0])],
+    )
+    check_golden("component-official.Dockerfile", text)
+
+
+def test_component_wheels_golden() -> None:
+    r = robot(base={"kind": "wheels"})
+    comp = r.component("driver")
+    text = dockerfiles.component_dockerfile(r, comp, base_ref="proj-base:latest",
+                                            repo_folders=[dockerfiles.repo_folder(comp.repositories[0])])
+    check_golden("component-wheels.Dockerfile", text)
+
+
+def test_component_without_dependencies_is_just_the_base() -> None:
+    r = robot()
+    text = dockerfiles.component_dockerfile(r, r.component("plain"), base_ref="proj-base:latest")
+    assert [line for line in text.splitlines() if not line.startswith("#")] == ["FROM proj-base:latest"]
+
+
+def test_wheels_base_has_entrypoint_setup_and_pins() -> None:
+    r = robot(base={"kind": "wheels"})
+    text = dockerfiles.base_dockerfile(r, root_image="x", has_ca=False, common=[])
+    assert 'ENTRYPOINT ["/robocore/entrypoint.sh"]' in text
+    assert 'CMD ["bash"]' in text
+    assert "COPY wheels-setup.bash /opt/ros/jazzy/setup.bash" in text
+    for pin in dockerfiles.WHEELS["jazzy"]:
+        assert pin in text
+    assert "host-ca.pem" not in text  # no trust store found -> nothing copied
+
+
+def test_official_base_uses_override() -> None:
+    r = robot(base={"kind": "official", "image": "myreg/ros:jazzy-custom"})
+    assert dockerfiles.official_image(r) == "myreg/ros:jazzy-custom"
+    assert dockerfiles.official_image(robot()) == "ros:jazzy-ros-base"
+
+
+def test_pip_requirements_are_shell_quoted() -> None:
+    r = robot()
+    text = dockerfiles.component_dockerfile(r, r.component("driver"), base_ref="b")
+    assert "'pyserial>=3.5'" in text
+
+
+@pytest.mark.parametrize("distro", ["humble", "rolling"])
+def test_wheels_refuses_distros_without_wheels(distro: str) -> None:
+    r = robot(base={"kind": "wheels"}, ros_distro=distro, components=[])
+    problems = dockerfiles.wheels_problems(r)
+    assert problems and problems[0][0] == ("ros_distro",) and "official" in problems[0][1]
+
+
+def test_wheels_refuses_arm64_hosts_with_components() -> None:
+    comps = [{"name": "cam", "runs_on": "pi", "folder": "c"}]
+    problems = dockerfiles.wheels_problems(robot(base={"kind": "wheels"}, components=comps))
+    assert problems == [(("hosts", 1, "arch"), problems[0][1])]
+    assert "amd64" in problems[0][1]
+    # an arm64 host without components to build is fine; the official base is always fine
+    assert dockerfiles.wheels_problems(robot(base={"kind": "wheels"}, components=[])) == []
+    assert dockerfiles.wheels_problems(robot(components=comps)) == []
+
+
+def test_repo_folder_from_url() -> None:
+    from robocore.config.model import Repository
+
+    assert dockerfiles.repo_folder(Repository(url="https://x.org/a/b_c.git")) == "b_c"
+    assert dockerfiles.repo_folder(Repository(url="git@x.org:a/tools")) == "tools"
+    assert dockerfiles.repo_folder(Repository(url="https://x.org/a/b.git", folder="mine")) == "mine"
+
+
+def test_base_tag_per_arch() -> None:
+    assert dockerfiles.base_tag("amd64", "amd64") == "latest"
+    assert dockerfiles.base_tag("arm64", "amd64") == "latest-arm64"

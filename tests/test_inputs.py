@@ -1,0 +1,132 @@
+"""Content hashes of image inputs and of workspaces: what changes a hash, and what does not."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from robocore.commands import images
+from robocore.config.model import Robot
+from robocore.plan import colcon
+from robocore.plan.inputs import FileDigest, inputs_hash, tree_hash
+from robocore.project import Project
+
+BASE = images.BaseRef(ref="proj-base:latest", arch="amd64", inputs="sha256:base1")
+
+
+def make_project(root: Path, kind: str = "wheels", **changes: Any) -> Project:
+    comps: list[dict[str, Any]] = [
+        {"name": "talker", "runs_on": "dev", "folder": "ws/talker", "apt_packages": ["curl"]},
+        {"name": "listener", "runs_on": "dev", "folder": "ws/listener", "pip_packages": ["numpy"]},
+    ]
+    for comp in comps:
+        comp.update(changes.get(comp["name"], {}))
+        pkg = root / comp["folder"] / "src" / f"pkg_{comp['name']}"
+        pkg.mkdir(parents=True, exist_ok=True)
+        if not (pkg / "package.xml").exists():
+            (pkg / "package.xml").write_text(f"<package><name>pkg_{comp['name']}</name></package>")
+            (pkg / "node.py").write_text("print('hi')\n")
+    robot = Robot.model_validate({"ros_distro": "jazzy", "base": {"kind": kind},
+                                  "hosts": [{"name": "dev", "ip": "127.0.0.1"}], "components": comps})
+    return Project(root=root, robot=robot)
+
+
+def hashes(project: Project, base: images.BaseRef = BASE) -> dict[str, str]:
+    return {c.name: images.plan_component(project, c, base).inputs for c in project.robot.components}
+
+
+def test_inputs_hash_is_order_independent_and_content_sensitive() -> None:
+    a = FileDigest("a", False, "1")
+    b = FileDigest("b", True, "2")
+    h = inputs_hash("FROM x\n", [a, b], parent="p", platform="linux/amd64")
+    assert h == inputs_hash("FROM x\n", [b, a], parent="p", platform="linux/amd64")
+    assert h != inputs_hash("FROM y\n", [a, b], parent="p", platform="linux/amd64")
+    assert h != inputs_hash("FROM x\n", [a, FileDigest("b", False, "2")], parent="p", platform="linux/amd64")
+    assert h != inputs_hash("FROM x\n", [a, b], parent="q", platform="linux/amd64")
+    assert h != inputs_hash("FROM x\n", [a, b], parent="p", platform="linux/arm64")
+    assert h.startswith("sha256:")
+
+
+def test_changing_one_components_apt_list_changes_only_its_hash(tmp_path: Path) -> None:
+    before = hashes(make_project(tmp_path))
+    after = hashes(make_project(tmp_path, talker={"apt_packages": ["curl", "jq"]}))
+    assert after["talker"] != before["talker"]
+    assert after["listener"] == before["listener"]
+
+
+def test_same_inputs_same_hash(tmp_path: Path) -> None:
+    assert hashes(make_project(tmp_path)) == hashes(make_project(tmp_path))
+
+
+def test_user_code_never_changes_an_image_hash(tmp_path: Path) -> None:
+    for kind in ("wheels", "official"):
+        project = make_project(tmp_path / kind, kind=kind)
+        before = hashes(project)
+        (tmp_path / kind / "ws/talker/src/pkg_talker/node.py").write_text("print('changed')\n")
+        assert hashes(project) == before
+
+
+def test_package_xml_changes_the_hash_only_where_rosdep_reads_it(tmp_path: Path) -> None:
+    official = make_project(tmp_path / "o", kind="official")
+    wheels = make_project(tmp_path / "w", kind="wheels")
+    before_o, before_w = hashes(official), hashes(wheels)
+    for root in ("o", "w"):
+        xml = tmp_path / root / "ws/talker/src/pkg_talker/package.xml"
+        xml.write_text(xml.read_text().replace("</name>", "</name><depend>rclpy</depend>"))
+    assert hashes(official)["talker"] != before_o["talker"]
+    assert hashes(official)["listener"] == before_o["listener"]
+    assert hashes(wheels) == before_w  # no rosdep on the wheels base: package.xml is not an input
+
+
+def test_official_component_context_holds_only_package_xml(tmp_path: Path) -> None:
+    project = make_project(tmp_path, kind="official")
+    planned = images.plan_component(project, project.robot.component("talker"), BASE)
+    assert [f.dest for f in planned.files] == ["rosdep/src/pkg_talker/package.xml"]
+
+
+def test_a_new_base_changes_every_component_hash(tmp_path: Path) -> None:
+    project = make_project(tmp_path)
+    other = images.BaseRef(ref=BASE.ref, arch="amd64", inputs="sha256:base2")
+    before, after = hashes(project), hashes(project, other)
+    assert all(before[name] != after[name] for name in before)
+
+
+def test_package_hashes_follow_content_not_timestamps(tmp_path: Path) -> None:
+    import os
+
+    project = make_project(tmp_path)
+    ws = tmp_path / "ws/talker"
+    first = images.package_hashes(ws)
+    assert list(first) == ["pkg_talker"]
+    node = ws / "src/pkg_talker/node.py"
+    os.utime(node, (1, 1))
+    assert images.package_hashes(ws) == first
+    node.write_text("print('edited')\n")
+    assert images.package_hashes(ws) != first
+    # build outputs and caches inside the workspace are not sources
+    (ws / "build").mkdir()
+    (ws / "build/x.txt").write_text("x")
+    (ws / "src/pkg_talker/__pycache__").mkdir()
+    (ws / "src/pkg_talker/__pycache__/node.cpython-311.pyc").write_bytes(b"\0")
+    assert images.package_hashes(ws) == images.package_hashes(ws)
+    assert project.robot.component("talker").folder == "ws/talker"
+
+
+def test_tree_hash_depends_on_paths_and_content() -> None:
+    assert tree_hash([FileDigest("a", False, "1")]) != tree_hash([FileDigest("b", False, "1")])
+    assert tree_hash([FileDigest("a", False, "1")]) == tree_hash([FileDigest("a", False, "1")])
+
+
+def test_colcon_events_and_argv() -> None:
+    assert colcon.parse_event("Starting >>> demo_talker") == colcon.PackageEvent("demo_talker", "started")
+    finished = colcon.PackageEvent("demo_talker", "finished", 1.23)
+    assert colcon.parse_event("Finished <<< demo_talker [1.23s]") == finished
+    assert colcon.parse_event("Failed   <<< broken [0.5s, exited with code 1]") == colcon.PackageEvent(
+        "broken", "failed", 0.5)
+    assert colcon.parse_event("random output") is None
+    argv = colcon.workspace_build_argv(["a"])
+    assert argv[:4] == ["colcon", "--log-base", "/robocore/log", "build"]
+    assert argv[argv.index("--base-paths") + 1] == "/robocore/ws"
+    assert argv[argv.index("--install-base") + 1] == "/robocore/install"
+    assert argv[-2:] == ["--packages-above", "a"]
+    assert colcon.package_name("<package><name> foo_bar </name></package>") == "foo_bar"
