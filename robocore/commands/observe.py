@@ -1,24 +1,375 @@
-"""status, logs and connect: looking at (and into) the running robot (issue #4)."""
+"""status, logs and connect: looking at (and into) the running robot."""
 
 from __future__ import annotations
 
+import json
+import os
+import queue
+import shlex
+import subprocess
+import sys
+import threading
+from collections.abc import Iterator
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from typing import TYPE_CHECKING, Any
+
 from robocore.commands.context import Options
-from robocore.errors import NotImplementedYet
+from robocore.commands.run import connect as connect_host
+from robocore.commands.run import for_each_host, managed_containers, select_hosts
+from robocore.config.model import DockerAccess, Host
+from robocore.errors import DockerError, GroupError, RobocoreError, UsageError
+from robocore.plan import dds, naming
+from robocore.plan.containers import discovery_service
+from robocore.project import Project
+from robocore.ui import console, stdout
+
+if TYPE_CHECKING:
+    import docker
+
+#: Seconds ``status`` lets its super client listen to the graph.
+GRAPH_SPIN_SECONDS = 3.0
+#: Read timeout of log streams: a quiet component may print nothing for a long time.
+LOG_STREAM_TIMEOUT = 7 * 24 * 3600
+_PROFILE_VARS = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
+
+
+# --------------------------------------------------------------------------- status
+
+
+@dataclass(frozen=True)
+class Row:
+    """One line of the status table."""
+
+    component: str
+    host: str
+    state: str
+    uptime: str
+    restarts: int
+    image: str
+
+
+def uptime_text(started_at: str, now: datetime | None = None) -> str:
+    """``3d 2h``, ``5m 10s``... from Docker's ``State.StartedAt`` (RFC 3339, nanoseconds)."""
+    try:
+        stamp = datetime.fromisoformat(started_at[:26].rstrip("Z") + "+00:00") if started_at else None
+    except ValueError:
+        stamp = None
+    if stamp is None or stamp.year < 2000:
+        return "-"
+    seconds = int(((now or datetime.now(timezone.utc)) - stamp).total_seconds())
+    days, rest = divmod(max(seconds, 0), 86400)
+    hours, rest = divmod(rest, 3600)
+    minutes, secs = divmod(rest, 60)
+    if days:
+        return f"{days}d {hours}h"
+    if hours:
+        return f"{hours}h {minutes}m"
+    return f"{minutes}m {secs}s" if minutes else f"{secs}s"
+
+
+def _rows(project: Project, host: Host) -> list[Row]:
+    client = connect_host(project, host, timeout=60)
+    try:
+        found = {c.labels.get(naming.LABEL_COMPONENT, c.name): c for c in managed_containers(client, project.name)}
+    finally:
+        client.close()
+    planned = [discovery_service(s.index) for s in dds.servers(project.robot) if s.host == host.name]
+    planned += [c.name for c in project.robot.components_on(host.name)]
+    rows = []
+    for name in planned + sorted(set(found) - set(planned)):
+        container = found.get(name)
+        if container is None:
+            rows.append(Row(name, host.name, "missing", "-", 0, "-"))
+            continue
+        state = container.attrs.get("State", {})
+        running = state.get("Status") == "running"
+        rows.append(Row(
+            component=name,
+            host=host.name,
+            state=str(state.get("Status", container.status)) + ("" if name in planned else " (not planned)"),
+            uptime=uptime_text(state.get("StartedAt", "")) if running else "-",
+            restarts=int(container.attrs.get("RestartCount", 0)),
+            image=str(container.attrs.get("Config", {}).get("Image", "")),
+        ))
+    return rows
+
+
+def super_client_exec_env(project: Project) -> dict[str, str]:
+    """Super-client environment for a container without the DDS profiles mounted (env override only)."""
+    env = dds.client_environment(project.robot, super_client=True)
+    for key in _PROFILE_VARS:
+        env.pop(key, None)
+    return env
+
+
+def ros_nodes(project: Project) -> tuple[list[str] | None, str]:
+    """Names of the ROS nodes alive in the graph, and where they were asked (None when no server answered).
+
+    Runs ``ros2 node list`` as a super client inside a running discovery-server container.
+    """
+    notes = []
+    for server in dds.servers(project.robot):
+        host = project.robot.host(server.host)
+        where = f"{discovery_service(server.index)} on {host.name}"
+        try:
+            client = connect_host(project, host, timeout=60)
+        except RobocoreError as error:
+            notes.append(f"{where}: {error.lines()[0]}")
+            continue
+        try:
+            container = _running(client, naming.discovery_container_name(project.name, server.index))
+            if container is None:
+                notes.append(f"{where}: not running")
+                continue
+            argv = [naming.ENTRYPOINT, "ros2", "node", "list", "--no-daemon", "--spin-time", str(GRAPH_SPIN_SECONDS)]
+            code, output = container.exec_run(argv, environment=super_client_exec_env(project), demux=False)
+        finally:
+            client.close()
+        text = (output or b"").decode(errors="replace")
+        if code != 0:
+            notes.append(f"{where}: `ros2 node list` exited {code}: {text.strip().splitlines()[-1:] or ''}")
+            continue
+        names = sorted({line.strip() for line in text.splitlines() if line.strip().startswith("/")})
+        return [n for n in names if not n.split("/")[-1].startswith("_")], where
+    return None, "; ".join(notes) or "no discovery server"
+
+
+def _running(client: docker.DockerClient, name: str) -> Any:
+    from docker.errors import NotFound
+
+    try:
+        container = client.containers.get(name)
+    except NotFound:
+        return None
+    return container if container.status == "running" else None
+
+
+def collect_status(project: Project, hosts: list[Host]) -> tuple[list[Row], dict[str, RobocoreError]]:
+    """Status rows of every reachable host (file order) and the failures of the others."""
+    results, failures = for_each_host(hosts, lambda h: _rows(project, h))
+    rows = [row for h in hosts for row in results.get(h.name, [])]
+    return rows, failures
 
 
 def status(options: Options) -> None:
-    """Print the state of every component."""
-    options.load()
-    raise NotImplementedYet("status is not implemented yet")
+    """Print the state of every component and the ROS nodes alive in the graph."""
+    project = options.load()
+    hosts = select_hosts(project, None)
+    if options.dry_run:
+        for h in hosts:
+            stdout().print(f"would list {project.name} containers on {h.name}")
+        stdout().print("would run `ros2 node list` as a super client in the discovery server container")
+        return
+    rows, failures = collect_status(project, hosts)
+    nodes, where = ros_nodes(project)
+    if options.json:
+        print(json.dumps({
+            "components": [row.__dict__ for row in rows],
+            "nodes": nodes,
+            "nodes_from": where,
+            "unreachable": {h: e.lines()[0] for h, e in failures.items()},
+        }, indent=2))
+    else:
+        print_status(rows, failures, nodes, where)
+    if failures:
+        raise GroupError(failures, sorted({r.host for r in rows}))
+
+
+def print_status(rows: list[Row], failures: dict[str, RobocoreError], nodes: list[str] | None, where: str) -> None:
+    """The status table, then the ROS nodes line."""
+    from rich.table import Table
+
+    table = Table(title="robot status", title_justify="left")
+    for column in ("component", "host", "state", "uptime", "restarts", "image"):
+        table.add_column(column, no_wrap=column in {"component", "image"})
+    colors = {"running": "green", "missing": "red"}
+    for row in rows:
+        color = colors.get(row.state.split()[0], "yellow")
+        table.add_row(row.component, row.host, f"[{color}]{row.state}[/]", row.uptime, str(row.restarts), row.image)
+    for host, error in sorted(failures.items()):
+        table.add_row("-", host, "[red]unreachable[/]", "-", "-", error.lines()[0])
+    out = stdout()
+    out.print(table)
+    if nodes is None:
+        out.print(f"ROS nodes: unknown ({where})")
+    else:
+        out.print(f"ROS nodes ({len(nodes)}, via {where}): " + (", ".join(nodes) if nodes else "none"))
+
+
+# --------------------------------------------------------------------------- logs
+
+
+def _component_containers(project: Project, host: Host, component: str | None) -> list[tuple[str, Any]]:
+    client = connect_host(project, host, timeout=LOG_STREAM_TIMEOUT)
+    found = []
+    for container in managed_containers(client, project.name):
+        name = container.labels.get(naming.LABEL_COMPONENT, container.name)
+        if component is None or name == component:
+            found.append((name, container))
+    return found
 
 
 def logs(options: Options, *, component: str | None, follow: bool, tail: int) -> None:
-    """Print container logs."""
-    options.load()
-    raise NotImplementedYet("logs is not implemented yet")
+    """Print container logs of all hosts, each line prefixed by its component; ``follow`` merges live streams."""
+    project = options.load()
+    if component is not None and component not in {c.name for c in project.robot.components}:
+        project.component(component)  # UsageError listing the known components
+    hosts = [project.host(project.component(component).runs_on)] if component else select_hosts(project, None)
+    if options.dry_run:
+        for h in hosts:
+            stdout().print(f"would read logs of {component or 'every container'} on {h.name}")
+        return
+    results, failures = for_each_host(hosts, lambda h: _component_containers(project, h, component))
+    containers = [item for h in hosts for item in sorted(results.get(h.name, []), key=lambda i: i[0])]
+    for host, error in sorted(failures.items()):
+        console().print(f"[red]{host}: {error.lines()[0]}[/]")
+    if not containers and not failures:
+        console().print(f"no {project.name} containers" + (f" for {component}" if component else "") + "; run `run`")
+    width = max((len(name) for name, _ in containers), default=0)
+    if not follow:
+        for name, container in containers:
+            for line in _lines(container.logs(tail=tail, stream=False)):
+                _emit(name, width, line)
+    else:
+        _follow(containers, width, tail)
+    if failures:
+        raise GroupError(failures, list(results))
+
+
+def _lines(data: bytes | Iterator[bytes]) -> Iterator[str]:
+    chunks = [data] if isinstance(data, bytes) else data
+    pending = b""
+    for chunk in chunks:
+        pending += chunk
+        *complete, pending = pending.split(b"\n")
+        for raw in complete:
+            yield raw.decode(errors="replace").rstrip("\r")
+    if pending:
+        yield pending.decode(errors="replace")
+
+
+def _emit(name: str, width: int, line: str) -> None:
+    sys.stdout.write(f"{name:<{width}} | {line}\n")
+    sys.stdout.flush()
+
+
+def _follow(containers: list[tuple[str, Any]], width: int, tail: int) -> None:
+    lines: queue.Queue[tuple[str, str] | None] = queue.Queue()
+
+    def pump(name: str, container: Any) -> None:
+        try:
+            for line in _lines(container.logs(stream=True, follow=True, tail=tail)):
+                lines.put((name, line))
+        except Exception as exc:  # a host going away ends its streams, not the others
+            lines.put((name, f"[log stream ended: {exc}]"))
+        finally:
+            lines.put(None)
+
+    for name, container in containers:
+        threading.Thread(target=pump, args=(name, container), daemon=True, name=f"logs-{name}").start()
+    open_streams = len(containers)
+    while open_streams:
+        item = lines.get()
+        if item is None:
+            open_streams -= 1
+        else:
+            _emit(item[0], width, item[1])
+
+
+# --------------------------------------------------------------------------- connect
+
+
+#: Interactive shell: bash when the image has it, else sh (a fixed script, nothing interpolated).
+_SHELL = ["sh", "-c", "if command -v bash >/dev/null 2>&1; then exec bash; else exec sh; fi"]
+
+
+def exec_argv(entrypoint: list[str] | None, command: list[str]) -> list[str]:
+    """``command`` behind the container's own entrypoint (ours sources ROS and the install tree)."""
+    return [*(entrypoint or []), *command]
 
 
 def connect(options: Options, *, component: str, cmd: str | None) -> int:
-    """Shell in a live container."""
-    options.load()
-    raise NotImplementedYet("connect is not implemented yet")
+    """A shell (or ``cmd``) in the live container of ``component`` on its host, as a ROS super client."""
+    project = options.load()
+    comp = project.component(component)
+    host = project.host(comp.runs_on)
+    name = naming.container_name(project.name, comp.name)
+    env = dds.client_environment(project.robot, super_client=True)
+    command = _SHELL if cmd is None else ["sh", "-c", cmd]
+    if options.dry_run:
+        entry = None if comp.image else [naming.ENTRYPOINT]
+        where = f"on {host.name} ({'interactive' if cmd is None else 'no tty'}), in {name}"
+        print(f"{where}: {shlex.join(exec_argv(entry, command))}")
+        print("environment: " + " ".join(f"{k}={v}" for k, v in sorted(env.items())))
+        return 0
+    client, container = _require_running(project, host, name, comp.name)
+    entrypoint = container.attrs.get("Config", {}).get("Entrypoint") or None
+    argv = exec_argv(entrypoint, command)
+    if cmd is not None:
+        return _exec_streaming(client, container, host, name, argv, env)
+    client.close()
+    tty = sys.stdin.isatty()
+    docker_argv = ["docker", "exec", "-it" if tty else "-i"]
+    for key, value in sorted(env.items()):
+        docker_argv += ["-e", f"{key}={value}"]
+    docker_argv += [name, *argv]
+    full, extra_env = _interactive_argv(project, host, docker_argv, tty=tty)
+    return subprocess.call(full, env={**os.environ, **extra_env})
+
+
+def _interactive_argv(project: Project, host: Host, docker_argv: list[str], *,
+                      tty: bool) -> tuple[list[str], dict[str, str]]:
+    """The local argv of an interactive ``docker exec -it`` on ``host`` and extra environment for it."""
+    access = host.access
+    if access is DockerAccess.local:
+        return docker_argv, {}
+    if access is DockerAccess.ssh:
+        from robocore.adapters import ssh
+
+        ssh.require_ssh()
+        return ["ssh", "-t" if tty else "-T", *ssh.ssh_options(host), "--", ssh.destination(host),
+                shlex.join(docker_argv)], {}
+    if access is DockerAccess.tls and host.tls is not None:
+        def resolve(value: str) -> str:
+            path = os.path.expanduser(value)
+            return path if os.path.isabs(path) else str(project.root / path)
+
+        tls = ["--tlsverify", "--tlscacert", resolve(host.tls.ca_cert), "--tlscert", resolve(host.tls.client_cert),
+               "--tlskey", resolve(host.tls.client_key)]
+        return ["docker", *tls, *docker_argv[1:]], {"DOCKER_HOST": f"tcp://{host.ip}:{host.docker_port or 2376}"}
+    return docker_argv, {"DOCKER_HOST": f"tcp://{host.ip}:{host.docker_port or 2375}"}
+
+
+def _require_running(project: Project, host: Host, name: str, component: str) -> tuple[docker.DockerClient, Any]:
+    client = connect_host(project, host, timeout=60)
+    container = _running(client, name)
+    if container is None:
+        client.close()
+        raise UsageError(f"component {component} is not running on host {host.name} (container {name})",
+                         hint="start it with `robocore run`; `robocore status` shows every component")
+    return client, container
+
+
+def _exec_streaming(client: docker.DockerClient, container: Any, host: Host, name: str, argv: list[str],
+                    env: dict[str, str]) -> int:
+    """Run ``argv`` in the container without a TTY, stream its output, return its exit code."""
+    try:
+        api = client.api
+        exec_id = api.exec_create(container.id, argv, environment=env, stdout=True, stderr=True, tty=False)["Id"]
+        for out, err in api.exec_start(exec_id, stream=True, demux=True):
+            if out:
+                sys.stdout.buffer.write(out)
+                sys.stdout.flush()
+            if err:
+                sys.stderr.buffer.write(err)
+                sys.stderr.flush()
+        code = api.exec_inspect(exec_id).get("ExitCode")
+    except Exception as exc:
+        if type(exc).__module__.split(".")[0] in {"docker", "requests", "urllib3"}:
+            raise DockerError(f"host {host.name}: exec in {name} failed: {exc}") from None
+        raise
+    finally:
+        client.close()
+    return int(code) if code is not None else 1
+
