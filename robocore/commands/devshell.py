@@ -9,12 +9,15 @@ the dev machine), as seed 001's ``docker run --rm`` did.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import json
 import os
 import shutil
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import replace
 from importlib import resources
 from pathlib import Path
@@ -78,16 +81,20 @@ def run(options: Options, *, component: str, cmd: str | None, new: bool, devices
                           hint="install it (Debian: apt-get install docker.io, or docker-ce-cli)")
     argv[0] = docker_cli
 
-    container = None if new else _running(client, spec.name)
-    if container is not None:
-        _warn_if_stale(client, container, spec, quiet=options.quiet)
-        _refresh_cookie(project, spec, machine)
-    else:
-        container = _create(client, project, spec, machine, quiet=options.quiet)
+    with _container_lock(project, spec.name):
+        container = None if new else _running(client, spec.name)
+        if container is not None:
+            _warn_if_stale(client, container, spec, quiet=options.quiet)
+            _refresh_cookie(project, spec, machine)
+        else:
+            container = _create(client, project, spec, machine, quiet=options.quiet)
+        proc = subprocess.Popen(argv)
+        _wait_session_registered(client, container, proc)
     try:
-        code = _exec(argv)
+        code = _wait(proc)
     finally:
-        _remove_if_idle(client, container, project, spec.name)
+        with _container_lock(project, spec.name):
+            _remove_if_idle(client, container, project, spec.name)
     return code
 
 
@@ -298,14 +305,48 @@ def _wait_ready(container: Container, spec: plan.ShellSpec) -> None:
         time.sleep(0.1)
 
 
-def _exec(argv: list[str]) -> int:
-    proc = subprocess.Popen(argv)
+@contextlib.contextmanager
+def _container_lock(project: Project, name: str) -> Iterator[None]:
+    """Serialise "find or create, then start a session" against "last session left, remove"."""
+    folder = plan.shell_dir(project)
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / f".{name}.lock", "a+b") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def _running_sessions(client: docker.DockerClient, container: Container) -> int:
+    from docker.errors import NotFound
+
+    container.reload()
+    running = 0
+    for exec_id in container.attrs.get("ExecIDs") or []:
+        try:
+            running += bool(client.api.exec_inspect(exec_id).get("Running"))
+        except NotFound:
+            continue
+    return running
+
+
+def _wait_session_registered(client: docker.DockerClient, container: Container, proc: subprocess.Popen[bytes],
+                             timeout: float = 10.0) -> None:
+    """Wait until Docker lists a running exec in the container (or the session already ended)."""
+    deadline = time.monotonic() + timeout
+    while proc.poll() is None and time.monotonic() < deadline:
+        if _running_sessions(client, container):
+            return
+        time.sleep(0.05)
+
+
+def _wait(proc: subprocess.Popen[bytes]) -> int:
     while True:
         try:
             return proc.wait()
         except KeyboardInterrupt:
-            # the session received the interrupt too; wait for it to finish
-            continue
+            continue  # the session received the interrupt too; wait for it to finish
 
 
 def _remove_if_idle(client: docker.DockerClient, container: Container, project: Project, name: str) -> None:
@@ -313,17 +354,11 @@ def _remove_if_idle(client: docker.DockerClient, container: Container, project: 
     from docker.errors import APIError, NotFound
 
     try:
-        container.reload()
-        for exec_id in container.attrs.get("ExecIDs") or []:
-            try:
-                if client.api.exec_inspect(exec_id).get("Running"):
-                    return
-            except NotFound:
-                continue
+        if _running_sessions(client, container):
+            return
         container.remove(force=True)
     except NotFound:
         pass
     except APIError as exc:
         raise DockerError(f"cannot remove dev container {name}: {_explain(exc)}") from None
     shutil.rmtree(plan.x11_dir(project, name), ignore_errors=True)
-
