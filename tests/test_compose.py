@@ -1,0 +1,115 @@
+"""Per-host compose files: golden files (UPDATE_GOLDEN=1 rewrites them) and what write_compose_files writes."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+from robocore.commands.composefiles import write_compose_files
+from robocore.config.model import Robot
+from robocore.plan import compose, containers
+from robocore.project import Project
+
+GOLDEN = Path(__file__).parent / "golden" / "compose"
+
+CASES: dict[str, dict[str, Any]] = {
+    "jazzy-two-hosts": {
+        "ros_distro": "jazzy",
+        "hosts": [
+            {"name": "dev", "ip": "192.168.1.10", "docker": "local"},
+            {"name": "pi", "ip": "192.168.1.20", "user": "pi"},
+        ],
+        "components": [
+            {"name": "talker", "runs_on": "dev", "folder": "components/talker",
+             "entrypoint": "ros2 run demo_talker talker"},
+            {"name": "listener", "runs_on": "pi", "folder": "components/listener",
+             "entrypoint": "ros2 run demo_listener listener", "environment": {"LOG_LEVEL": "info"}},
+            {"name": "vnc", "runs_on": "pi", "image": "ghcr.io/example/desktop:jazzy", "ports": ["6080:80"]},
+        ],
+    },
+    "kilted-redundant-udp": {
+        "ros_distro": "kilted",
+        "ros_domain_id": 42,
+        "image_prefix": "acme/bot-",
+        "discovery": {"servers": [{"host": "ipc"}, {"host": "jetson", "port": 11900}], "transport": "udp"},
+        "hosts": [
+            {"name": "ipc", "ip": "10.1.0.2", "user": "robot", "mount_root": "/opt/robot"},
+            {"name": "jetson", "ip": "10.1.0.3", "arch": "arm64"},
+        ],
+        "components": [
+            {"name": "driver", "runs_on": "ipc", "folder": "driver", "entrypoint": "ros2 launch driver all.launch.py",
+             "launch_args": "use_sim:=false", "devices": ["/dev/ttyUSB0"], "privileged": True, "restart": "always",
+             "volumes": ["./maps:/maps:ro", "bags:/bags"]},
+            {"name": "perception", "runs_on": "jetson", "folder": "perception", "nvidia": True,
+             "entrypoint": "ros2 run perception detector", "restart": "no"},
+        ],
+    },
+}
+
+
+def make(case: str, root: Path = Path("/srv/myrobot")) -> Project:
+    return Project(root=root, robot=Robot.model_validate(CASES[case]))
+
+
+def check_golden(name: str, text: str) -> None:
+    path = GOLDEN / name
+    if os.environ.get("UPDATE_GOLDEN"):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    assert path.exists(), f"missing golden file {path}; run with UPDATE_GOLDEN=1"
+    assert text == path.read_text(), f"{name} differs from its golden file (UPDATE_GOLDEN=1 rewrites it)"
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_golden(case: str) -> None:
+    project = make(case)
+    for host in project.robot.hosts:
+        check_golden(f"{case}-{host.name}.yaml", compose.render(project, host.name))
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_compose_matches_the_specs(case: str) -> None:
+    project = make(case)
+    for host in project.robot.hosts:
+        document = yaml.safe_load(compose.render(project, host.name))
+        specs = containers.host_specs(project, host.name)
+        assert list(document["services"]) == [s.service for s in specs]
+        for spec in specs:
+            service = document["services"][spec.service]
+            assert service["labels"]["dev.robocore.spec"] == spec.spec_hash
+            assert service["environment"] == spec.env
+            for dependency in service.get("depends_on", []):
+                assert dependency in document["services"]  # dependencies are on the same host
+        named = {m.source for s in specs for m in s.mounts if m.is_named_volume}
+        assert set(document.get("volumes", {})) == named
+
+
+def test_discovery_server_is_in_its_hosts_file_only() -> None:
+    project = make("kilted-redundant-udp")
+    ipc = yaml.safe_load(compose.render(project, "ipc"))["services"]
+    jetson = yaml.safe_load(compose.render(project, "jetson"))["services"]
+    assert "discovery-0" in ipc and "discovery-1" not in ipc
+    assert "discovery-1" in jetson and "discovery-0" not in jetson
+    assert jetson["discovery-1"]["command"] == ["fastdds", "discovery", "-l", "0.0.0.0", "-p", "11900"]
+    assert jetson["perception"]["depends_on"] == ["discovery-1"]
+    assert ipc["driver"]["environment"]["ROS_DISCOVERY_SERVER"] == "10.1.0.2:11811;10.1.0.3:11900"
+
+
+def test_write_compose_files(tmp_path: Path) -> None:
+    project = make("jazzy-two-hosts", root=tmp_path)
+    stale = project.compose_file("old-host")
+    stale.parent.mkdir(parents=True)
+    stale.write_text("services: {}\n")
+    paths = write_compose_files(project)
+    assert [p.name for p in paths] == ["dev.yaml", "pi.yaml"]
+    assert not stale.exists()
+    assert paths[0].read_text() == compose.render(project, "dev")
+    profile = tmp_path / ".robocore" / "dds" / "super_client.xml"
+    assert "SUPER_CLIENT" in profile.read_text()
+    before = paths[0].stat().st_mtime_ns
+    write_compose_files(project)  # unchanged: not rewritten
+    assert paths[0].stat().st_mtime_ns == before

@@ -1,0 +1,176 @@
+"""robocore.plan.dds: discovery-server environment, XML profiles and server argv per Fast DDS line."""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from typing import Any
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from robocore.config.model import Robot
+from robocore.plan import dds
+
+
+def robot(distro: str = "jazzy", servers: list[dict[str, Any]] | None = None, hosts: int = 3,
+          transport: str = "shm", domain: int = 7) -> Robot:
+    data: dict[str, Any] = {
+        "ros_distro": distro,
+        "ros_domain_id": domain,
+        "hosts": [{"name": f"h{i}", "ip": f"10.0.0.{i + 1}"} for i in range(hosts)],
+        "discovery": {"transport": transport},
+    }
+    if servers is not None:
+        data["discovery"]["servers"] = servers
+    return Robot.model_validate(data)
+
+
+def parse(xml: str) -> ET.Element:
+    root = ET.fromstring(xml.encode())
+    for element in root.iter():  # drop namespaces: the Fast DDS parser ignores them
+        element.tag = element.tag.split("}")[-1]
+    return root
+
+
+# ------------------------------------------------------------------ environment
+
+
+def test_default_server_is_first_host_on_11811() -> None:
+    env = dds.client_environment(robot())
+    assert env["ROS_DISCOVERY_SERVER"] == "10.0.0.1:11811"
+    assert env["ROS_DOMAIN_ID"] == "7"
+    assert env["RMW_IMPLEMENTATION"] == "rmw_fastrtps_cpp"
+    assert "ROS_SUPER_CLIENT" not in env
+    assert "FASTRTPS_DEFAULT_PROFILES_FILE" not in env
+
+
+@pytest.mark.parametrize("distro", ["humble", "jazzy"])
+def test_2x_slots_are_positional(distro: str) -> None:
+    r = robot(distro, servers=[{"host": "h0"}, {"host": "h2", "port": 11900}])
+    assert dds.discovery_server_value(r) == "10.0.0.1:11811;10.0.0.3:11900"
+    # Each server lists the others, its own slot empty so the other ids keep their positions.
+    assert dds.server_environment(r, 0)["ROS_DISCOVERY_SERVER"] == ";10.0.0.3:11900"
+    assert dds.server_environment(r, 1)["ROS_DISCOVERY_SERVER"] == "10.0.0.1:11811"
+
+
+def test_2x_middle_server_keeps_an_empty_slot() -> None:
+    r = robot("humble", servers=[{"host": "h0"}, {"host": "h1"}, {"host": "h2"}])
+    assert dds.server_environment(r, 1)["ROS_DISCOVERY_SERVER"] == "10.0.0.1:11811;;10.0.0.3:11811"
+
+
+@pytest.mark.parametrize("distro", ["kilted", "rolling"])
+def test_3x_is_a_locator_list_without_slots(distro: str) -> None:
+    r = robot(distro, servers=[{"host": "h0"}, {"host": "h1"}, {"host": "h2"}])
+    assert dds.discovery_server_value(r) == "10.0.0.1:11811;10.0.0.2:11811;10.0.0.3:11811"
+    assert dds.server_environment(r, 1)["ROS_DISCOVERY_SERVER"] == "10.0.0.1:11811;10.0.0.3:11811"
+
+
+def test_single_server_has_no_server_list_of_its_own() -> None:
+    assert "ROS_DISCOVERY_SERVER" not in dds.server_environment(robot(), 0)
+
+
+@given(count=st.integers(min_value=1, max_value=6), exclude=st.one_of(st.none(), st.integers(0, 5)))
+def test_2x_position_is_server_id(count: int, exclude: int | None) -> None:
+    r = robot("jazzy", servers=[{"host": f"h{i}", "port": 12000 + i} for i in range(count)], hosts=count)
+    value = dds.discovery_server_value(r, exclude=exclude)
+    if not value:  # the only server excluded
+        assert count == 1 and exclude == 0
+        return
+    slots = value.split(";")
+    for server in dds.servers(r):
+        if server.index == exclude:
+            assert server.index >= len(slots) or slots[server.index] == ""
+        else:
+            assert slots[server.index] == f"10.0.0.{server.index + 1}:{12000 + server.index}"
+    assert slots[-1] != ""  # no trailing empty slot
+
+
+@pytest.mark.parametrize("distro", ["humble", "jazzy", "kilted"])
+def test_super_client_env_points_at_a_generated_profile(distro: str) -> None:
+    r = robot(distro)
+    env = dds.client_environment(r, super_client=True)
+    assert env["ROS_SUPER_CLIENT"] == "TRUE"
+    assert env["ROS_DISCOVERY_SERVER"] == dds.discovery_server_value(r)
+    # Both variables: 2.x reads FASTRTPS_*, 3.x reads FASTDDS_*.
+    path = env["FASTRTPS_DEFAULT_PROFILES_FILE"]
+    assert env["FASTDDS_DEFAULT_PROFILES_FILE"] == path
+    folder, name = path.rsplit("/", 1)
+    assert folder == "/robocore/dds"
+    assert name in dds.profile_files(r)
+
+
+def test_udp_transport_settings() -> None:
+    jazzy = robot("jazzy", transport="udp")
+    assert dds.client_environment(jazzy)["FASTDDS_BUILTIN_TRANSPORTS"] == "UDPv4"
+    assert "FASTRTPS_DEFAULT_PROFILES_FILE" not in dds.client_environment(jazzy)
+    assert "FASTDDS_BUILTIN_TRANSPORTS" not in dds.client_environment(robot("jazzy"))
+    # Humble's Fast DDS 2.6 has no FASTDDS_BUILTIN_TRANSPORTS: a transport-only XML profile.
+    humble = robot("humble", transport="udp")
+    env = dds.client_environment(humble)
+    assert env["FASTRTPS_DEFAULT_PROFILES_FILE"] == "/robocore/dds/client.xml"
+    client = parse(dds.profile_files(humble)["client.xml"])
+    assert client.find(".//useBuiltinTransports").text == "false"  # type: ignore[union-attr]
+    assert client.find(".//transport_descriptor/type").text == "UDPv4"  # type: ignore[union-attr]
+    # It must not set the discovery protocol, or ROS_DISCOVERY_SERVER would be ignored.
+    assert client.find(".//discoveryProtocol") is None
+    assert "client.xml" not in dds.profile_files(robot("humble"))
+
+
+# ------------------------------------------------------------------ server argv
+
+
+@pytest.mark.parametrize("distro", ["humble", "jazzy"])
+def test_2x_server_command_has_its_id(distro: str) -> None:
+    r = robot(distro, servers=[{"host": "h0"}, {"host": "h1", "port": 12345}])
+    assert dds.server_command(r, 0) == ["fastdds", "discovery", "-i", "0", "-l", "0.0.0.0", "-p", "11811"]
+    assert dds.server_command(r, 1) == ["fastdds", "discovery", "-i", "1", "-l", "0.0.0.0", "-p", "12345"]
+
+
+def test_3x_server_command_has_no_id() -> None:
+    r = robot("kilted", servers=[{"host": "h0", "port": 12000}])
+    assert dds.server_command(r, 0) == ["fastdds", "discovery", "-l", "0.0.0.0", "-p", "12000"]
+
+
+# ------------------------------------------------------------------ XML
+
+
+@pytest.mark.parametrize("distro", ["humble", "jazzy"])
+def test_2x_super_client_xml_lists_remote_servers_by_prefix(distro: str) -> None:
+    r = robot(distro, servers=[{"host": "h0"}, {"host": "h1", "port": 12000}])
+    root = parse(dds.super_client_xml(r))
+    assert root.tag == "dds"
+    participant = root.find("./profiles/participant")
+    assert participant is not None and participant.get("is_default_profile") == "true"
+    assert participant.find(".//discoveryProtocol").text == "SUPER_CLIENT"  # type: ignore[union-attr]
+    remotes = participant.findall(".//discoveryServersList/RemoteServer")
+    assert [r.get("prefix") for r in remotes] == [
+        "44.53.00.5f.45.50.52.4f.53.49.4d.41",
+        "44.53.01.5f.45.50.52.4f.53.49.4d.41",
+    ]
+    addresses = [(x.findtext(".//address"), x.findtext(".//port")) for x in remotes]
+    assert addresses == [("10.0.0.1", "11811"), ("10.0.0.2", "12000")]
+    assert "fastRTPS_Profiles" in dds.super_client_xml(r)
+
+
+def test_3x_super_client_xml_lists_bare_locators() -> None:
+    r = robot("kilted", servers=[{"host": "h0"}, {"host": "h2"}])
+    text = dds.super_client_xml(r)
+    root = parse(text)
+    servers_list = root.find(".//discoveryServersList")
+    assert servers_list is not None
+    assert root.find(".//RemoteServer") is None
+    assert [child.tag for child in servers_list] == ["locator", "locator"]
+    assert [x.findtext(".//address") for x in servers_list] == ["10.0.0.1", "10.0.0.3"]
+    assert 'xmlns="http://www.eprosima.com"' in text
+
+
+def test_server_prefix_of_id_above_15_is_two_hex_digits() -> None:
+    endpoint = dds.ServerEndpoint(index=26, host="h", address="a", port=11811)
+    assert endpoint.guid_prefix.split(".")[2] == "1a"
+
+
+def test_udp_super_client_drops_builtin_transports() -> None:
+    root = parse(dds.super_client_xml(robot("jazzy", transport="udp")))
+    assert root.findtext(".//useBuiltinTransports") == "false"
+    assert root.findtext(".//userTransports/transport_id") == root.findtext(".//transport_descriptor/transport_id")
