@@ -1,0 +1,176 @@
+"""Simulated robot hosts for the integration suites: Docker-in-Docker containers with sshd.
+
+Each host runs Debian's dockerd and sshd (image from :mod:`robot_host.build`) on a private
+user-defined bridge network, started with design.md section 5's settings (all capabilities but
+SYS_RESOURCE, seccomp/apparmor unconfined, /sys/fs/cgroup bind, exec tmpfs on /var/lib/docker;
+``--privileged`` does not work on these machines). A fresh ed25519 key is generated per fleet,
+its public half injected through ``AUTHORIZED_KEY``, and the host keys are collected with
+ssh-keyscan into a private known_hosts. ``ROBOCORE_SSH_CONFIG`` points robocore at that config,
+so robocore reaches each host exactly as it would a real robot: ``ssh://root@<ip>``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import subprocess
+import tempfile
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from testcontainers.core.container import DockerContainer
+from testcontainers.core.network import Network
+
+from robot_host.build import ensure_image
+
+os.environ.setdefault("TESTCONTAINERS_RYUK_DISABLED", "true")
+
+PREFIX = "robocore-it-host"
+
+
+@dataclass
+class RobotHost:
+    """One running simulated robot."""
+
+    name: str
+    container: DockerContainer
+    ip: str
+
+    def ssh(self, fleet: RobotFleet, *argv: str, check: bool = True, timeout: float = 60) -> str:
+        """Run argv on the host over ssh (quoted), return stdout."""
+        import shlex
+
+        proc = subprocess.run(
+            ["ssh", "-F", str(fleet.ssh_config), f"root@{self.ip}", "--", shlex.join(argv)],
+            capture_output=True, text=True, timeout=timeout,
+        )
+        if check and proc.returncode != 0:
+            raise AssertionError(f"ssh {self.name} {argv} exited {proc.returncode}: {proc.stderr}")
+        return proc.stdout
+
+    def docker(self, fleet: RobotFleet) -> Any:
+        """A docker-py client of the host's inner daemon, through robocore's own ssh adapter."""
+        from robocore.adapters.docker_hosts import client_for
+        from robocore.config.model import Host
+
+        return client_for(Host(name=self.name, ip=self.ip), timeout=600)
+
+
+class RobotFleet:
+    """``count`` robot hosts on one private network; a context manager that removes everything."""
+
+    def __init__(self, count: int = 2, tag: str = "") -> None:
+        self.count = count
+        self.tag = tag or uuid.uuid4().hex[:6]
+        self.dir = Path(tempfile.mkdtemp(prefix="robocore-it-ssh-"))
+        self.key = self.dir / "id_ed25519"
+        self.known_hosts = self.dir / "known_hosts"
+        self.ssh_config = self.dir / "ssh_config"
+        self.network: Network | None = None
+        self.hosts: list[RobotHost] = []
+        self._saved_env: str | None = None
+
+    def __enter__(self) -> RobotFleet:
+        try:
+            self.start()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def start(self) -> None:
+        """Build the image if needed, start the hosts, wait for sshd and dockerd, write the ssh config."""
+        image = ensure_image()
+        subprocess.run(["ssh-keygen", "-q", "-t", "ed25519", "-N", "", "-f", str(self.key)], check=True)
+        public = self.key.with_suffix(".pub").read_text().strip()
+        self.network = Network(docker_network_kw={"labels": {"dev.robocore.test": "1"}})
+        self.network.create()
+        for index in range(self.count):
+            name = f"{PREFIX}-{self.tag}-{index}"
+            container = (
+                DockerContainer(image)
+                .with_name(name)
+                .with_env("AUTHORIZED_KEY", public)
+                .with_network(self.network)
+                .with_volume_mapping("/sys/fs/cgroup", "/sys/fs/cgroup", "rw")
+                .with_tmpfs_mount("/var/lib/docker", "exec")
+                .with_kwargs(
+                    cap_add=["ALL"],
+                    cap_drop=["SYS_RESOURCE"],
+                    security_opt=["seccomp=unconfined", "apparmor=unconfined"],
+                    hostname=name,
+                )
+            )
+            container.start()
+            wrapped = container.get_wrapped_container()
+            wrapped.reload()
+            ip = wrapped.attrs["NetworkSettings"]["Networks"][self.network.name]["IPAddress"]
+            self.hosts.append(RobotHost(name=name, container=container, ip=ip))
+        self.ssh_config.write_text(
+            "Host *\n"
+            f"  IdentityFile {self.key}\n"
+            f"  UserKnownHostsFile {self.known_hosts}\n"
+            "  StrictHostKeyChecking yes\n"
+            "  IdentitiesOnly yes\n"
+            "  BatchMode yes\n"
+            "  LogLevel ERROR\n"
+        )
+        for host in self.hosts:
+            self._wait_ready(host)
+        self._saved_env = os.environ.get("ROBOCORE_SSH_CONFIG")
+        os.environ["ROBOCORE_SSH_CONFIG"] = str(self.ssh_config)
+
+    def _wait_ready(self, host: RobotHost, timeout: float = 90) -> None:
+        deadline = time.monotonic() + timeout
+        last = ""
+        while time.monotonic() < deadline:
+            scan = subprocess.run(["ssh-keyscan", "-T", "2", "-t", "ed25519", host.ip],
+                                  capture_output=True, text=True)
+            if scan.returncode == 0 and scan.stdout.strip():
+                with self.known_hosts.open("a") as handle:
+                    handle.write(scan.stdout)
+                break
+            last = scan.stderr
+            time.sleep(0.5)
+        else:
+            raise AssertionError(f"sshd on {host.name} ({host.ip}) did not come up: {last}")
+        while time.monotonic() < deadline:
+            proc = subprocess.run(["ssh", "-F", str(self.ssh_config), f"root@{host.ip}", "--", "docker", "info",
+                                   "--format", "{{.ServerVersion}}"], capture_output=True, text=True)
+            if proc.returncode == 0:
+                return
+            last = proc.stderr
+            time.sleep(0.5)
+        raise AssertionError(f"dockerd on {host.name} ({host.ip}) did not come up: {last}")
+
+    def host_yaml(self, names: list[str]) -> str:
+        """robot.yaml ``hosts:`` entries naming the fleet's hosts ``names[i]``."""
+        rows = zip(names, self.hosts, strict=False)
+        return "".join(f"  - name: {n}\n    ip: {h.ip}\n    user: root\n" for n, h in rows)
+
+    def stop(self, index: int) -> None:
+        """Stop host ``index`` (its address stops answering)."""
+        self.hosts[index].container.get_wrapped_container().stop(timeout=2)
+
+    def close(self) -> None:
+        """Remove the hosts, the network and the keys; restore ROBOCORE_SSH_CONFIG."""
+        for host in self.hosts:
+            with contextlib.suppress(Exception):
+                host.container.get_wrapped_container().remove(force=True, v=True)
+        self.hosts.clear()
+        if self.network is not None:
+            with contextlib.suppress(Exception):
+                self.network.remove()
+            self.network = None
+        if self._saved_env is None:
+            os.environ.pop("ROBOCORE_SSH_CONFIG", None)
+        else:
+            os.environ["ROBOCORE_SSH_CONFIG"] = self._saved_env
+        shutil.rmtree(self.dir, ignore_errors=True)
