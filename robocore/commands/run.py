@@ -327,8 +327,10 @@ def run(options: Options, *, host: str | None, tag: str | None) -> None:
         write_compose_files(project, tag=tag)
 
     def work(h: Host) -> HostOutcome:
-        return deploy_host(project, h, host_specs(project, h.name, tag=tag), dry_run=options.dry_run,
-                           quiet=options.quiet)
+        from robocore.commands.sync import with_synced_release  # restart on a newly synced release
+
+        specs = with_synced_release(project, h, host_specs(project, h.name, tag=tag))
+        return deploy_host(project, h, specs, dry_run=options.dry_run, quiet=options.quiet)
 
     results, failures = for_each_host(hosts, work)
     _report(results, failures, hosts, options, title="would do" if options.dry_run else "run")

@@ -241,3 +241,28 @@ def _human(n: int) -> str:
         size /= 1024
     return f"{size:.1f} GB"
 
+
+
+#: Label carrying the release a remote component's container was started on.
+LABEL_RELEASE = "dev.robocore.release"
+
+
+def with_synced_release(project: Project, host: Host, specs: list[Any]) -> list[Any]:
+    """Add the synced release id of each remote component to its spec's labels.
+
+    The container mounts ``<component>/current/install``, a path that stays the same across
+    releases, so without this a sync would not change the spec hash and ``run`` would keep
+    the container on the old files. Local hosts (files used in place) are unchanged.
+    """
+    import dataclasses
+
+    if host.is_local:
+        return specs
+    releases = synced_releases(project, host.name)
+    out = []
+    for spec in specs:
+        release = releases.get(spec.service) if spec.role == "component" else None
+        if release:
+            spec = dataclasses.replace(spec, extra_labels=(*spec.extra_labels, (LABEL_RELEASE, release)))
+        out.append(spec)
+    return out
