@@ -326,11 +326,20 @@ def test_staged_image_sources_ros_and_the_install_tree(demo_project: Path) -> No
 
     proj = Project.load(demo_project)
     comp = next(c for c in proj.robot.components if c.folder)
+    packages = sorted(p.parent.name for p in (demo_project / str(comp.folder)).rglob("package.xml"))
+    assert packages
+    build_dir = demo_project / ".robocore" / "build" / comp.name
+    stamp = time.time()
     out = ok(robocore(demo_project, "shell", "--component", comp.name, "--cmd",
                       "python3 -c 'import rclpy; print(\"rclpy-ok\")'; echo \"super=$ROS_SUPER_CLIENT\"; "
-                      "echo \"ament=$AMENT_PREFIX_PATH\"; cd /tmp && colcon list --names-only"))
+                      "echo \"ament=$AMENT_PREFIX_PATH\"; "
+                      "cd /tmp && colcon build >/dev/null && echo built"))
     assert "rclpy-ok" in out
     assert "super=TRUE" in out
     assert f"{naming.CONTAINER_INSTALL}/" in out.split("ament=", 1)[1].splitlines()[0]
-    packages = [p.parent.name for p in (demo_project / comp.folder).rglob("package.xml")]  # type: ignore[operator]
-    assert packages and all(p in out.split() for p in packages)
+    assert "built" in out.split()
+    # colcon's defaults put a build started anywhere into robocore's folders, not the source tree
+    assert (build_dir / "install" / packages[0]).is_dir()
+    assert (build_dir / "log" / "latest_build").resolve().stat().st_mtime >= stamp - 1
+    for stray in ("build", "install", "log"):
+        assert not (demo_project / str(comp.folder) / stray).exists()
