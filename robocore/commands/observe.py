@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 from robocore.commands.context import Options
 from robocore.commands.run import connect as connect_host
-from robocore.commands.run import for_each_host, managed_containers, select_hosts
+from robocore.commands.run import for_each_host, managed_containers, print_table, select_hosts
 from robocore.config.model import DockerAccess, Host
 from robocore.errors import DockerError, GroupError, RobocoreError, UsageError
 from robocore.plan import dds, naming
@@ -189,8 +189,8 @@ def print_status(rows: list[Row], failures: dict[str, RobocoreError], nodes: lis
         table.add_row(row.component, row.host, f"[{color}]{row.state}[/]", row.uptime, str(row.restarts), row.image)
     for host, error in sorted(failures.items()):
         table.add_row("-", host, "[red]unreachable[/]", "-", "-", error.lines()[0])
+    print_table(table)
     out = stdout()
-    out.print(table)
     if nodes is None:
         out.print(f"ROS nodes: unknown ({where})")
     else:

@@ -11,6 +11,7 @@ with a per-host summary and a :class:`~robocore.errors.GroupError`.
 from __future__ import annotations
 
 import json
+import sys
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -371,7 +372,18 @@ def _report(results: dict[str, HostOutcome], failures: dict[str, RobocoreError],
         detail = "; ".join(out.notes)
         table.add_row(h.name, "[green]ok[/]", *(str(out.count(v)) for v in ("create", "replace", "start", "keep",
                                                                              "remove")), detail)
-    stdout().print(table)
+    print_table(table)
+
+
+def print_table(table: Any) -> None:
+    """Print a rich table on stdout; off a terminal (logs, CI, pipes) 160 columns wide, not squeezed into 80."""
+    out = stdout()
+    if out.is_terminal:
+        out.print(table)
+        return
+    from rich.console import Console
+
+    Console(file=sys.stdout, width=160, highlight=False).print(table)
 
 
 # --------------------------------------------------------------------------- down
