@@ -24,7 +24,7 @@ components:
   - name: arm
     runs_on: dev
     folder: components/arm
-    devices: ["/dev/ttyUSB0", "/dev/video0:/dev/cam:r"]
+    devices: ["/dev/robocore-absent-tty", "/dev/video0:/dev/cam:r"]
     environment: {ARM_MODE: sim}
     volumes: ["maps:/maps:ro", "/nonexistent/robocore-test:/data"]
     nvidia: true
@@ -133,13 +133,13 @@ def test_root_developer_gets_root_user_with_a_persistent_home(project: Project) 
 
 def test_component_devices_are_passed_and_devices_all_mounts_dev(project: Project) -> None:
     spec = shell(project)
-    assert spec.devices == ("/dev/ttyUSB0", "/dev/video0:/dev/cam:r")
+    assert spec.devices == ("/dev/robocore-absent-tty", "/dev/video0:/dev/cam:r")
     assert "/dev" not in mounts(spec) and not spec.device_cgroup_rules
     spec = shell(project, devices_all=True)
     assert mounts(spec)["/dev"] == plan.Mount("/dev", "/dev")
     assert spec.devices == ()
     assert set(spec.device_cgroup_rules) == {"c *:* rmw", "b *:* rmw"}
-    assert plan.device_paths(project.component("arm"), devices_all=False) == ["/dev/ttyUSB0", "/dev/video0"]
+    assert plan.device_paths(project.component("arm"), devices_all=False) == ["/dev/robocore-absent-tty", "/dev/video0"]
 
 
 def test_device_groups_reach_the_setup_script(project: Project) -> None:
@@ -148,7 +148,7 @@ def test_device_groups_reach_the_setup_script(project: Project) -> None:
 
 
 def test_parse_device() -> None:
-    assert plan.parse_device("/dev/ttyUSB0") == ("/dev/ttyUSB0", "/dev/ttyUSB0", "rwm")
+    assert plan.parse_device("/dev/robocore-absent-tty") == ("/dev/robocore-absent-tty", "/dev/robocore-absent-tty", "rwm")
     assert plan.parse_device("/dev/video0:/dev/cam:r") == ("/dev/video0", "/dev/cam", "r")
 
 
@@ -345,3 +345,51 @@ def test_colcon_defaults_match_the_mounts() -> None:
     assert defaults["build"]["base-paths"] == [naming.CONTAINER_WS]
     assert defaults["build"]["build-base"] == plan.CONTAINER_BUILD
     assert defaults["build"]["install-base"] == naming.CONTAINER_INSTALL
+
+
+# --- the command in --dry-run (no Docker) ------------------------------------------------
+
+
+def test_dry_run_prints_the_plan_without_docker(project: Project, monkeypatch: pytest.MonkeyPatch,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    from robocore.commands import devshell
+    from robocore.commands.context import Options
+
+    monkeypatch.setenv("DOCKER_HOST", "unix:///nonexistent/docker.sock")  # would fail if contacted
+    monkeypatch.setenv("ROBOCORE_UID", "1234")
+    monkeypatch.delenv("ROBOCORE_GID", raising=False)
+    monkeypatch.setenv("USER", "carol")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    code = devshell.run(Options(project_dir=project.root, dry_run=True), component="viz", cmd="true", new=False,
+                        devices="all", gpus=None, privileged=False)
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["user"] == "carol (1234:1234)"
+    assert out["image"] == "osrf/ros:jazzy-desktop"
+    assert "/dev:/dev" in out["mounts"]
+    assert out["exec"][-3:] == ["bash", "-lc", "true"]
+    assert out["environment"]["ROS_SUPER_CLIENT"] == "TRUE"
+    assert not (project.root / ".robocore" / "shell").exists()  # a dry run writes nothing
+
+
+def test_devices_flag_only_takes_all(project: Project) -> None:
+    from robocore.commands import devshell
+    from robocore.commands.context import Options
+    from robocore.errors import UsageError
+
+    with pytest.raises(UsageError, match="--devices"):
+        devshell.run(Options(project_dir=project.root, dry_run=True), component="viz", cmd=None, new=False,
+                     devices="/dev/robocore-absent-tty", gpus=None, privileged=False)
+
+
+def test_missing_component_device_is_a_usage_error(project: Project, monkeypatch: pytest.MonkeyPatch) -> None:
+    from robocore.commands import devshell
+    from robocore.commands.context import Options
+    from robocore.errors import UsageError
+
+    with pytest.raises(UsageError, match="device /dev/robocore-absent-tty does not exist"):
+        devshell.run(Options(project_dir=project.root, dry_run=True), component="arm", cmd=None, new=False,
+                     devices=None, gpus=None, privileged=False)
