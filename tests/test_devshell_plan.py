@@ -148,7 +148,8 @@ def test_device_groups_reach_the_setup_script(project: Project) -> None:
 
 
 def test_parse_device() -> None:
-    assert plan.parse_device("/dev/robocore-absent-tty") == ("/dev/robocore-absent-tty", "/dev/robocore-absent-tty", "rwm")
+    tty = "/dev/robocore-absent-tty"
+    assert plan.parse_device(tty) == (tty, tty, "rwm")
     assert plan.parse_device("/dev/video0:/dev/cam:r") == ("/dev/video0", "/dev/cam", "r")
 
 
