@@ -225,14 +225,16 @@ def test_files_made_in_the_shell_belong_to_the_developer(project: Path, uid: int
         env["USER"] = user
     want_uid = os.getuid() if uid is None else uid
     out = ok(shell(project, "ws", "touch mine && sudo -n touch by-sudo && id -un && id -u && pwd && echo $HOME "
-                   "&& sudo -n id -u", env=env)).split()
-    name, seen_uid, cwd, home, sudo_uid = out[:5]
+                   "&& sudo -n id -u && id -Gn | tr ' ' ,", env=env)).split()
+    name, seen_uid, cwd, home, sudo_uid, groups = out[:6]
     assert int(seen_uid) == want_uid
     if expected_name is not None:
         assert name == expected_name
     assert cwd == naming.CONTAINER_WS
     assert home == f"/home/{name}"
     assert sudo_uid == "0"  # passwordless sudo
+    if want_uid:
+        assert {"dialout", "video"} <= set(groups.split(","))  # hardware groups of the image
     assert (project / "ws" / "mine").stat().st_uid == want_uid
     assert (project / "ws" / "mine").stat().st_gid == want_uid  # ROBOCORE_GID defaults to the UID
     # negative control: what root makes is root's, so the check above can tell them apart
