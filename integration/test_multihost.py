@@ -1,0 +1,202 @@
+"""Two simulated robot hosts over ssh://: images without a registry, then the full deploy path.
+
+- image delivery: images streamed (docker save -> load) onto both inner daemons, then skipped;
+  a derived image moves only its new layer; a stopped host fails fast by name.
+- the template project with talker on robot-a and listener on robot-b: ``stage build sync run``
+  to both hosts over ssh, the discovery server on robot-a; the listener on robot-b hears the
+  talker on robot-a (negative control: nothing is heard before the talker's host is deployed);
+  ``status`` shows both nodes; a one-line change to the talker goes through build, sync and
+  run and is heard on robot-b; with robot-b stopped, ``run`` names it and still deploys robot-a.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import subprocess
+import sys
+import tarfile
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+from conftest import make_demo_project
+from robot_host.hosts import RobotFleet
+
+from robocore.adapters.image_delivery import ensure_images
+from robocore.config.model import Host
+from robocore.errors import HostError
+
+pytestmark = pytest.mark.docker
+
+TINY = "robocore-it-tiny:v1"
+DERIVED = "robocore-it-tiny-derived:v1"
+
+
+@pytest.fixture(scope="module")
+def fleet() -> Iterator[RobotFleet]:
+    with RobotFleet(2) as hosts:
+        yield hosts
+
+
+@pytest.fixture(scope="module")
+def tiny_images(docker_client: Any) -> Iterator[list[str]]:
+    """A 2 MB image made from scratch (docker import) and one derived from it with one more layer."""
+    payload = io.BytesIO()
+    with tarfile.open(fileobj=payload, mode="w") as tar:
+        data = bytes(range(256)) * 8192
+        info = tarfile.TarInfo("payload.bin")
+        info.size = len(data)
+        tar.addfile(info, io.BytesIO(data))
+    docker_client.api.import_image_from_data(payload.getvalue(), repository="robocore-it-tiny", tag="v1")
+    with tempfile.TemporaryDirectory() as ctx:
+        Path(ctx, "Dockerfile").write_text(f"FROM {TINY}\nCOPY extra.txt /extra.txt\n")
+        Path(ctx, "extra.txt").write_text("one more layer\n" * 100)
+        docker_client.images.build(path=ctx, tag=DERIVED, rm=True)
+    yield [TINY, DERIVED]
+    for name in (DERIVED, TINY):
+        docker_client.images.remove(name, force=True)
+
+
+def test_images_are_streamed_without_registry_then_skipped(fleet: RobotFleet, tiny_images: list[str],
+                                                           docker_client: Any) -> None:
+    local_ids = {name: docker_client.images.get(name).id for name in tiny_images}
+    for index, host in enumerate(fleet.hosts):
+        client = host.docker(fleet)
+        # negative control: the inner daemon starts without them
+        assert not {t for img in client.images.list() for t in img.tags} & set(tiny_images)
+        first = ensure_images(client, [TINY], registry=None, progress=False, label=host.name)
+        assert first[TINY].action == "loaded" and first[TINY].bytes > 2_000_000
+        second = ensure_images(client, tiny_images, registry=None, progress=False, label=host.name)
+        assert second[TINY].action == "present" and second[TINY].bytes == 0
+        # the derived image shares the base layer: only its own small layer is sent
+        assert second[DERIVED].action == "loaded" and second[DERIVED].bytes < 200_000, second[DERIVED]
+        third = ensure_images(client, tiny_images, registry=None, progress=False, label=host.name)
+        assert all(d.action == "present" for d in third.values())
+        for name in tiny_images:
+            assert client.images.get(name).id == local_ids[name], (index, name)
+        client.close()
+
+
+def test_unreachable_host_fails_fast_with_its_name(fleet: RobotFleet) -> None:
+    start = time.monotonic()
+    with pytest.raises(HostError) as caught:
+        from robocore.adapters.docker_hosts import client_for
+
+        # an address on the fleet's network where no host answers
+        prefix = fleet.hosts[0].ip.rsplit(".", 1)[0]
+        client_for(Host(name="ghost", ip=f"{prefix}.250"), timeout=60)
+    assert time.monotonic() - start < 10
+    assert "ghost" in caught.value.message
+
+
+# --------------------------------------------------------------------------- the full path
+
+
+def robocore(project: Path, *args: str, check: bool = True, timeout: float = 1800) -> subprocess.CompletedProcess[str]:
+    proc = subprocess.run([sys.executable, "-m", "robocore", "-p", str(project), *args],
+                          capture_output=True, text=True, timeout=timeout)
+    if check and proc.returncode != 0:
+        pytest.fail(f"robocore {' '.join(args)} exited {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}",
+                    pytrace=False)
+    return proc
+
+
+@pytest.fixture(scope="module")
+def robot(fleet: RobotFleet, docker_client: Any) -> Iterator[Path]:
+    """The template project (wheels) with talker on robot-a and listener on robot-b."""
+    parent = Path(tempfile.mkdtemp(prefix="robocore-it-mh-"))
+    root = make_demo_project(parent)
+    data = yaml.safe_load((root / "robot.yaml").read_text())
+    data["hosts"] = [{"name": n, "ip": h.ip, "user": "root", "arch": "amd64"}
+                     for n, h in zip(["robot-a", "robot-b"], fleet.hosts, strict=True)]
+    for comp in data["components"]:
+        comp["runs_on"] = "robot-a" if comp["name"] == "talker" else "robot-b"
+    (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    for step in ("prepare-base", "stage", "build"):
+        robocore(root, step, "--quiet")
+    yield root
+    import shutil
+
+    shutil.rmtree(parent, ignore_errors=True)
+
+
+def heard(fleet: RobotFleet, index: int, container: str) -> list[str]:
+    client = fleet.hosts[index].docker(fleet)
+    try:
+        logs = client.containers.get(container).logs().decode(errors="replace")
+    finally:
+        client.close()
+    return [line for line in logs.splitlines() if "I heard" in line]
+
+
+def wait_heard(fleet: RobotFleet, index: int, container: str, needle: str, timeout: float = 60) -> list[str]:
+    deadline = time.monotonic() + timeout
+    lines: list[str] = []
+    while time.monotonic() < deadline:
+        lines = [line for line in heard(fleet, index, container) if needle in line]
+        if lines:
+            return lines
+        time.sleep(1)
+    return lines
+
+
+def test_stage_build_sync_run_over_ssh_one_graph_across_hosts(fleet: RobotFleet, robot: Path) -> None:
+    listener = f"{robot.name}-listener"
+    robocore(robot, "sync", "--quiet")
+    # listener host first: with no talker anywhere it hears nothing (negative control)
+    robocore(robot, "run", "--host", "robot-b", "--quiet")
+    time.sleep(8)
+    assert heard(fleet, 1, listener) == []
+    # then robot-a: the discovery server and the talker
+    robocore(robot, "run", "--host", "robot-a", "--quiet")
+    lines = wait_heard(fleet, 1, listener, "hello from talker")
+    assert lines, "the listener on robot-b never heard the talker on robot-a"
+    # images arrived without a registry, on both inner daemons
+    for index, comp in ((0, "talker"), (1, "listener")):
+        client = fleet.hosts[index].docker(fleet)
+        assert client.images.get(f"{robot.name}-{comp}:latest")
+        client.close()
+
+    status = robocore(robot, "status", "--json")
+    data = json.loads(status.stdout)
+    nodes = " ".join(data["nodes"] or [])
+    assert "talker" in nodes and "listener" in nodes, data
+    states = {row["component"]: (row["host"], row["state"]) for row in data["components"]}
+    assert states["talker"] == ("robot-a", "running") and states["listener"] == ("robot-b", "running"), states
+
+    # a second run changes nothing
+    again = robocore(robot, "run", "--json")
+    assert "create" not in again.stdout and "replace" not in again.stdout, again.stdout
+
+    # a one-line change of the talker: build, sync, run; robot-b hears the new text
+    code = robot / "components" / "talker" / "src" / "demo_talker" / "demo_talker" / "talker.py"
+    code.write_text(code.read_text().replace('f"hello from talker #', 'f"edited talker #'))
+    robocore(robot, "build", "--component", "talker", "--quiet")
+    synced = json.loads(robocore(robot, "sync", "--json").stdout)
+    moved = {row["component"]: row["sent"] for row in synced["results"]}
+    assert moved["talker"] < 50_000, moved
+    robocore(robot, "run", "--quiet")
+    assert wait_heard(fleet, 1, listener, "edited talker #"), "the edited talker was never heard on robot-b"
+
+
+def test_run_with_a_stopped_host_names_it_and_deploys_the_other(fleet: RobotFleet, robot: Path) -> None:
+    # last test of the module: stops robot-b
+    client = fleet.hosts[0].docker(fleet)
+    talker = client.containers.get(f"{robot.name}-talker")
+    talker.remove(force=True)
+    client.close()
+    fleet.stop(1)
+    start = time.monotonic()
+    proc = robocore(robot, "run", check=False)
+    elapsed = time.monotonic() - start
+    assert proc.returncode != 0
+    assert "robot-b" in proc.stderr, proc.stderr
+    assert elapsed < 30, f"run took {elapsed:.1f} s with robot-b down"
+    client = fleet.hosts[0].docker(fleet)
+    assert client.containers.get(f"{robot.name}-talker").status == "running"
+    client.close()
