@@ -1,0 +1,73 @@
+"""Docker host access without a daemon: refusals, descriptions, ssh settings, timeouts."""
+
+from __future__ import annotations
+
+import socket
+import time
+from pathlib import Path
+
+import pytest
+
+from robocore.adapters import docker_hosts, ssh
+from robocore.config.model import DockerAccess, Host
+from robocore.errors import HostError
+
+
+def test_plain_tcp_is_refused_unless_insecure() -> None:
+    host = Host(name="r1", ip="10.0.0.9", docker=DockerAccess.tcp)
+    with pytest.raises(HostError) as caught:
+        docker_hosts.client_for(host)
+    assert "r1" in caught.value.message and "insecure" in (caught.value.hint or "")
+
+
+def test_descriptions_name_the_transport() -> None:
+    assert docker_hosts.describe(Host(name="a", ip="10.0.0.1")) == "ssh://root@10.0.0.1:22"
+    assert docker_hosts.describe(Host(name="a", ip="127.0.0.1")) == "local socket"
+    assert "2376" in docker_hosts.describe(Host(name="a", ip="h", docker=DockerAccess.tls))
+    assert "insecure" in docker_hosts.describe(Host(name="a", ip="h", docker=DockerAccess.tcp, insecure=True))
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.mark.parametrize("access", [DockerAccess.ssh, DockerAccess.tcp])
+def test_unreachable_host_fails_fast_with_its_name(access: DockerAccess) -> None:
+    port = _closed_port()
+    extra = {"ssh_port": port} if access is DockerAccess.ssh else {"docker_port": port, "insecure": True}
+    host = Host(name="nobody", ip="127.0.0.2", docker=access, **extra)
+    start = time.monotonic()
+    with pytest.raises(HostError) as caught:
+        docker_hosts.client_for(host, timeout=60, connect_timeout=3)
+    assert time.monotonic() - start < 10
+    assert "nobody" in caught.value.message
+
+
+def test_ssh_settings_come_from_the_robocore_ssh_config(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    config = tmp_path / "ssh_config"
+    config.write_text("Host 10.1.*\n  IdentityFile ~/keys/robot\n  UserKnownHostsFile /tmp/kh\n"
+                      "  StrictHostKeyChecking accept-new\n")
+    monkeypatch.setenv(ssh.CONFIG_ENV, str(config))
+    host = Host(name="r", ip="10.1.2.3", user="pi", ssh_port=2200)
+    settings = ssh.paramiko_settings(host, connect_timeout=4)
+    assert settings.params["port"] == 2200 and settings.params["username"] == "pi"
+    assert settings.params["timeout"] == 4 and settings.params["banner_timeout"] == 4
+    assert settings.params["key_filename"] == [str(Path("~/keys/robot").expanduser())]
+    assert settings.known_hosts == ["/tmp/kh"] and settings.strict is False
+    assert ssh.ssh_options(host)[:2] == ["-F", str(config)]
+    other = ssh.paramiko_settings(Host(name="s", ip="192.168.1.1"))
+    assert "key_filename" not in other.params and other.strict is True
+
+
+def test_tls_client_resolves_relative_files_and_fails_by_name(tmp_path: Path) -> None:
+    from robocore.config.model import TlsFiles
+
+    host = Host(name="secure", ip="127.0.0.2", docker=DockerAccess.tls, docker_port=_closed_port(),
+                tls=TlsFiles(ca_cert="ca.pem", client_cert="cert.pem", client_key="key.pem"))
+    for name in ("ca.pem", "cert.pem", "key.pem"):
+        (tmp_path / name).write_text("x")
+    with pytest.raises(HostError) as caught:
+        docker_hosts.client_for(host, project_root=tmp_path, connect_timeout=2)
+    assert "secure" in caught.value.message

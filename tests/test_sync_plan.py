@@ -1,0 +1,120 @@
+"""The sync plan: rsync argv, remote scripts as argv, stats parsing, release ids (no I/O)."""
+
+from __future__ import annotations
+
+import shlex
+import subprocess
+from datetime import datetime, timezone
+from pathlib import Path, PurePosixPath
+
+import pytest
+
+from robocore.adapters import ssh
+from robocore.config.model import Host
+from robocore.plan import sync as plan
+
+HOST = Host(name="robot1", ip="10.0.0.5", user="pi", ssh_port=2222)
+
+
+def item(tmp: Path) -> plan.ComponentSync:
+    return plan.ComponentSync(
+        component="talker", host="robot1", root=PurePosixPath("/home/pi/robocore/talker"),
+        sources=(plan.Source(tmp / "build" / "talker" / "install", "install"),
+                 plan.Source(tmp / "state" / "dds", "dds"),
+                 plan.Source(tmp / "state" / "compose" / "robot1.yaml", "robot1.yaml")),
+        compose_name="robot1.yaml",
+    )
+
+
+def test_rsync_argv_links_against_current_and_writes_to_staging(tmp_path: Path) -> None:
+    argv = plan.rsync_argv(item(tmp_path), HOST, "ssh -p 2222")
+    assert argv[0] == "rsync"
+    assert "--link-dest=/home/pi/robocore/talker/current/" in argv
+    assert argv[-1] == "pi@10.0.0.5:/home/pi/robocore/talker/staging/"
+    assert f"{tmp_path}/build/talker/./install" in argv
+    assert f"{tmp_path}/state/compose/./robot1.yaml" in argv
+    assert {"-a", "-R", "--delete", "--stats", "--copy-unsafe-links"} <= set(argv)
+    assert argv[argv.index("-e") + 1] == "ssh -p 2222"
+
+
+def test_remote_steps_are_fixed_scripts_with_arguments_as_argv(tmp_path: Path) -> None:
+    evil = plan.ComponentSync(component="x", host="h", root=PurePosixPath("/tmp/a b;touch /tmp/pwned"),
+                              sources=(), compose_name="h.yaml")
+    argv = plan.prepare_argv(evil)
+    assert argv[:2] == ["sh", "-c"] and argv[2] == plan.PREPARE_SCRIPT
+    assert argv[3:] == ["sh", "/tmp/a b;touch /tmp/pwned"]
+    final = plan.finalize_argv(evil, "20260101T000000Z-abcdef", keep=2)
+    assert final[2] == plan.FINALIZE_SCRIPT and final[4:] == ["/tmp/a b;touch /tmp/pwned", "20260101T000000Z-abcdef",
+                                                              "h.yaml", "2"]
+    with pytest.raises(ValueError):
+        plan.finalize_argv(evil, "../../etc")
+
+
+def test_ssh_quotes_every_remote_argument() -> None:
+    argv = ssh.ssh_argv(HOST, ["echo", "a b", "$(id)", "'q'"])
+    assert argv[0] == "ssh" and "-p" in argv and argv[argv.index("-p") + 1] == "2222"
+    assert "BatchMode=yes" in argv
+    assert argv[-2] == "pi@10.0.0.5"
+    assert shlex.split(argv[-1]) == ["echo", "a b", "$(id)", "'q'"]
+
+
+def test_scripts_switch_current_atomically_and_prune(tmp_path: Path) -> None:
+    """Run the real scripts locally with sh: the layout they leave is the contract with run."""
+    root = tmp_path / "robot" / "talker"
+    it = plan.ComponentSync(component="talker", host="h", root=PurePosixPath(str(root)), sources=(),
+                            compose_name="h.yaml")
+    ids = []
+    for n in range(5):
+        out = subprocess.run(plan.prepare_argv(it), capture_output=True, text=True, check=True).stdout
+        keys = plan.parse_keyvals(out)
+        assert keys["staging"] == "0"
+        assert keys["current"] == ("" if n == 0 else f"releases/{ids[-1]}")
+        (root / "staging" / "install").mkdir(parents=True)
+        (root / "staging" / "install" / "v").write_text(str(n))
+        (root / "staging" / "h.yaml").write_text("services: {}\n")
+        rid = plan.new_release_id(datetime(2026, 1, 1, 0, 0, n, tzinfo=timezone.utc), nonce=bytes([n]))
+        ids.append(rid)
+        subprocess.run(plan.finalize_argv(it, rid, keep=3), check=True, capture_output=True)
+        assert (root / "current").is_symlink() and (root / "current" / "install" / "v").read_text() == str(n)
+        assert (root / "current" / "compose.yaml").read_text() == "services: {}\n"
+        assert not (root / "staging").exists()
+    assert sorted(p.name for p in (root / "releases").iterdir()) == ids[-3:]
+    # an interrupted copy: staging is reported and current is untouched
+    (root / "staging").mkdir()
+    keys = plan.parse_keyvals(subprocess.run(plan.prepare_argv(it), capture_output=True, text=True).stdout)
+    assert keys == {"staging": "1", "current": f"releases/{ids[-1]}"}
+    subprocess.run(plan.discard_argv(it), check=True)
+    assert not (root / "staging").exists() and (root / "current" / "install" / "v").read_text() == "4"
+
+
+def test_parse_stats_reads_rsync_3_output() -> None:
+    text = """
+Number of files: 1,234 (reg: 1,000, dir: 234)
+Number of created files: 2 (reg: 2)
+Number of deleted files: 0
+Number of regular files transferred: 3
+Total file size: 5,000,000 bytes
+Literal data: 1,024 bytes
+Total bytes sent: 12,345
+Total bytes received: 678
+"""
+    stats = plan.parse_stats(text)
+    assert (stats.files, stats.created, stats.transferred, stats.literal, stats.sent, stats.received) == (
+        1234, 2, 3, 1024, 12345, 678)
+    assert stats.changed
+    assert not plan.parse_stats("Number of files: 5\nTotal bytes sent: 90\n").changed
+
+
+def test_release_ids_sort_by_time_and_are_validated() -> None:
+    a = plan.new_release_id(datetime(2026, 1, 1, 12, 0, 0, tzinfo=timezone.utc), nonce=b"x")
+    b = plan.new_release_id(datetime(2026, 1, 1, 12, 0, 1, tzinfo=timezone.utc), nonce=b"a")
+    assert a < b and plan.is_release_id(a) and a.startswith("20260101T120000Z-")
+    assert not plan.is_release_id("current") and not plan.is_release_id("20260101T120000Z-zz/..")
+
+
+def test_manifest_digest_sees_size_time_and_deletions() -> None:
+    rows = [("install/a", 1, 10, 0o644, ""), ("install/b", 2, 20, 0o644, "")]
+    base = plan.manifest_digest(rows)
+    assert plan.manifest_digest(list(reversed(rows))) == base
+    assert plan.manifest_digest(rows[:1]) != base
+    assert plan.manifest_digest([rows[0], ("install/b", 2, 21, 0o644, "")]) != base
