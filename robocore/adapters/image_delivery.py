@@ -101,13 +101,14 @@ def _get(client: docker.DockerClient, ref: str) -> Any:
 def _via_registry(local: docker.DockerClient, remote: docker.DockerClient, image: Any, name: str,
                   registry: str) -> Delivery:
     repo, tag = name.rsplit(":", 1)
-    target = f"{registry.rstrip('/')}/{repo}"
+    prefix = registry.rstrip("/") + "/"
+    target = repo if repo.startswith(prefix) else prefix + repo
     with _push_lock:
         if (image.id, f"{target}:{tag}") not in _pushed:
             image.tag(target, tag)
-            _check_stream(local.images.push(target, tag, stream=True, decode=True), f"push {target}:{tag}")
+            check_stream(local.images.push(target, tag, stream=True, decode=True), f"push {target}:{tag}")
             _pushed.add((image.id, f"{target}:{tag}"))
-    _check_stream(remote.api.pull(target, tag, stream=True, decode=True), f"pull {target}:{tag}")
+    check_stream(remote.api.pull(target, tag, stream=True, decode=True), f"pull {target}:{tag}")
     pulled = remote.images.get(f"{target}:{tag}")
     pulled.tag(repo, tag)
     if pulled.id != image.id:
@@ -116,7 +117,8 @@ def _via_registry(local: docker.DockerClient, remote: docker.DockerClient, image
     return Delivery(name, "pulled")
 
 
-def _check_stream(events: Iterable[dict[str, Any]], what: str) -> None:
+def check_stream(events: Iterable[dict[str, Any]], what: str) -> None:
+    """Raise DockerError on the first error event of a push, pull or load stream."""
     for event in events:
         if "error" in event:
             detail = event.get("errorDetail", {}).get("message") or event["error"]
@@ -152,7 +154,7 @@ def _stream(local: docker.DockerClient, remote: docker.DockerClient, image: Any,
 def _load(remote: docker.DockerClient, body: Iterator[bytes], name: str) -> None:
     api: Any = remote.api
     events = api.load_image(body)
-    _check_stream(events or [], f"load {name}")
+    check_stream(events or [], f"load {name}")
 
 
 class _Counter:

@@ -331,7 +331,12 @@ def run(options: Options, *, host: str | None, tag: str | None) -> None:
         from robocore.commands.sync import with_synced_release  # restart on a newly synced release
 
         specs = with_synced_release(project, h, host_specs(project, h.name, tag=tag))
-        return deploy_host(project, h, specs, dry_run=options.dry_run, quiet=options.quiet)
+        outcome = deploy_host(project, h, specs, dry_run=options.dry_run, quiet=options.quiet)
+        if not options.dry_run:
+            from robocore.commands.release import record_run  # history for rollback
+
+            record_run(project, h, tag)
+        return outcome
 
     results, failures = for_each_host(hosts, work)
     _report(results, failures, hosts, options, title="would do" if options.dry_run else "run")
