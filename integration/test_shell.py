@@ -347,3 +347,59 @@ def test_staged_image_sources_ros_and_the_install_tree(demo_project: Path) -> No
     assert (build_dir / "log" / "latest_build").resolve().stat().st_mtime >= stamp - 1
     for stray in ("build", "install", "log"):
         assert not (demo_project / str(comp.folder) / stray).exists()
+
+
+def _host_device() -> str:
+    """A character device of the host that Docker's default /dev does not have and root may open."""
+    for path in ("/dev/cpu_dma_latency", "/dev/loop-control", "/dev/fuse"):
+        if Path(path).is_char_device():
+            return path
+    pytest.fail("none of /dev/cpu_dma_latency, /dev/loop-control, /dev/fuse exists on this host")
+
+
+def test_devices_from_the_component_and_devices_all(project: Path) -> None:
+    device = _host_device()
+    probe = f"sudo -n sh -c 'exec 3<{device} && echo opened' 2>&1 || true; test -e {device} || echo absent"
+    # negative control: by default the device is not there
+    default = ok(shell(project, "ws", probe)).split()
+    assert "absent" in default and "opened" not in default
+    # --devices all: the whole /dev, and the device cgroup lets it be opened
+    assert "opened" in ok(shell(project, "ws", probe, "--devices", "all")).split()
+    # a component's devices: list
+    with (project / "robot.yaml").open("a") as handle:
+        handle.write(f"  - name: hw\n    runs_on: dev\n    image: \"{TEST_IMAGE}\"\n    devices: [\"{device}\"]\n")
+    assert "opened" in ok(shell(project, "hw", probe)).split()
+
+
+def test_wayland_socket_reaches_the_container(project: Path) -> None:
+    import socket
+    import threading
+
+    runtime = Path(tempfile.mkdtemp(prefix="rc-xdg-"))  # short: AF_UNIX paths are limited to 107 bytes
+    path = runtime / "wayland-robocore-test"
+    server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    server.bind(str(path))
+    os.chmod(path, 0o777)  # a compositor's socket belongs to the developer; the test may be root
+    server.listen(1)
+
+    def answer() -> None:
+        conn, _ = server.accept()
+        with conn:
+            conn.sendall(b"hello-from-the-compositor")
+
+    thread = threading.Thread(target=answer, daemon=True)
+    thread.start()
+    env = {"XDG_RUNTIME_DIR": str(runtime), "WAYLAND_DISPLAY": path.name, "ROBOCORE_UID": "1000", "USER": "alice"}
+    connect = ("python3 -c \"import os, socket; s = socket.socket(socket.AF_UNIX); "
+               "s.connect(os.path.join(os.environ['XDG_RUNTIME_DIR'], os.environ['WAYLAND_DISPLAY'])); "
+               "print(s.recv(100).decode())\"; stat -c %a:%u \"$XDG_RUNTIME_DIR\"")
+    try:
+        out = ok(shell(project, "ws", connect, env=env)).split()
+    finally:
+        server.close()
+        shutil.rmtree(runtime, ignore_errors=True)
+    assert out == ["hello-from-the-compositor", "700:1000"]
+    # negative control: no WAYLAND_DISPLAY, no socket
+    out = ok(shell(project, "ws", "echo \"[$WAYLAND_DISPLAY]\"; test -e /robocore/xdg || echo no-xdg",
+                   env={"ROBOCORE_UID": "1000"})).split()
+    assert out == ["[]", "no-xdg"]
