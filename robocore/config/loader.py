@@ -284,16 +284,60 @@ def _read(text: str, file: str) -> tuple[Any, LineMap]:
             _check_size(node, file)
             lines = LineMap()
             lines.add(node)
-            data = loader.construct_document(node)
+            data = _construct(loader, node, file)
         finally:
             loader.dispose()
     except yaml.YAMLError as exc:
         raise _yaml_error(exc, file) from None
     except RecursionError:
         raise ConfigError([problem(file, None, "", "YAML is nested too deeply")]) from None
-    except (ValueError, TypeError, OverflowError) as exc:
-        raise ConfigError([problem(file, None, "", f"YAML value could not be read: {exc}")]) from None
     return data, lines
+
+
+def _construct(loader: yaml.SafeLoader, node: yaml.Node, file: str) -> Any:
+    """Build Python values from ``node``.
+
+    PyYAML's constructors raise assorted exceptions on malformed tagged values (an empty
+    ``!!timestamp`` raises AttributeError, a bad date ValueError); every one of them is a
+    problem of the file, not of robocore.
+    """
+    try:
+        return loader.construct_document(node)
+    except (yaml.YAMLError, RecursionError, ConfigError):
+        raise
+    except Exception as exc:
+        culprit = _culprit(node)
+        if culprit is None:
+            raise ConfigError([problem(file, None, "", f"YAML value could not be read: {exc}")]) from None
+        bad, why = culprit
+        tag = bad.tag.rsplit(":", 1)[-1]
+        reason = str(why) if isinstance(why, (ValueError, yaml.YAMLError)) else "malformed value"
+        message = f"YAML value {shown(bad.value)} could not be read as {tag}: {reason}"
+        raise ConfigError([problem(file, bad.start_mark.line + 1, "", message)]) from None
+
+
+def _culprit(root: yaml.Node) -> tuple[yaml.ScalarNode, Exception] | None:
+    """The first scalar that cannot be constructed on its own, with its exception."""
+    stack = [root]
+    seen: set[int] = set()
+    while stack:
+        node = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        if isinstance(node, yaml.ScalarNode):
+            probe = yaml.SafeLoader("")
+            try:
+                probe.construct_object(node)
+            except Exception as exc:
+                return node, exc
+            finally:
+                probe.dispose()
+        elif isinstance(node, yaml.MappingNode):
+            stack.extend(item for pair in reversed(node.value) for item in reversed(pair))
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend(reversed(node.value))
+    return None
 
 
 def parse_robot_text(text: str, *, file: str = ROBOT_FILE, project: Path | None = None) -> Robot:
