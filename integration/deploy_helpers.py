@@ -1,0 +1,90 @@
+"""Helpers of the deploy suites (test_discovery_local, test_run_local): throw-away copies of the
+session's demo project with their own discovery port and ROS domain, so that suites running at
+the same time on one Docker host never share a discovery server or a graph."""
+
+from __future__ import annotations
+
+import random
+import shutil
+import socket
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
+
+T = TypeVar("T")
+
+HEARD = "I heard"
+PUBLISHED = "Publishing"
+
+
+def free_udp_port() -> int:
+    """A UDP port nobody listens on right now (host networking: the discovery server binds it)."""
+    for _ in range(200):
+        port = random.randint(20000, 40000)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            try:
+                sock.bind(("0.0.0.0", port))
+            except OSError:
+                continue
+            return port
+    raise RuntimeError("no free UDP port")
+
+
+def copy_project(source: Path, parent: Path, name: str, *, transport: str = "shm",
+                 edit: Callable[[dict[str, Any]], None] | None = None) -> Path:
+    """A copy of the built project ``source`` named ``name``: same images (same image_prefix) and install
+    trees, its own containers (the name), discovery port and ROS domain."""
+    root = parent / name
+    if root.exists():
+        shutil.rmtree(root)
+    root.mkdir(parents=True)
+    shutil.copytree(source / "components", root / "components", symlinks=True)
+    for install in (source / ".robocore" / "build").glob("*/install"):
+        shutil.copytree(install, root / ".robocore" / "build" / install.parent.name / "install", symlinks=True)
+    data = yaml.safe_load((source / "robot.yaml").read_text())
+    data["ros_domain_id"] = random.randint(100, 230)
+    data["discovery"] = {"servers": [{"host": data["hosts"][0]["name"], "port": free_udp_port()}],
+                         "transport": transport}
+    if edit is not None:
+        edit(data)
+    (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    return root
+
+
+def wait_for(check: Callable[[], T], timeout: float, interval: float = 0.5) -> T | None:
+    """Poll ``check`` until it returns something truthy (returned) or ``timeout`` seconds pass (None)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = check()
+        if value:
+            return value
+        if time.monotonic() >= deadline:
+            return None
+        time.sleep(interval)
+
+
+def log_lines(container: Any, marker: str, since: float | None = None) -> list[str]:
+    """Lines of ``container``'s log containing ``marker`` (optionally only those logged after ``since``)."""
+    kwargs: dict[str, Any] = {"since": int(since)} if since is not None else {}
+    text = container.logs(**kwargs).decode(errors="replace")
+    return [line for line in text.splitlines() if marker in line]
+
+
+def remove_project_containers(client: Any, project: str) -> None:
+    """Remove every container of ``project`` (by label) and those named ``<project>-*``."""
+    seen = set()
+    for container in client.containers.list(all=True, filters={"label": f"dev.robocore.project={project}"}):
+        seen.add(container.id)
+        container.remove(force=True)
+    for container in client.containers.list(all=True, filters={"name": f"{project}-"}):
+        if container.id not in seen and container.name.startswith(f"{project}-"):
+            container.remove(force=True)
+
+
+def containers_of(client: Any, project: str) -> Iterator[Any]:
+    """The project's containers, by name."""
+    yield from sorted(client.containers.list(all=True, filters={"label": f"dev.robocore.project={project}"}),
+                      key=lambda c: c.name)

@@ -1,0 +1,158 @@
+"""One host, real containers, real rclpy nodes: discovery through the generated Fast DDS configuration.
+
+Every positive test has a negative control that would pass by accident if the path under test
+were not the one carrying the messages:
+
+- talker and listener from the generated config exchange messages through the discovery server;
+  the same two containers with no server running never hear each other;
+- with the generated shared-memory settings (host network + ipc host) data flows between
+  containers of one host; the same pair with private IPC namespaces discovers the topic and
+  receives nothing; the generated UDP-only settings work with private IPC;
+- the discovery server container is restarted and a restarted listener finds the talker again
+  (the seconds it takes are printed).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import pytest
+from deploy_helpers import HEARD, PUBLISHED, copy_project, log_lines, remove_project_containers, wait_for
+
+from robocore.commands.composefiles import write_compose_files
+from robocore.plan import naming
+from robocore.plan.containers import ContainerSpec, host_specs
+from robocore.project import Project
+
+pytestmark = pytest.mark.docker
+
+#: Seconds a negative control listens for messages that must not come.
+SILENCE = 20.0
+#: Seconds a positive test waits for messages.
+HEAR_WITHIN = 60.0
+
+
+class Deployment:
+    """Containers of one project created straight from its generated specs (no `run`: controls edit specs)."""
+
+    def __init__(self, client: Any, project: Project) -> None:
+        self.client = client
+        self.project = project
+        self.containers: dict[str, Any] = {}
+        write_compose_files(project)  # the DDS profiles the components mount
+        self.host = project.robot.hosts[0].name
+
+    def specs(self) -> dict[str, ContainerSpec]:
+        return {s.service: s for s in host_specs(self.project, self.host)}
+
+    def start(self, spec: ContainerSpec) -> Any:
+        container = self.client.containers.create(**spec.docker_kwargs())
+        container.start()
+        self.containers[spec.service] = container
+        return container
+
+    def heard(self) -> list[str]:
+        return log_lines(self.containers["listener"], HEARD)
+
+    def graph(self, what: str = "node") -> str:
+        """``ros2 <what> list`` as a super client inside the discovery server container."""
+        from robocore.commands.observe import super_client_exec_env
+
+        code, out = self.containers["discovery-0"].exec_run(
+            [naming.ENTRYPOINT, "ros2", what, "list", "--spin-time", "3"],
+            environment=super_client_exec_env(self.project))
+        assert code == 0, out.decode(errors="replace")
+        return str(out.decode(errors="replace"))
+
+
+@pytest.fixture
+def deployment(demo_project: Path, tmp_path: Path, docker_client: Any, request: pytest.FixtureRequest) -> Iterator[
+        Any]:
+    """A factory of deployments of copies of the demo project; every container is removed afterwards."""
+    made: list[Deployment] = []
+
+    def make(transport: str = "shm") -> Deployment:
+        name = f"robocore-it-dds-{len(made)}-{int(time.time() * 1000) % 100000}"
+        root = copy_project(demo_project, tmp_path, name, transport=transport)
+        dep = Deployment(docker_client, Project.load(root))
+        made.append(dep)
+        return dep
+
+    yield make
+    for dep in made:
+        remove_project_containers(docker_client, dep.project.name)
+
+
+def test_messages_flow_through_the_discovery_server(deployment: Any) -> None:
+    dep = deployment()
+    specs = dep.specs()
+    assert list(specs) == ["discovery-0", "talker", "listener"]
+    for spec in specs.values():
+        dep.start(spec)
+    heard = wait_for(dep.heard, HEAR_WITHIN)
+    assert heard, f"listener heard nothing in {HEAR_WITHIN} s; listener log:\n" + \
+        dep.containers["listener"].logs(tail=20).decode()
+    # The graph is known to the server: a super client asking it sees both nodes.
+    nodes = dep.graph("node")
+    assert "/talker" in nodes and "/listener" in nodes, nodes
+
+
+def test_without_a_discovery_server_nothing_is_heard(deployment: Any) -> None:
+    """Negative control: the same generated talker and listener, no server running."""
+    dep = deployment()
+    specs = dep.specs()
+    dep.start(specs["talker"])
+    dep.start(specs["listener"])
+    talker = dep.containers["talker"]
+    assert wait_for(lambda: log_lines(talker, PUBLISHED), HEAR_WITHIN), "the talker never published"
+    time.sleep(SILENCE)
+    assert log_lines(talker, PUBLISHED), "talker stopped publishing"
+    assert dep.heard() == [], "listener heard the talker without a discovery server: discovery is not via the server"
+
+
+def test_same_host_private_ipc_discovers_but_receives_nothing(deployment: Any) -> None:
+    """Negative control of the ipc handling: shared memory allowed, private IPC namespaces."""
+    dep = deployment("shm")
+    specs = dep.specs()
+    assert specs["talker"].ipc_mode == "host" and specs["listener"].ipc_mode == "host"
+    dep.start(specs["discovery-0"])
+    dep.start(replace(specs["talker"], ipc_mode=None))
+    dep.start(replace(specs["listener"], ipc_mode=None))
+    assert wait_for(lambda: log_lines(dep.containers["talker"], PUBLISHED), HEAR_WITHIN), "the talker never published"
+    # Discovery works: the server knows the talker's and the listener's /chatter endpoints...
+    assert wait_for(lambda: "/chatter" in dep.graph("topic"), 30), "the topic was never discovered"
+    time.sleep(SILENCE)
+    # ...but Fast DDS picks shared memory between them, which private IPC namespaces cannot share.
+    assert dep.heard() == [], "data arrived with private IPC: this control no longer proves the ipc setting"
+
+
+def test_udp_transport_works_with_private_ipc(deployment: Any) -> None:
+    dep = deployment("udp")
+    specs = dep.specs()
+    assert specs["listener"].ipc_mode is None
+    assert specs["listener"].env["FASTDDS_BUILTIN_TRANSPORTS"] == "UDPv4"
+    for spec in specs.values():
+        dep.start(spec)
+    assert wait_for(dep.heard, HEAR_WITHIN), "UDP-only listener heard nothing"
+
+
+def test_discovery_server_restart_recovers(deployment: Any) -> None:
+    """The server container restarts; a listener started after it finds the talker again. Prints the seconds."""
+    dep = deployment()
+    for spec in dep.specs().values():
+        dep.start(spec)
+    assert wait_for(dep.heard, HEAR_WITHIN), "no messages before the restart"
+    server, listener = dep.containers["discovery-0"], dep.containers["listener"]
+    started = time.monotonic()
+    server.restart(timeout=2)
+    listener.restart(timeout=2)  # a new participant: it can only find the talker through the new server
+    # The old listener process is gone: every "I heard" line from now on is the new one's.
+    before = len(dep.heard())
+    resumed = wait_for(lambda: len(dep.heard()) > before, 90, interval=0.25)
+    seconds = time.monotonic() - started
+    print(f"\nBENCH discovery-server restart -> restarted listener hears the talker: {seconds:.1f} s (goal < 30 s)")
+    assert resumed, "traffic did not resume within 90 s of a discovery server restart"

@@ -1,0 +1,201 @@
+"""`robocore run/down/status/logs/connect` on this machine's Docker, through the CLI, on copies of the demo project.
+
+Controls: idempotency is checked by container IDs (a recreated container has a new ID), the changed
+component is the only one with a new ID; an unreachable host is reported by name while the
+reachable one is deployed; a missing install tree is refused before anything starts.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+from deploy_helpers import HEARD, copy_project, log_lines, remove_project_containers, wait_for
+
+pytestmark = pytest.mark.docker
+
+HEAR_WITHIN = 60.0
+
+
+def ids(client: Any, project: str) -> dict[str, str]:
+    found = client.containers.list(all=True, filters={"label": f"dev.robocore.project={project}"})
+    return {c.labels["dev.robocore.component"]: c.id for c in found}
+
+
+@pytest.fixture
+def project_copy(demo_project: Path, tmp_path: Path, docker_client: Any) -> Iterator[Callable[..., Path]]:
+    made: list[str] = []
+
+    def make(**kwargs: Any) -> Path:
+        name = f"robocore-it-run-{len(made)}-{int(time.time() * 1000) % 100000}"
+        made.append(name)
+        return copy_project(demo_project, tmp_path, name, **kwargs)
+
+    yield make
+    for name in made:
+        remove_project_containers(docker_client, name)
+
+
+@pytest.fixture(scope="module")
+def running(demo_project: Path, tmp_path_factory: pytest.TempPathFactory, docker_client: Any,
+            run_robocore: Any) -> Iterator[Path]:
+    """One copy deployed with `robocore run` for the read-only tests (status, logs, connect)."""
+    name = f"robocore-it-obs-{int(time.time()) % 100000}"
+    root = copy_project(demo_project, tmp_path_factory.mktemp("running"), name)
+    run_robocore(root, "run", "--quiet")
+    listener = docker_client.containers.get(f"{root.name}-listener")
+    assert wait_for(lambda: log_lines(listener, HEARD), HEAR_WITHIN), "listener heard nothing after run"
+    yield root
+    remove_project_containers(docker_client, root.name)
+
+
+def test_run_is_idempotent_and_recreates_only_what_changed(project_copy: Any, docker_client: Any,
+                                                          run_robocore: Any) -> None:
+    root = project_copy()
+    run_robocore(root, "run")
+    first = ids(docker_client, root.name)
+    assert set(first) == {"discovery-0", "talker", "listener"}
+    listener = docker_client.containers.get(f"{root.name}-listener")
+    assert wait_for(lambda: log_lines(listener, HEARD), HEAR_WITHIN), "listener heard nothing"
+
+    out = run_robocore(root, "run", "--json")
+    assert ids(docker_client, root.name) == first, "a second run with nothing changed recreated containers"
+    actions = json.loads(out.stdout)
+    host = next(iter(actions))
+    assert {a["verb"] for a in actions[host]["actions"]} == {"keep"}
+
+    data = yaml.safe_load((root / "robot.yaml").read_text())
+    listener_entry = next(c for c in data["components"] if c["name"] == "listener")
+    listener_entry["environment"] = {"ROBOCORE_IT_CHANGED": "1"}
+    (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    plan = run_robocore(root, "run", "--dry-run").stdout
+    assert f"would replace {root.name}-listener" in plan and f"keep {root.name}-talker" in plan
+    assert ids(docker_client, root.name) == first, "--dry-run changed something"
+
+    run_robocore(root, "run")
+    second = ids(docker_client, root.name)
+    changed = {name for name in first if first[name] != second[name]}
+    assert changed == {"listener"}
+    new_listener = docker_client.containers.get(f"{root.name}-listener")
+    assert new_listener.attrs["Config"]["Env"].count("ROBOCORE_IT_CHANGED=1") == 1
+    assert wait_for(lambda: log_lines(new_listener, HEARD), HEAR_WITHIN), "recreated listener heard nothing"
+
+    # A component removed from robot.yaml is removed from its host; the others stay.
+    data["components"] = [c for c in data["components"] if c["name"] != "listener"]
+    (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    run_robocore(root, "run")
+    third = ids(docker_client, root.name)
+    assert set(third) == {"discovery-0", "talker"} and third["talker"] == first["talker"]
+
+    run_robocore(root, "down")
+    assert ids(docker_client, root.name) == {}
+
+
+def test_generated_compose_file_is_accepted_and_matches_run(project_copy: Any, docker_client: Any,
+                                                           run_robocore: Any) -> None:
+    root = project_copy()
+    run_robocore(root, "run", "--quiet")
+    files = list((root / ".robocore" / "compose").glob("*.yaml"))
+    assert files
+    for path in files:
+        proc = subprocess.run(["docker-compose", "-f", str(path), "config"], capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stderr
+        services = yaml.safe_load(proc.stdout)["services"]
+        for container in docker_client.containers.list(filters={"label": f"dev.robocore.project={root.name}"}):
+            service = services[container.labels["dev.robocore.component"]]
+            assert service["labels"]["dev.robocore.spec"] == container.labels["dev.robocore.spec"]
+            assert service["network_mode"] == container.attrs["HostConfig"]["NetworkMode"] == "host"
+            assert service["ipc"] == container.attrs["HostConfig"]["IpcMode"] == "host"
+
+
+def test_missing_install_tree_says_build_first(project_copy: Any, docker_client: Any, run_robocore: Any) -> None:
+    root = project_copy()
+    shutil.rmtree(root / ".robocore" / "build" / "listener")
+    proc = run_robocore(root, "run", check=False)
+    assert proc.returncode != 0
+    assert "listener" in proc.stderr and "run build first" in proc.stderr
+    assert ids(docker_client, root.name) == {}, "containers were started although the plan was refused"
+
+
+def _lan_address() -> str:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.connect(("192.0.2.1", 9))  # no packet is sent; this only picks the outgoing interface
+        return str(sock.getsockname()[0])
+
+
+def test_unreachable_host_is_named_and_the_others_are_deployed(project_copy: Any, docker_client: Any,
+                                                               run_robocore: Any) -> None:
+    def add_ghost(data: dict[str, Any]) -> None:
+        first = data["hosts"][0]
+        first["ip"] = _lan_address()  # a LAN address, so that a remote host could reach the server
+        first["docker"] = "local"
+        data["hosts"].append({"name": "ghost", "ip": "192.0.2.1", "user": "robot"})  # TEST-NET-1: never answers
+        data["components"].append({"name": "phantom", "runs_on": "ghost", "image": "busybox:latest"})
+
+    root = project_copy(edit=add_ghost)
+    started = time.monotonic()
+    proc = run_robocore(root, "run", check=False, timeout=120)
+    elapsed = time.monotonic() - started
+    assert proc.returncode == 8, proc.stderr  # GroupError
+    assert "ghost" in proc.stderr and "192.0.2.1" in proc.stderr
+    print(f"\nBENCH run with one unreachable host: {elapsed:.1f} s (goal: host named within 10 s)")
+    assert elapsed < 20, f"run took {elapsed:.1f} s to give up on an unreachable host"
+    assert set(ids(docker_client, root.name)) == {"discovery-0", "talker", "listener"}
+    assert "failed" in proc.stdout and "ok" in proc.stdout  # the per-host summary
+
+
+def test_status_shows_components_and_nodes(running: Path, run_robocore: Any) -> None:
+    status = json.loads(run_robocore(running, "status", "--json").stdout)
+    rows = {row["component"]: row for row in status["components"]}
+    assert set(rows) == {"discovery-0", "talker", "listener"}
+    assert {row["state"] for row in rows.values()} == {"running"}
+    assert rows["talker"]["image"].endswith("-talker:latest")
+    assert "/talker" in status["nodes"] and "/listener" in status["nodes"]
+    table = run_robocore(running, "status").stdout
+    assert "running" in table and "/listener" in table
+
+
+def test_logs_prefix_and_filter(running: Path, run_robocore: Any) -> None:
+    lines = run_robocore(running, "logs", "--tail", "5").stdout.splitlines()
+    prefixes = {line.split("|", 1)[0].strip() for line in lines if "|" in line}
+    assert {"talker", "listener"} <= prefixes
+    assert any(line.startswith("listener") and HEARD in line for line in lines)
+    only = run_robocore(running, "logs", "--component", "talker", "--tail", "5").stdout.splitlines()
+    assert only and all(line.startswith("talker ") for line in only)
+
+
+def test_logs_follow_merges_live_streams(running: Path) -> None:
+    argv = [sys.executable, "-m", "robocore", "-p", str(running), "logs", "-f", "--tail", "0"]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    seen: set[str] = set()
+    try:
+        deadline = time.monotonic() + 30
+        assert proc.stdout is not None
+        while time.monotonic() < deadline and not {"talker", "listener"} <= seen:
+            line = proc.stdout.readline()
+            if "|" in line:
+                seen.add(line.split("|", 1)[0].strip())
+    finally:
+        proc.kill()
+        proc.wait()
+    assert {"talker", "listener"} <= seen, f"followed streams: {seen}"
+
+
+def test_connect_runs_commands_as_super_client(running: Path, run_robocore: Any) -> None:
+    proc = run_robocore(running, "connect", "--component", "listener", "--cmd", "exit 7", check=False)
+    assert proc.returncode == 7
+    out = run_robocore(running, "connect", "--component", "talker", "--cmd",
+                       "echo super=$ROS_SUPER_CLIENT; ros2 node list --spin-time 3").stdout
+    assert "super=TRUE" in out
+    assert "/listener" in out and "/talker" in out
+    missing = run_robocore(running, "connect", "--component", "nope", "--cmd", "true", check=False)
+    assert missing.returncode == 2 and "unknown component" in missing.stderr
