@@ -7,13 +7,22 @@ from robocore.ui import console
 
 
 def run(options: Options) -> None:
-    """Validate robot.yaml; a ConfigError carries every problem."""
+    """Validate robot.yaml; a ConfigError carries every problem (the task turns it into exit code 2)."""
+    out = console()
     if options.dry_run:
-        console().print(f"would validate {options.project_dir / 'robot.yaml'}")
+        out.print(f"would validate {options.project_dir / 'robot.yaml'}", soft_wrap=True, markup=False)
         return
     project = options.load()
     robot = project.robot
-    console().print(
+    lines = [
         f"{project.robot_file}: ok — ROS 2 {robot.ros_distro.value}, {len(robot.hosts)} host(s), "
         f"{len(robot.components)} component(s), base {robot.base.kind.value}"
-    )
+    ]
+    for host in robot.hosts:
+        names = ", ".join(c.name for c in robot.components_on(host.name)) or "no components"
+        lines.append(f"  {host.name} ({host.ip}, {host.arch.value}, docker via {host.access.value}): {names}")
+    servers = ", ".join(f"{s.host}:{s.port}" for s in robot.discovery_servers)
+    lines.append(f"  discovery server: {servers}")
+    if not options.quiet:
+        for line in lines:
+            out.print(line, soft_wrap=True, markup=False)
