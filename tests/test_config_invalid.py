@@ -150,6 +150,12 @@ CASES = [
         "hosts[0]: expected a mapping of keys, got 'rpi5'",
         count=2,
     ),
+    Case(
+        "hosts-is-a-mapping",
+        edit({4: "hosts: {rpi5: 192.168.1.20}"}, delete=(5, 6, 7, 8, 9, 10, 11)),
+        4,
+        "hosts: expected a list, got a mapping",
+    ),
     Case("bad-arch", edit({8: "    arch: armhf"}), 8, "hosts[0].arch: 'armhf' is not one of: amd64, arm64"),
     Case(
         "ip-with-space", edit({6: "    ip: 192.168.1.20 extra"}), 6, "hosts[0].ip: must be an IP address or a hostname"

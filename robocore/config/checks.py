@@ -45,7 +45,8 @@ class Parts:
     common_packages: list[tuple[int, CommonPackage]] = field(default_factory=list)
     #: Explicit ``discovery.servers`` entries; empty when the default server is used.
     servers: list[tuple[int, DiscoveryServer]] = field(default_factory=list)
-    #: Every ``name`` written in each named section, validated or not, with its index.
+    #: Every ``name`` written in each named section, validated or not, with its index; a section
+    #: that is not a list at all is left out (its names are unknown, so references are not checked).
     names: dict[str, list[tuple[int, str]]] = field(default_factory=dict)
 
     @classmethod
@@ -82,13 +83,11 @@ def salvage(data: Mapping[str, Any]) -> Parts:
         components=_salvage_list(data.get("components"), Component),
         common_packages=_salvage_list(data.get("common_packages"), CommonPackage),
         servers=_salvage_list(servers, DiscoveryServer),
-        names={section: _raw_names(data.get(section)) for section in NAMED_SECTIONS},
+        names={section: _raw_names(data[section]) for section in NAMED_SECTIONS if isinstance(data.get(section), list)},
     )
 
 
-def _raw_names(items: object) -> list[tuple[int, str]]:
-    if not isinstance(items, list):
-        return []
+def _raw_names(items: list[Any]) -> list[tuple[int, str]]:
     return [
         (i, item["name"])
         for i, item in enumerate(items)
@@ -171,6 +170,8 @@ def _unique_names(parts: Parts) -> Iterator[Found]:
 
 
 def _references(parts: Parts) -> Iterator[Found]:
+    if "hosts" not in parts.names:
+        return
     hosts = parts.host_names
     for index, comp in parts.components:
         if comp.runs_on not in hosts:
