@@ -403,3 +403,18 @@ def test_wayland_socket_reaches_the_container(project: Path) -> None:
     out = ok(shell(project, "ws", "echo \"[$WAYLAND_DISPLAY]\"; test -e /robocore/xdg || echo no-xdg",
                    env={"ROBOCORE_UID": "1000"})).split()
     assert out == ["[]", "no-xdg"]
+
+
+def test_a_foreign_container_with_the_shell_name_is_left_alone(project: Path, docker_client: Any,
+                                                               root_image: str) -> None:
+    name = naming.shell_container_name(project.name, "ws")
+    foreign = docker_client.containers.run(root_image, ["sleep", "60"], name=name, detach=True,
+                                           labels={naming.LABEL_PROJECT: project.name})
+    try:
+        refused = shell(project, "ws", "true")
+        assert refused.returncode != 0
+        assert "is not a robocore dev shell" in refused.stderr
+        foreign.reload()
+        assert foreign.status == "running"
+    finally:
+        foreign.remove(force=True)

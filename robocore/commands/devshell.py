@@ -167,6 +167,9 @@ def _running(client: docker.DockerClient, name: str) -> Container | None:
     container = _get(client, name)
     if container is None:
         return None
+    if (container.labels or {}).get(naming.LABEL_ROLE) != plan.ROLE:
+        raise DockerError(f"a container named {name} exists and is not a robocore dev shell",
+                          hint=f"rename or remove it (docker rm -f {name}) to use robocore shell here")
     if container.status == "running":
         return container
     container.remove(force=True)  # a stopped leftover: start afresh
