@@ -566,3 +566,28 @@ def test_file_name_is_relative_to_the_current_folder(
     assert caught.value.lines() == [
         f"{project.name}/robot.yaml:1: ros_distro: 'iron' is not one of: humble, jazzy, kilted, rolling"
     ]
+
+
+def test_problems_found_after_loading_get_their_lines(make_project: MakeProject) -> None:
+    """located(): checks outside the config package (e.g. the wheels base) still report robot.yaml lines."""
+    from robocore.config.loader import located
+
+    project = make_project(BASE, FOLDERS)
+    error = located(project / "robot.yaml", [(("hosts", 0, "arch"), "arm64: no wheels"), (("ros_distro",), "no")])
+    assert [(p.line, p.path, p.message) for p in error.problems] == [
+        (1, "ros_distro", "no"),
+        (8, "hosts[0].arch", "arm64: no wheels"),
+    ]
+    (project / "robot.yaml").unlink()
+    assert [p.line for p in located(project / "robot.yaml", [(("ros_distro",), "no")]).problems] == [None]
+
+
+def test_validate_reports_what_the_wheels_base_cannot_build(make_project: MakeProject) -> None:
+    from robocore.commands import validate
+    from robocore.commands.context import Options
+
+    project = make_project(edit({1: "ros_distro: humble\nbase: {kind: wheels}"}), FOLDERS)
+    with pytest.raises(ConfigError) as caught:
+        validate.run(Options(project_dir=project))
+    assert [(p.line, p.path) for p in caught.value.problems] == [(1, "ros_distro"), (9, "hosts[0].arch")]
+    assert "humble has no ROS 2 wheels on PyPI" in caught.value.problems[0].message

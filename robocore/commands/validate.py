@@ -14,6 +14,12 @@ def run(options: Options) -> None:
         return
     project = options.load()
     robot = project.robot
+    from robocore.config.loader import located
+    from robocore.plan.dockerfiles import wheels_problems
+
+    found = wheels_problems(robot)
+    if found:
+        raise located(project.robot_file, found)
     lines = [
         f"{project.robot_file}: ok — ROS 2 {robot.ros_distro.value}, {len(robot.hosts)} host(s), "
         f"{len(robot.components)} component(s), base {robot.base.kind.value}"

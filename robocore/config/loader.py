@@ -9,6 +9,7 @@ fields are invalid the cross-field checks still run on the parts that validated.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 from collections.abc import Iterable, Sequence
@@ -405,3 +406,16 @@ def load_robot(project: Path, *, file_name: str = ROBOT_FILE) -> Robot:
     if not text.strip():
         raise ConfigError([problem(shown_path, None, "", "file is empty; see 'robocore schema' for its keys")])
     return parse_robot_text(text, file=shown_path, project=project)
+
+
+def located(path: Path, found: Iterable[tuple[KeyPath, str]]) -> ConfigError:
+    """A ConfigError for problems found after loading (``(key path, message)`` pairs), each with its line in ``path``.
+
+    For checks that live outside the config package (e.g. what the wheels base can build);
+    lines are omitted when the file cannot be read again.
+    """
+    shown_path = display_path(path)
+    lines = LineMap()
+    with contextlib.suppress(OSError, UnicodeDecodeError, ConfigError):
+        _, lines = _read(path.read_text(encoding="utf-8"), shown_path)
+    return ConfigError(_ordered([problem(shown_path, lines.line_of(p), format_path(p), m) for p, m in found]))
