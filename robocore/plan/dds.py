@@ -9,7 +9,8 @@ Pure functions of a :class:`~robocore.config.model.Robot`. Two Fast DDS lines ma
 * **3.x** (Kilted, Rolling): servers are matched by locator only; XML lists bare
   ``<locator>`` elements; the profile file is read from ``FASTDDS_DEFAULT_PROFILES_FILE``.
 
-Both profile variables are always exported together, so a profile works on either line.
+Profiles are named by ``FASTDDS_DEFAULT_PROFILES_FILE`` on both lines, plus
+``FASTRTPS_DEFAULT_PROFILES_FILE`` on 2.x (3.x warns about that old name).
 Server ids are the indexes of ``robot.discovery_servers``; several servers are redundant:
 every participant lists all of them, and servers list each other.
 """
@@ -86,8 +87,12 @@ def needs_client_profile(robot: Robot) -> bool:
     return robot.discovery.transport == "udp" and robot.ros_distro.value == "humble"
 
 
-def _profile_env(file_name: str) -> dict[str, str]:
+def _profile_env(robot: Robot, file_name: str) -> dict[str, str]:
+    """2.x reads FASTRTPS_DEFAULT_PROFILES_FILE (both are set, as on 3.x); 3.x reads FASTDDS_DEFAULT_PROFILES_FILE
+    and warns that the FASTRTPS_ name is deprecated (verified with Kilted's rmw_fastrtps), so it gets only that."""
     path = f"{CONTAINER_DDS}/{file_name}"
+    if robot.fastdds_line >= 3:
+        return {"FASTDDS_DEFAULT_PROFILES_FILE": path}
     return {"FASTRTPS_DEFAULT_PROFILES_FILE": path, "FASTDDS_DEFAULT_PROFILES_FILE": path}
 
 
@@ -112,9 +117,9 @@ def client_environment(robot: Robot, *, super_client: bool = False) -> dict[str,
     env.update(transport_environment(robot))
     if super_client:
         env["ROS_SUPER_CLIENT"] = "TRUE"
-        env.update(_profile_env(SUPER_CLIENT_PROFILE))
+        env.update(_profile_env(robot, SUPER_CLIENT_PROFILE))
     elif needs_client_profile(robot):
-        env.update(_profile_env(CLIENT_PROFILE))
+        env.update(_profile_env(robot, CLIENT_PROFILE))
     return env
 
 
