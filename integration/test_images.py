@@ -69,7 +69,15 @@ def _logs(container: Any) -> str:
 
 
 def _quoted(text: str) -> set[str]:
-    return set(re.findall(r"'([^']+)'", text)) | set(re.findall(r'"([^"]+)"', text))
+    """The payload of each log line: quoted text if any, else what follows the last ': '."""
+    found: set[str] = set()
+    for line in text.splitlines():
+        quoted = re.findall(r"'([^']+)'", line) + re.findall(r'"([^"]+)"', line)
+        if quoted:
+            found.update(quoted)
+        elif ": " in line:
+            found.add(line.rsplit(": ", 1)[1].strip())
+    return found
 
 
 def test_talker_and_listener_exchange_messages(docker_client: Any, demo_project: Path, containers: list[Any]) -> None:
@@ -179,11 +187,14 @@ def test_failed_build_names_the_package_and_shows_its_log(demo_project: Path, ru
             '<?xml version="1.0"?><package format="3"><name>robocore_it_broken</name><version>0.0.0</version>'
             "<description>x</description><maintainer email='a@b.c'>a</maintainer><license>MIT</license>"
             "<export><build_type>ament_python</build_type></export></package>")
-        (broken / "setup.py").write_text("raise SystemExit('deliberately broken: robocore-it marker')\n")
+        # identifies fine, fails when built: the package directory it names does not exist
+        (broken / "setup.py").write_text(
+            "from setuptools import setup\nsetup(name='robocore_it_broken', version='0.0.0', "
+            "packages=['robocore_it_marker_dir'])\n")
         proc = run_robocore(demo_project, "build", "--component", listener.name, check=False)
         assert proc.returncode == 6, proc.stderr
         assert "robocore_it_broken" in proc.stderr
-        assert "robocore-it marker" in proc.stderr  # the tail of the package's own log
+        assert "robocore_it_marker_dir" in proc.stderr  # the tail of the package's own log
     finally:
         import shutil
 

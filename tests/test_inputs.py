@@ -128,5 +128,6 @@ def test_colcon_events_and_argv() -> None:
     assert argv[:4] == ["colcon", "--log-base", "/robocore/log", "build"]
     assert argv[argv.index("--base-paths") + 1] == "/robocore/ws"
     assert argv[argv.index("--install-base") + 1] == "/robocore/install"
-    assert argv[-2:] == ["--packages-above", "a"]
+    assert argv[argv.index("--packages-above") + 1] == "a"
+    assert argv[argv.index("--event-handlers") + 1:] == list(colcon.EVENT_HANDLERS)
     assert colcon.package_name("<package><name> foo_bar </name></package>") == "foo_bar"

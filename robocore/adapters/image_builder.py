@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import os
 import stat
 import tarfile
@@ -156,7 +157,9 @@ def build_image(
     """Build ``plan`` and tag it; return the image ID, or raise BuildError with the last output lines."""
     from docker.errors import APIError, DockerException
 
-    context = make_tar(plan.dockerfile, files)
+    # One LABEL instruction at the end (docker-py's labels= adds one build step per label).
+    label_line = "LABEL " + " ".join(f"{key}={json.dumps(value)}" for key, value in sorted(labels.items()))
+    context = make_tar(plan.dockerfile + label_line + "\n", files)
     kwargs: dict[str, Any] = {}
     if plan.arch != native_arch:
         kwargs["platform"] = plan.platform
@@ -164,7 +167,7 @@ def build_image(
     image_id: str | None = None
     try:
         stream = client.api.build(
-            fileobj=context, custom_context=True, tag=plan.ref, labels=dict(labels), rm=True, forcerm=True,
+            fileobj=context, custom_context=True, tag=plan.ref, rm=True, forcerm=True,
             pull=False, decode=True, buildargs=proxy_buildargs(), **kwargs,
         )
         for chunk in stream:

@@ -123,6 +123,14 @@ class Reporter:
 
         from robocore.ui import console
 
+        if not console().is_terminal:  # logs of CI: the build steps as plain lines
+
+            def plain(key: str, text: str) -> None:
+                if text.startswith(("Step ", "building")):
+                    console().print(f"{key}: {text}", markup=False, highlight=False, soft_wrap=True)
+
+            yield plain
+            return
         tasks: dict[str, Any] = {}
         with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(),
                       console=console(), transient=True) as bar:
@@ -573,12 +581,14 @@ def plan_build(project: Project, comp: Component, image_id: str) -> BuildPlan:
 
 
 def _log_tail(out: Path, package: str, lines: int = 30) -> str:
-    log = out / "log" / "latest_build" / package / "stdout_stderr.log"
-    try:
-        text = log.read_text(errors="replace").splitlines()
-    except OSError:
-        return f"(no log at {log})"
-    return "\n".join(f"  {line}" for line in text[-lines:])
+    latest = out / "log" / "latest_build"
+    for log in (latest / package / "stdout_stderr.log", latest / "logger_all.log"):
+        try:
+            text = log.read_text(errors="replace").splitlines()
+        except OSError:
+            continue
+        return "\n".join(f"  {line}" for line in text[-lines:])
+    return f"(no log under {latest})"
 
 
 def _colcon(project: Project, plan: BuildPlan, report: Reporter) -> Outcome:

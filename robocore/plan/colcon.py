@@ -11,9 +11,9 @@ from robocore.plan import naming
 CONTAINER_BUILD = "/robocore/build"
 CONTAINER_LOG = "/robocore/log"
 
-#: colcon event handlers: one line when a package starts and ends, nothing else on the console.
-EVENT_HANDLERS = ("console_start_end+", "console_cohesion-", "console_direct-", "console_stderr-",
-                  "status-", "summary-", "desktop_notification-", "terminal_title-")
+#: colcon event handlers: a line when a package starts and ends, no build output on the console (it is in
+#: the log folder). Only handlers of colcon-core: naming one that is not installed is an error.
+EVENT_HANDLERS = ("console_start_end+", "console_direct-")
 
 _EVENT_RE = re.compile(r"^(?P<what>Starting|Finished|Failed|Aborted)\s+(?:>>>|<<<)\s+(?P<pkg>\S+)"
                        r"(?:\s+\[(?P<secs>[0-9.]+)s[],])?")
@@ -31,11 +31,10 @@ def workspace_build_argv(packages_above: Sequence[str] = ()) -> list[str]:
         "--base-paths", naming.CONTAINER_WS,
         "--build-base", CONTAINER_BUILD,
         "--install-base", naming.CONTAINER_INSTALL,
-        "--event-handlers", *EVENT_HANDLERS,
     ]
     if packages_above:
         argv += ["--packages-above", *packages_above]
-    return argv
+    return [*argv, "--event-handlers", *EVENT_HANDLERS]
 
 
 def underlay_build_argv(source: str, install: str, build: str) -> list[str]:
@@ -43,8 +42,7 @@ def underlay_build_argv(source: str, install: str, build: str) -> list[str]:
     return [
         "colcon", "--log-base", "/dev/null", "build", "--merge-install",
         "--base-paths", source, "--build-base", build, "--install-base", install,
-        "--event-handlers", "console_start_end+", "console_cohesion+", "status-", "summary+",
-        "desktop_notification-", "terminal_title-",
+        "--event-handlers", "console_start_end+", "console_direct+",
     ]
 
 

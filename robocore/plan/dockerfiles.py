@@ -31,7 +31,8 @@ WHEELS: dict[str, tuple[str, ...]] = {
 }
 #: colcon for ament_python packages, and psutil for ``fastdds discovery``.
 WHEELS_TOOLS: tuple[str, ...] = (
-    "colcon-core", "colcon-ros", "colcon-python-setup-py", "colcon-library-path", "colcon-bash", "psutil",
+    "colcon-core", "colcon-ros", "colcon-python-setup-py", "colcon-library-path", "colcon-bash",
+    "colcon-package-selection", "colcon-parallel-executor", "colcon-output", "psutil",
 )
 #: Debian packages the wheels base needs from its root image (installed only if missing).
 WHEELS_APT: tuple[str, ...] = ("python3", "python3-venv", "procps", "ca-certificates")

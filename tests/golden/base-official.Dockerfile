@@ -16,6 +16,6 @@ RUN apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-ins
 COPY entrypoint.sh /robocore/entrypoint.sh
 COPY common /tmp/robocore/common
 RUN apt-get update && /robocore/entrypoint.sh rosdep install --rosdistro "$ROS_DISTRO" --ignore-src -r -y --from-paths /tmp/robocore/common && rm -rf /var/lib/apt/lists/*
-RUN /robocore/entrypoint.sh colcon --log-base /dev/null build --merge-install --base-paths /tmp/robocore/common --build-base /tmp/robocore/colcon-build --install-base /opt/robocore/common --event-handlers console_start_end+ console_cohesion+ status- summary+ desktop_notification- terminal_title- && rm -rf /tmp/robocore
+RUN /robocore/entrypoint.sh colcon --log-base /dev/null build --merge-install --base-paths /tmp/robocore/common --build-base /tmp/robocore/colcon-build --install-base /opt/robocore/common --event-handlers console_start_end+ console_direct+ && rm -rf /tmp/robocore
 ENTRYPOINT ["/robocore/entrypoint.sh"]
 CMD ["bash"]

@@ -3,6 +3,6 @@ FROM proj-base:latest
 RUN apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends libusb-1.0-0 ros-jazzy-diagnostic-updater && rm -rf /var/lib/apt/lists/*
 RUN python3 -m pip install 'pyserial>=3.5' numpy
 COPY repos /tmp/robocore/deps
-RUN /robocore/entrypoint.sh colcon --log-base /dev/null build --merge-install --base-paths /tmp/robocore/deps --build-base /tmp/robocore/colcon-build --install-base /opt/robocore/deps --event-handlers console_start_end+ console_cohesion+ status- summary+ desktop_notification- terminal_title- && rm -rf /tmp/robocore
+RUN /robocore/entrypoint.sh colcon --log-base /dev/null build --merge-install --base-paths /tmp/robocore/deps --build-base /tmp/robocore/colcon-build --install-base /opt/robocore/deps --event-handlers console_start_end+ console_direct+ && rm -rf /tmp/robocore
 RUN ["/robocore/entrypoint.sh", "bash", "-c", "echo 'done' > /etc/driver-ready"]
 RUN ["/robocore/entrypoint.sh", "bash", "-c", "ros2 pkg list | grep -q rclpy"]
