@@ -9,7 +9,9 @@ were not the one carrying the messages:
   containers of one host; the same pair with private IPC namespaces discovers the topic and
   receives nothing; the generated UDP-only settings work with private IPC;
 - the discovery server container is restarted and a restarted listener finds the talker again
-  (the seconds it takes are printed).
+  (the seconds it takes are printed);
+- with two redundant servers, losing one still lets a restarted listener find the talker; with a
+  single server lost, it finds nothing.
 """
 
 from __future__ import annotations
@@ -21,7 +23,15 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from deploy_helpers import HEARD, PUBLISHED, copy_project, log_lines, remove_project_containers, wait_for
+from deploy_helpers import (
+    HEARD,
+    PUBLISHED,
+    copy_project,
+    free_udp_port,
+    log_lines,
+    remove_project_containers,
+    wait_for,
+)
 
 from robocore.commands.composefiles import write_compose_files
 from robocore.plan import naming
@@ -75,9 +85,15 @@ def deployment(demo_project: Path, tmp_path: Path, docker_client: Any, request: 
     """A factory of deployments of copies of the demo project; every container is removed afterwards."""
     made: list[Deployment] = []
 
-    def make(transport: str = "shm") -> Deployment:
+    def make(transport: str = "shm", servers: int = 1) -> Deployment:
         name = f"robocore-it-dds-{len(made)}-{int(time.time() * 1000) % 100000}"
-        root = copy_project(demo_project, tmp_path, name, transport=transport)
+
+        def more_servers(data: dict[str, Any]) -> None:
+            host = data["hosts"][0]["name"]
+            data["discovery"]["servers"] = [{"host": host, "port": free_udp_port()} for _ in range(servers)]
+
+        root = copy_project(demo_project, tmp_path, name, transport=transport,
+                            edit=more_servers if servers > 1 else None)
         dep = Deployment(docker_client, Project.load(root))
         made.append(dep)
         return dep
@@ -156,3 +172,33 @@ def test_discovery_server_restart_recovers(deployment: Any) -> None:
     seconds = time.monotonic() - started
     print(f"\nBENCH discovery-server restart -> restarted listener hears the talker: {seconds:.1f} s (goal < 30 s)")
     assert resumed, "traffic did not resume within 90 s of a discovery server restart"
+
+
+def test_redundant_servers_survive_losing_one(deployment: Any) -> None:
+    """Two servers: with server 0 gone, a restarted listener still finds the talker through server 1."""
+    dep = deployment(servers=2)
+    specs = dep.specs()
+    assert list(specs) == ["discovery-0", "discovery-1", "talker", "listener"]
+    for spec in specs.values():
+        dep.start(spec)
+    assert wait_for(dep.heard, HEAR_WITHIN), "no messages with two servers"
+    dep.containers["discovery-0"].remove(force=True)
+    listener = dep.containers["listener"]
+    listener.restart(timeout=2)
+    before = len(dep.heard())
+    assert wait_for(lambda: len(dep.heard()) > before, HEAR_WITHIN), \
+        "the restarted listener did not find the talker through the remaining server"
+
+
+def test_single_server_lost_means_no_new_discovery(deployment: Any) -> None:
+    """Negative control of the redundancy test: one server, removed, and the restarted listener hears nothing."""
+    dep = deployment()
+    for spec in dep.specs().values():
+        dep.start(spec)
+    assert wait_for(dep.heard, HEAR_WITHIN), "no messages before removing the server"
+    dep.containers["discovery-0"].remove(force=True)
+    listener = dep.containers["listener"]
+    listener.restart(timeout=2)
+    before = len(dep.heard())
+    time.sleep(SILENCE)
+    assert len(dep.heard()) == before, "a restarted listener found the talker with no server running"
