@@ -68,15 +68,26 @@ def heard_lines(options: Options, component: str = "listener", tail: int = 200) 
     return [line for line in text.splitlines() if HEARD in line]
 
 
-def wait_for_messages(options: Options, timeout: float) -> list[str]:
-    """Poll the listener's log until it shows messages; DemoFailed with the last log lines after ``timeout``."""
+def wait_for_messages(options: Options, timeout: float, *, count: int = 3) -> list[str]:
+    """Poll the listener's log until it shows ``count`` messages it had not logged before; DemoFailed after ``timeout``.
+
+    Lines already in the log when the wait starts (a deployment left running) do not count.
+    """
+    old = set(heard_lines(options))
     deadline = time.monotonic() + timeout
     with console().status(f"waiting for the listener to hear the talker (up to {timeout:.0f} s)"):
         while time.monotonic() < deadline:
-            lines = heard_lines(options)
-            if len(lines) >= 3:
+            lines = [line for line in heard_lines(options) if line not in old]
+            if len(lines) >= count:
                 return lines
             time.sleep(1.0)
+    from robocore.commands import observe
+
+    console().print("[red]no messages in time; the last lines of every container:[/]")
+    try:
+        observe.logs(options, component=None, follow=False, tail=10)
+    except RobocoreError as error:
+        console().print(f"(logs unavailable: {error.lines()[0]})")
     raise DemoFailed(
         f"the listener heard nothing from the talker within {timeout:.0f} s",
         hint=f"look at `robocore -p {options.project_dir} logs` and `robocore -p {options.project_dir} status`",
