@@ -20,7 +20,7 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from robocore.config.checks import check_parts, check_robot, did_you_mean, salvage
-from robocore.config.model import Robot
+from robocore.config.model import PATTERN_HELP, Robot
 from robocore.errors import ConfigError, Problem
 
 KeyPath = tuple[str | int, ...]
@@ -55,7 +55,7 @@ def shown(value: object) -> str:
 
 
 def _one_line(text: str) -> str:
-    return " ".join(text.split())
+    return " ".join(text.splitlines()).strip()
 
 
 class LineMap:
@@ -108,7 +108,7 @@ class LineMap:
 
 # --- pydantic errors as user messages ----------------------------------------------------------
 
-Mapping_ = dict[str, Any]
+ErrorDict = dict[str, Any]
 
 _EXPECTED = {
     "string_type": "a string",
@@ -143,7 +143,7 @@ def _kind_of(value: object) -> str:
     return shown(value)
 
 
-def _friendly(error: Mapping_) -> str:
+def _friendly(error: ErrorDict) -> str:
     kind = str(error.get("type", ""))
     ctx = error.get("ctx") or {}
     value = error.get("input")
@@ -158,7 +158,8 @@ def _friendly(error: Mapping_) -> str:
         expected = str(ctx.get("expected", "")).replace(" or ", ", ").replace("'", "")
         return f"{shown(value)} is not one of: {expected}{did_you_mean(str(value), expected.split(', '))}"
     if kind == "string_pattern_mismatch":
-        return f"{shown(value)} is not a valid value here (must match {ctx.get('pattern', '?')})"
+        pattern = str(ctx.get("pattern", "?"))
+        return f"{shown(value)} is not a valid value here (expected {PATTERN_HELP.get(pattern, 'to match ' + pattern)})"
     if kind == "too_short" and isinstance(value, list):
         return f"needs at least {ctx.get('min_length', 1)} item(s)"
     if kind in ("string_too_short", "too_short"):

@@ -21,8 +21,21 @@ Name = Annotated[
 #: ROS 2 distributions robocore knows, with the Fast DDS line each ships.
 FASTDDS_LINE: dict[str, int] = {"humble": 2, "jazzy": 2, "kilted": 3, "rolling": 3}
 
-AptPackage = Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9+.\-]*(=[A-Za-z0-9.+:~\-]+)?$")]
-PipPackage = Annotated[str, Field(min_length=1, pattern=r"^[^\s;]+$")]
+APT_PATTERN = r"^[a-z0-9][a-z0-9+.\-]*(=[A-Za-z0-9.+:~\-]+)?$"
+PIP_PATTERN = r"^[^\s;]+$"
+USER_PATTERN = r"^[a-z_][a-z0-9_\-.]{0,31}$"
+IMAGE_PREFIX_PATTERN = r"^[a-z0-9._\-/]*$"
+#: What each pattern means, for error messages.
+PATTERN_HELP: dict[str, str] = {
+    NAME_PATTERN: "a letter, then letters, digits, '_' or '-' (at most 63)",
+    APT_PATTERN: "a Debian package name (lower case), optionally =version",
+    PIP_PATTERN: "a pip requirement without spaces or ';'",
+    USER_PATTERN: "a Linux user name: lower case, digits, '_', '-' or '.'",
+    IMAGE_PREFIX_PATTERN: "lower-case letters, digits, '.', '_', '-' or '/'",
+}
+
+AptPackage = Annotated[str, Field(pattern=APT_PATTERN)]
+PipPackage = Annotated[str, Field(min_length=1, pattern=PIP_PATTERN)]
 
 _PORT_RE = re.compile(
     r"^(?:(?P<ip>[0-9.]+|\[[0-9a-fA-F:]+\]):)?(?P<host>\d{1,5})(?:-(?P<host_end>\d{1,5}))?"
@@ -74,7 +87,7 @@ class Host(Strict):
 
     name: Name
     ip: str = Field(min_length=1, description="Address or hostname used for SSH, rsync and Docker.")
-    user: str = Field(default="root", pattern=r"^[a-z_][a-z0-9_\-.]{0,31}$", description="SSH user.")
+    user: str = Field(default="root", pattern=USER_PATTERN, description="SSH user.")
     arch: Arch = Arch.amd64
     docker: DockerAccess | None = Field(
         default=None,
@@ -274,7 +287,7 @@ class Robot(Strict):
     registry: str | None = Field(
         default=None, description="Registry images are pushed to; without one, images are streamed to hosts."
     )
-    image_prefix: str = Field(default="", pattern=r"^[a-z0-9._\-/]*$", description="Prefix of every image name.")
+    image_prefix: str = Field(default="", pattern=IMAGE_PREFIX_PATTERN, description="Prefix of every image name.")
     base: BaseImage = Field(default_factory=BaseImage)
     discovery: Discovery = Field(default_factory=Discovery)
     hosts: list[Host] = Field(min_length=1)
