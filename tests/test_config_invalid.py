@@ -591,3 +591,17 @@ def test_validate_reports_what_the_wheels_base_cannot_build(make_project: MakePr
         validate.run(Options(project_dir=project))
     assert [(p.line, p.path) for p in caught.value.problems] == [(1, "ros_distro"), (9, "hosts[0].arch")]
     assert "humble has no ROS 2 wheels on PyPI" in caught.value.problems[0].message
+
+
+def test_folder_symlinked_outside_the_project_is_refused(tmp_path: Path) -> None:
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    project = tmp_path / "robot"
+    (project / "components").mkdir(parents=True)
+    (project / "components" / "listener").mkdir()
+    (project / "components" / "talker").symlink_to(outside)
+    with pytest.raises(ConfigError) as caught:
+        parse_robot_text(BASE, project=project)
+    assert caught.value.lines() == [
+        "robot.yaml:14: components[0].folder: 'components/talker' points outside the project folder"
+    ]
