@@ -131,3 +131,69 @@ def test_colcon_events_and_argv() -> None:
     assert argv[argv.index("--packages-above") + 1] == "a"
     assert argv[argv.index("--event-handlers") + 1:] == list(colcon.EVENT_HANDLERS)
     assert colcon.package_name("<package><name> foo_bar </name></package>") == "foo_bar"
+
+
+def _git_repo(path: Path, text: str) -> str:
+    import subprocess
+
+    path.mkdir(parents=True, exist_ok=True)
+    run = lambda *a: subprocess.run(["git", *a], cwd=path, check=True, capture_output=True, text=True)  # noqa: E731
+    if not (path / ".git").exists():
+        run("init", "-q", "-b", "main")
+    (path / "package.xml").write_text(f"<package><name>dep_pkg</name><!-- {text} --></package>")
+    run("add", "-A")
+    run("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-q", "-m", text)
+    return run("rev-parse", "HEAD").stdout.strip()
+
+
+def test_repositories_are_fetched_into_the_context_and_pinned_versions_hash(tmp_path: Path) -> None:
+    upstream = tmp_path / "upstream"
+    first = _git_repo(upstream, "one")
+    second = _git_repo(upstream, "two")
+    url = upstream.as_uri()
+    project = make_project(tmp_path / "p", talker={"repositories": [{"url": url, "version": first}]})
+    planned = images.plan_component(project, project.robot.component("talker"), BASE)
+    dests = [f.dest for f in planned.files]
+    assert dests == ["repos/upstream/package.xml"]  # no .git in the context
+    assert b"one" in planned.files[0].data
+    assert "COPY repos /tmp/robocore/deps" in planned.plan.dockerfile
+    other = make_project(tmp_path / "p", talker={"repositories": [{"url": url, "version": second}]})
+    again = images.plan_component(other, other.robot.component("talker"), BASE)
+    assert b"two" in again.files[0].data and again.inputs != planned.inputs
+
+
+def test_fetch_failure_is_a_one_line_build_error(tmp_path: Path) -> None:
+    import pytest
+
+    from robocore.adapters import vcs
+    from robocore.errors import BuildError
+
+    with pytest.raises(BuildError) as info:
+        vcs.fetch((tmp_path / "missing").as_uri(), "main", tmp_path / "dest")
+    assert "cannot fetch" in info.value.message and "missing" in info.value.message
+
+
+def test_cross_arch_without_binfmt_says_how_to_set_up_qemu(tmp_path: Path, monkeypatch: Any) -> None:
+    import pytest
+
+    from robocore.errors import ToolMissing
+
+    monkeypatch.setattr(images, "BINFMT_DIR", tmp_path)
+    images.check_emulation("amd64", "amd64", "x")  # native: nothing to check
+    with pytest.raises(ToolMissing) as info:
+        images.check_emulation("arm64", "amd64", "component cam")
+    assert "component cam" in info.value.message and "qemu-user-static" in (info.value.hint or "")
+    (tmp_path / "qemu-aarch64").write_text("enabled\n")
+    images.check_emulation("arm64", "amd64", "component cam")  # registered: fine
+
+
+def test_missing_mmdebstrap_is_tool_missing_with_a_hint(tmp_path: Path, monkeypatch: Any) -> None:
+    import pytest
+
+    from robocore.adapters import rootfs
+    from robocore.errors import ToolMissing
+
+    monkeypatch.setattr(rootfs.shutil, "which", lambda name: None)
+    with pytest.raises(ToolMissing) as info:
+        rootfs.bootstrap(object(), work_dir=tmp_path)  # type: ignore[arg-type]
+    assert "mmdebstrap" in info.value.message and "apt-get install mmdebstrap" in (info.value.hint or "")

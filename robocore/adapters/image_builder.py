@@ -153,13 +153,16 @@ def build_image(
     labels: Mapping[str, str],
     native_arch: str,
     output: Output | None = None,
+    nocache: bool = False,
 ) -> str:
     """Build ``plan`` and tag it; return the image ID, or raise BuildError with the last output lines."""
     from docker.errors import APIError, DockerException
 
     # One LABEL instruction at the end (docker-py's labels= adds one build step per label).
-    label_line = "LABEL " + " ".join(f"{key}={json.dumps(value)}" for key, value in sorted(labels.items()))
-    context = make_tar(plan.dockerfile + label_line + "\n", files)
+    dockerfile = plan.dockerfile
+    if labels:
+        dockerfile += "LABEL " + " ".join(f"{key}={json.dumps(value)}" for key, value in sorted(labels.items())) + "\n"
+    context = make_tar(dockerfile, files)
     kwargs: dict[str, Any] = {}
     if plan.arch != native_arch:
         kwargs["platform"] = plan.platform
@@ -167,7 +170,7 @@ def build_image(
     image_id: str | None = None
     try:
         stream = client.api.build(
-            fileobj=context, custom_context=True, tag=plan.ref, rm=True, forcerm=True,
+            fileobj=context, custom_context=True, tag=plan.ref, rm=True, forcerm=True, nocache=nocache,
             pull=False, decode=True, buildargs=proxy_buildargs(), **kwargs,
         )
         for chunk in stream:

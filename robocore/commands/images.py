@@ -448,13 +448,15 @@ def _selected(project: Project, component: str | None) -> list[Component]:
     return [c for c in project.robot.components if c.image is None]
 
 
-def _existing_base(project: Project, client: docker.DockerClient, arch: str) -> BaseRef:
+def _existing_base(project: Project, client: docker.DockerClient, arch: str, *, dry_run: bool = False) -> BaseRef:
     """The built base image for ``arch`` (stage does not rebuild it: that is prepare-base's job)."""
     from robocore.adapters.image_builder import image_state
 
     ref = f"{naming.base_image(project.robot, project.name)}:{dockerfiles.base_tag(arch, native_arch())}"
     state = image_state(client, ref)
     if state is None or naming.LABEL_INPUTS not in state.labels:
+        if dry_run:
+            return BaseRef(ref=ref, arch=arch, inputs="(base not built yet: run prepare-base first)")
         raise BuildError(f"no base image {ref}", hint="run `prepare-base` first")
     return BaseRef(ref=ref, arch=arch, inputs=state.labels[naming.LABEL_INPUTS])
 
@@ -477,11 +479,13 @@ def stage(options: Options, *, refresh: bool, component: str | None, force: bool
     client = _client()
     from robocore.adapters.image_builder import image_state
 
-    bases = {arch: _existing_base(project, client, arch) for arch in _arches(project, comps)}
+    bases = {arch: _existing_base(project, client, arch, dry_run=options.dry_run) for arch in _arches(project, comps)}
     outcomes: list[Outcome] = []
     work: list[tuple[Planned, str]] = []
     for comp in comps:
         base = bases[project.robot.host(comp.runs_on).arch.value]
+        if not options.dry_run:
+            check_emulation(base.arch, native_arch(), f"component {comp.name} (host {comp.runs_on})")
         planned = plan_component(project, comp, base, dry_run=options.dry_run, refresh_sources=force)
         reason = decide(image_state(client, planned.plan.ref), planned, force=force)
         if options.dry_run:
