@@ -8,6 +8,7 @@ reachable one is deployed; a missing install tree is refused before anything sta
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import socket
 import subprocess
@@ -199,3 +200,38 @@ def test_connect_runs_commands_as_super_client(running: Path, run_robocore: Any)
     assert "/listener" in out and "/talker" in out
     missing = run_robocore(running, "connect", "--component", "nope", "--cmd", "true", check=False)
     assert missing.returncode == 2 and "unknown component" in missing.stderr
+
+
+def test_connect_opens_an_interactive_shell_in_a_tty(running: Path) -> None:
+    """`connect` without --cmd: docker exec -it in the live container, ROS sourced, super client."""
+    import os
+    import pty
+    import select
+
+    pid, fd = pty.fork()
+    if pid == 0:  # child: the CLI on the pty
+        os.execv(sys.executable, [sys.executable, "-m", "robocore", "-p", str(running), "connect",
+                                  "--component", "listener"])
+    output = b""
+    try:
+        os.write(fd, b"echo tty=$(tty) super=$ROS_SUPER_CLIENT prefix=$AMENT_PREFIX_PATH; exit 5\n")
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([fd], [], [], 1.0)
+            if not ready:
+                continue
+            try:
+                chunk = os.read(fd, 4096)
+            except OSError:  # the child closed the pty
+                break
+            if not chunk:
+                break
+            output += chunk
+    finally:
+        _, status = os.waitpid(pid, 0)
+        os.close(fd)
+    text = output.decode(errors="replace")
+    assert os.waitstatus_to_exitcode(status) == 5, text
+    assert "tty=/dev/pts/" in text and "super=TRUE" in text, text
+    # Sourcing the component's install tree puts it on AMENT_PREFIX_PATH (the echoed command itself has no match).
+    assert re.search(r"prefix=\S*/robocore/install", text), f"the install tree is not sourced:\n{text}"
