@@ -62,6 +62,61 @@ def tiny_images(docker_client: Any) -> Iterator[list[str]]:
         docker_client.images.remove(name, force=True)
 
 
+@pytest.fixture(scope="module")
+def registry(fleet: RobotFleet, tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """Debian's docker-registry on this machine's loopback, reachable as the same 127.0.0.1:PORT on
+    every robot host through an ssh reverse tunnel (loopback registries need no TLS in dockerd)."""
+    import shutil
+    import socket
+    import urllib.request
+
+    binary = shutil.which("docker-registry")
+    assert binary, "the release tests need Debian's docker-registry package (apt-get install docker-registry)"
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    base = tmp_path_factory.mktemp("registry")
+    config = base / "config.yml"
+    config.write_text(f"version: 0.1\nstorage:\n  filesystem:\n    rootdirectory: {base / 'data'}\n"
+                      f"http:\n  addr: 127.0.0.1:{port}\nlog:\n  level: warn\n")
+    server = subprocess.Popen([binary, "serve", str(config)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    tunnels = []
+    try:
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                urllib.request.urlopen(f"http://127.0.0.1:{port}/v2/", timeout=2).close()
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.2)
+        for host in fleet.hosts:
+            tunnels.append(subprocess.Popen(
+                ["ssh", "-F", str(fleet.ssh_config), "-N", "-o", "ExitOnForwardFailure=yes",
+                 "-R", f"{port}:127.0.0.1:{port}", f"root@{host.ip}"], stdin=subprocess.DEVNULL))
+        for host in fleet.hosts:
+            probe = ["bash", "-c", f"exec 3<>/dev/tcp/127.0.0.1/{port}"]
+            deadline = time.monotonic() + 20
+            while host.ssh(fleet, "sh", "-c", '"$@" && echo up || true', "sh", *probe).strip() != "up":
+                assert time.monotonic() < deadline, f"registry tunnel to {host.name} did not come up"
+                time.sleep(0.3)
+        yield f"127.0.0.1:{port}"
+    finally:
+        for tunnel in tunnels:
+            tunnel.kill()
+            tunnel.wait()
+        server.kill()
+        server.wait()
+
+
+def registry_tags(registry: str, repo: str) -> list[str]:
+    import urllib.request
+
+    with urllib.request.urlopen(f"http://{registry}/v2/{repo}/tags/list", timeout=10) as resp:
+        return list(json.loads(resp.read()).get("tags") or [])
+
+
 def test_images_are_streamed_without_registry_then_skipped(fleet: RobotFleet, tiny_images: list[str],
                                                            docker_client: Any) -> None:
     local_ids = {name: docker_client.images.get(name).id for name in tiny_images}
@@ -79,6 +134,21 @@ def test_images_are_streamed_without_registry_then_skipped(fleet: RobotFleet, ti
         assert all(d.action == "present" for d in third.values())
         for name in tiny_images:
             assert client.images.get(name).id == local_ids[name], (index, name)
+        client.close()
+
+
+def test_images_go_through_a_registry_when_one_is_configured(fleet: RobotFleet, tiny_images: list[str],
+                                                            registry: str, docker_client: Any) -> None:
+    client = fleet.hosts[0].docker(fleet)
+    try:
+        for name in tiny_images:
+            client.images.remove(name, force=True)
+        result = ensure_images(client, [TINY], registry=registry, progress=False, label="robot-a")
+        assert result[TINY].action == "pulled"
+        assert registry_tags(registry, "robocore-it-tiny") == ["v1"]  # pushed once, from this machine
+        assert client.images.get(TINY).id == docker_client.images.get(TINY).id
+        assert client.images.get(f"{registry}/{TINY}").id == docker_client.images.get(TINY).id
+    finally:
         client.close()
 
 
@@ -182,6 +252,51 @@ def test_stage_build_sync_run_over_ssh_one_graph_across_hosts(fleet: RobotFleet,
     assert moved["talker"] < 50_000, moved
     robocore(robot, "run", "--quiet")
     assert wait_heard(fleet, 1, listener, "edited talker #"), "the edited talker was never heard on robot-b"
+
+
+def container_image(fleet: RobotFleet, index: int, name: str) -> str:
+    client = fleet.hosts[index].docker(fleet)
+    try:
+        return str(client.containers.get(name).attrs["Config"]["Image"])
+    finally:
+        client.close()
+
+
+def test_release_run_tag_and_rollback(fleet: RobotFleet, robot: Path, registry: str) -> None:
+    listener, talker = f"{robot.name}-listener", f"{robot.name}-talker"
+    # rollback first: robot-a goes back to the release synced before the one-line edit
+    before = fleet.hosts[0].ssh(fleet, "readlink", "/root/robocore/talker/current").strip()
+    robocore(robot, "rollback", "--host", "robot-a")
+    after = fleet.hosts[0].ssh(fleet, "readlink", "/root/robocore/talker/current").strip()
+    assert after != before
+    since = time.time()
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        client = fleet.hosts[1].docker(fleet)
+        recent = client.containers.get(listener).logs(since=int(since) + 2).decode(errors="replace")
+        client.close()
+        if "I heard: hello from talker" in recent:
+            break
+        time.sleep(1)
+    assert "I heard: hello from talker" in recent and "edited talker" not in recent, recent[-500:]
+
+    # release: needs a registry; pushes base and component images with the tag
+    assert robocore(robot, "release", "--tag", "v1", check=False).returncode != 0  # no registry yet
+    data = yaml.safe_load((robot / "robot.yaml").read_text())
+    data["registry"] = registry
+    (robot / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    robocore(robot, "release", "--tag", "v1", "--quiet")
+    for repo in ("base", "talker", "listener"):
+        assert registry_tags(registry, f"{robot.name}-{repo}") == ["v1"]
+    robocore(robot, "run", "--tag", "v1", "--quiet")
+    assert container_image(fleet, 0, talker) == f"{registry}/{robot.name}-talker:v1"
+    assert container_image(fleet, 1, listener) == f"{registry}/{robot.name}-listener:v1"
+    # rollback returns each host to what it ran before: the untagged images
+    robocore(robot, "rollback", "--quiet")
+    assert container_image(fleet, 0, talker) == f"{robot.name}-talker:latest"
+    assert container_image(fleet, 1, listener) == f"{robot.name}-listener:latest"
+    data.pop("registry")
+    (robot / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
 
 
 def test_run_with_a_stopped_host_names_it_and_deploys_the_other(fleet: RobotFleet, robot: Path) -> None:

@@ -13,8 +13,6 @@
 
 from __future__ import annotations
 
-import io
-import tarfile
 import threading
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -188,78 +186,100 @@ def _present_layers(layers: list[str], chains: set[tuple[str, ...]]) -> set[str]
     return set(layers[:k])
 
 
-class _Pipe(io.RawIOBase):
-    """A file-like view of an iterator of byte chunks (for tarfile's stream mode)."""
+class _Reader:
+    """Exact-size reads from an iterator of byte chunks."""
 
     def __init__(self, chunks: Iterable[bytes]) -> None:
         self._it = iter(chunks)
-        self._buf = b""
+        self._buf = bytearray()
 
-    def readable(self) -> bool:
-        return True
-
-    def readinto(self, b: Any) -> int:
-        while not self._buf:
+    def read(self, n: int) -> bytes:
+        while len(self._buf) < n:
             try:
-                self._buf = next(self._it)
+                self._buf += next(self._it)
             except StopIteration:
-                return 0
-        n = min(len(b), len(self._buf))
-        b[:n] = self._buf[:n]
-        self._buf = self._buf[n:]
-        return n
+                break
+        out = bytes(self._buf[:n])
+        del self._buf[:n]
+        return out
+
+    def rest(self) -> Iterator[bytes]:
+        if self._buf:
+            yield bytes(self._buf)
+            self._buf.clear()
+        yield from self._it
 
 
-class _Sink(io.RawIOBase):
-    def __init__(self) -> None:
-        self.out: list[bytes] = []
+_BLOCK = 512
+_SPOOL_IN_MEMORY = 1 << 20
 
-    def writable(self) -> bool:
-        return True
 
-    def write(self, b: Any) -> int:
-        self.out.append(bytes(b))
-        return len(b)
-
-    def take(self) -> bytes:
-        data = b"".join(self.out)
-        self.out.clear()
-        return data
+def _tar_size(header: bytes) -> int:
+    field = header[124:136]
+    if field[0] & 0x80:  # base-256 (GNU) for sizes >= 8 GiB
+        return int.from_bytes(field[1:], "big")
+    text = field.split(b"\0", 1)[0].strip() or b"0"
+    return int(text, 8)
 
 
 def _without_layers(chunks: Iterable[bytes], skip: set[str]) -> Iterator[bytes]:
-    """Re-stream a ``docker save`` tar, dropping ``layer.tar`` members whose diff ID is in ``skip``.
+    """Re-stream a ``docker save`` tar, leaving out the layer tars whose diff ID is in ``skip``.
 
-    A layer's diff ID is the sha256 of its uncompressed tar, so each layer is hashed while it is
-    spooled to a temp file; members the host needs are written through unchanged.
+    A layer's diff ID is the sha256 of its uncompressed tar, so every regular member is hashed
+    (spooled to a temp file when large) and dropped when its digest is a layer the host has;
+    everything else is passed through byte for byte. Memory stays bounded.
     """
     import hashlib
     import tempfile
 
-    sink = _Sink()
-    source = tarfile.open(fileobj=io.BufferedReader(_Pipe(chunks), 1 << 20), mode="r|")  # noqa: SIM115
-    target = tarfile.open(fileobj=sink, mode="w|", format=tarfile.PAX_FORMAT)  # noqa: SIM115
-    for member in source:
-        data = source.extractfile(member) if member.isfile() else None
-        if data is None:
-            target.addfile(member)
-        elif member.name.endswith("layer.tar"):
-            digest = hashlib.sha256()
-            with tempfile.TemporaryFile() as spool:
-                while block := data.read(1 << 20):
-                    digest.update(block)
-                    spool.write(block)
-                if f"sha256:{digest.hexdigest()}" not in skip:
-                    spool.seek(0)
-                    target.addfile(member, spool)
-        else:
-            target.addfile(member, io.BytesIO(data.read()))
-        if chunk := sink.take():
-            yield chunk
-    target.close()
-    source.close()
-    if chunk := sink.take():
-        yield chunk
+    reader = _Reader(chunks)
+    pending: list[bytes] = []  # pax/GNU long-name headers that belong to the next member
+    while True:
+        header = reader.read(_BLOCK)
+        if len(header) < _BLOCK or header == bytes(_BLOCK):
+            yield from pending
+            yield header
+            yield from reader.rest()
+            return
+        size = _tar_size(header)
+        padded = -(-size // _BLOCK) * _BLOCK
+        kind = header[156:157]
+        if kind in (b"x", b"g", b"L", b"K"):
+            pending.append(header + reader.read(padded))
+            continue
+        if kind not in (b"0", b"\0") or size == 0:
+            yield from pending
+            pending.clear()
+            yield header
+            remaining = padded
+            while remaining:
+                block = reader.read(min(remaining, 1 << 20))
+                if not block:
+                    return
+                remaining -= len(block)
+                yield block
+            continue
+        digest = hashlib.sha256()
+        with tempfile.SpooledTemporaryFile(max_size=_SPOOL_IN_MEMORY) as spool:
+            remaining = padded
+            left_in_file = size
+            while remaining:
+                block = reader.read(min(remaining, 1 << 20))
+                if not block:
+                    break
+                remaining -= len(block)
+                digest.update(block[:left_in_file])
+                left_in_file = max(0, left_in_file - len(block))
+                spool.write(block)
+            if f"sha256:{digest.hexdigest()}" in skip:
+                pending.clear()
+                continue
+            yield from pending
+            pending.clear()
+            yield header
+            spool.seek(0)
+            while block := spool.read(1 << 20):
+                yield block
 
 
 def _human(n: int) -> str:
