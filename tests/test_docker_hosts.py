@@ -71,3 +71,37 @@ def test_tls_client_resolves_relative_files_and_fails_by_name(tmp_path: Path) ->
     with pytest.raises(HostError) as caught:
         docker_hosts.client_for(host, project_root=tmp_path, connect_timeout=2)
     assert "secure" in caught.value.message
+
+
+def _tar(members: dict[str, bytes]) -> bytes:
+    import io
+    import tarfile
+
+    buf = io.BytesIO()
+    with tarfile.open(fileobj=buf, mode="w", format=tarfile.PAX_FORMAT) as tar:
+        for name, data in members.items():
+            info = tarfile.TarInfo(name)
+            info.size = len(data)
+            tar.addfile(info, io.BytesIO(data))
+    return buf.getvalue()
+
+
+def test_layer_filter_drops_only_layers_the_host_has_and_keeps_the_rest_byte_for_byte() -> None:
+    import hashlib
+    import io
+    import tarfile
+
+    from robocore.adapters.image_delivery import _without_layers
+
+    base, top = b"B" * 3_000_000, b"T" * 1000
+    long_name = "x" * 150 + "/layer.tar"  # needs a pax header
+    raw = _tar({"a/layer.tar": base, long_name: top, "manifest.json": b"[]", "a/VERSION": b"1.0"})
+    chunks = [raw[i:i + 7777] for i in range(0, len(raw), 7777)]
+    assert b"".join(_without_layers(iter(chunks), {"sha256:" + "0" * 64})) == raw
+    have = {"sha256:" + hashlib.sha256(base).hexdigest()}
+    out = b"".join(_without_layers(iter(chunks), have))
+    with tarfile.open(fileobj=io.BytesIO(out)) as tar:
+        names = tar.getnames()
+        assert tar.extractfile(long_name).read() == top  # type: ignore[union-attr]
+    assert names == [long_name, "manifest.json", "a/VERSION"]
+    assert len(out) < 20_000
