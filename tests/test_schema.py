@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+import functools
 import json
 import subprocess
 import sys
@@ -11,8 +13,13 @@ import jsonschema
 import pytest
 import yaml
 from config_examples import SEED_EXAMPLES, Example
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
+from pydantic import ValidationError
 from test_config_invalid import BASE, edit
+from test_config_property import VALID_DOCS, _get, _paths, mutated_documents
 
+from robocore.config.model import Robot
 from robocore.config.schema import SCHEMA_ID, robot_schema
 
 
@@ -79,3 +86,51 @@ def test_schema_accepts_the_base_document_and_values_robocore_coerces(schema: di
 def test_cross_field_rules_are_left_to_validate(schema: dict[str, Any]) -> None:
     """The schema checks shape only: an unknown runs_on host passes it (robocore validate reports it)."""
     assert _validator(schema).is_valid(yaml.safe_load(edit({15: "    runs_on: rpi6"})))
+
+
+FIELD_RULES = {
+    "ip-with-space": edit({6: "    ip: 192.168.1.20 extra"}),
+    "ip-with-slash": edit({6: "    ip: 192.168.1.0/24"}),
+    "relative-mount-root": edit(after={8: "    mount_root: robocore"}),
+    "repository-folder-escapes": edit(after={15: "    repositories:\n      - {url: https://x/y, folder: a/../../z}"}),
+}
+
+
+@pytest.mark.parametrize("name", sorted(FIELD_RULES))
+def test_field_rules_are_in_the_schema_too(schema: dict[str, Any], name: str) -> None:
+    data = yaml.safe_load(FIELD_RULES[name])
+    with pytest.raises(ValidationError):
+        Robot.model_validate(data)
+    assert not _validator(schema).is_valid(data)
+
+
+TRICKY = st.one_of(
+    st.sampled_from(["a b", "a/b", "/abs", "rel", "..", "a/../b", "", " ", "-x", "X", "1a", "a" * 70, "Root", "ok_name",
+                     "curl=1.0", "pip pkg", "x;y", "6080:80", "/dev/x:/dev/x:rwm", "12345"]),
+    st.text(max_size=12),
+)
+
+
+@st.composite
+def restrung_documents(draw: st.DrawFn) -> Any:
+    """A seed example whose string values are replaced by tricky strings: the shape stays, the content varies."""
+    doc = copy.deepcopy(draw(st.sampled_from(VALID_DOCS)))
+    leaves = [path for path in _paths(doc) if path and isinstance(_get(doc, path), str)]
+    for path in draw(st.lists(st.sampled_from(leaves), min_size=1, max_size=3)):
+        _get(doc, path[:-1])[path[-1]] = draw(TRICKY)
+    return doc
+
+
+@settings(max_examples=500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.one_of(mutated_documents(), restrung_documents()))
+def test_what_the_schema_accepts_the_model_accepts(doc: Any) -> None:
+    """Editors never call a file fine that robocore's field checks reject (shape only: no cross-field rules)."""
+    accepted = _shared_validator().is_valid(doc)
+    event("schema accepts" if accepted else "schema rejects")
+    if accepted:
+        Robot.model_validate(doc)
+
+
+@functools.cache
+def _shared_validator() -> jsonschema.Draft202012Validator:
+    return _validator(robot_schema())

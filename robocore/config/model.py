@@ -86,7 +86,11 @@ class Host(Strict):
     """A machine of the robot (or the dev machine) that runs components."""
 
     name: Name
-    ip: str = Field(min_length=1, description="Address or hostname used for SSH, rsync and Docker.")
+    ip: str = Field(
+        min_length=1,
+        description="Address or hostname used for SSH, rsync and Docker.",
+        json_schema_extra={"pattern": r"^[^\s/]+$"},
+    )
     user: str = Field(default="root", pattern=USER_PATTERN, description="SSH user.")
     arch: Arch = Arch.amd64
     docker: DockerAccess | None = Field(
@@ -104,6 +108,7 @@ class Host(Strict):
         default=None,
         description="Absolute folder on the host that receives synced install trees "
         "(default /home/<user>/robocore, /root/robocore for root).",
+        json_schema_extra={"pattern": "^/"},
     )
 
     @field_validator("ip")
@@ -162,7 +167,10 @@ class Repository(Strict):
     url: str = Field(min_length=1)
     version: str | None = None
     folder: str | None = Field(
-        default=None, description="Folder name under the workspace's src/ (default: from the URL)."
+        default=None,
+        description="Folder name under the workspace's src/ (default: from the URL).",
+        # the same rule as _inside_src, for editors (pydantic's own patterns cannot look ahead)
+        json_schema_extra={"pattern": r"^(?!/)(?!\.\.(/|$))(?!.*/\.\.(/|$)).+$"},
     )
     type: Literal["git"] = "git"
 
