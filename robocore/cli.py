@@ -72,6 +72,13 @@ def split_project(argv: Sequence[str], task_names: set[str]) -> tuple[str | None
     return project, rest
 
 
+def init_in_project(rest: list[str], project: str) -> list[str]:
+    """The seed's ``robocore DIR init`` (and ``robocore -p DIR init``): create the project in DIR."""
+    if rest[:1] != ["init"] or any(arg == "--path" or arg.startswith("--path=") for arg in rest):
+        return rest
+    return ["init", f"--path={project}", *rest[1:]]
+
+
 def _program(namespace: Any) -> Any:
     """An invoke Program named robocore whose help documents ``-p/--project`` (instead of invoke's ``--pty``)."""
     from invoke.parser.argument import Argument
@@ -103,6 +110,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         sys.exit(2)
     if project is not None:
         os.environ[PROJECT_ENV] = os.path.abspath(project)
+        rest = init_in_project(rest, project)
     try:
         _program(cli_namespace).run(["robocore", *rest])
     except BrokenPipeError:

@@ -11,7 +11,7 @@ import pytest
 from conftest import write_project
 from test_config_invalid import BASE, FOLDERS, edit
 
-from robocore.cli import CommandLineError, split_project
+from robocore.cli import CommandLineError, init_in_project, split_project
 
 TASKS = {"validate", "shell", "stage", "prepare-base", "prepare_base", "schema", "init"}
 
@@ -172,3 +172,27 @@ def test_help_does_not_import_the_heavy_libraries() -> None:
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().splitlines()[-1] == "HEAVY="
+
+
+@pytest.mark.parametrize(
+    "rest, expected",
+    [
+        (["init"], ["init", "--path=DIR"]),
+        (["init", "--defaults"], ["init", "--path=DIR", "--defaults"]),
+        (["init", "--path=OTHER"], ["init", "--path=OTHER"]),
+        (["validate"], ["validate"]),
+        ([], []),
+    ],
+)
+def test_init_in_project(rest: list[str], expected: list[str]) -> None:
+    assert init_in_project(rest, "DIR") == expected
+
+
+def test_seed_form_init_creates_the_project_in_dir(tmp_path: Path) -> None:
+    """The seed's `robocore-cli <project_folder> init`."""
+    target = tmp_path / "myrobot"
+    done = robocore(str(target), "init", "--defaults", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert (target / "robot.yaml").is_file()
+    checked = robocore(str(target), "validate")
+    assert checked.returncode == 0, checked.stderr
