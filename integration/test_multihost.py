@@ -285,14 +285,14 @@ def test_release_run_tag_and_rollback(fleet: RobotFleet, robot: Path, registry: 
     data = yaml.safe_load((robot / "robot.yaml").read_text())
     data["registry"] = registry
     (robot / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
-    robocore(robot, "release", "--tag", "v1", "--quiet")
+    robocore(robot, "release", "--tag", "v1")
     for repo in ("base", "talker", "listener"):
         assert registry_tags(registry, f"{robot.name}-{repo}") == ["v1"]
     robocore(robot, "run", "--tag", "v1", "--quiet")
     assert container_image(fleet, 0, talker) == f"{registry}/{robot.name}-talker:v1"
     assert container_image(fleet, 1, listener) == f"{registry}/{robot.name}-listener:v1"
     # rollback returns each host to what it ran before: the untagged images
-    robocore(robot, "rollback", "--quiet")
+    robocore(robot, "rollback")
     assert container_image(fleet, 0, talker) == f"{robot.name}-talker:latest"
     assert container_image(fleet, 1, listener) == f"{robot.name}-listener:latest"
     data.pop("registry")
