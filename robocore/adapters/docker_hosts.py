@@ -79,10 +79,14 @@ def describe(host: Host) -> str:
 
 def _unreachable(host: Host, exc: BaseException) -> HostError:
     detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-    return HostError(
-        f"host {host.name}: cannot reach its Docker daemon at {describe(host)}: {detail}",
-        hint="is the host up? `robocore doctor` checks ssh, Docker and disk on every host",
-    )
+    hint = "is the host up? `robocore doctor` checks ssh, Docker and disk on every host"
+    if "known_hosts" in detail:
+        hint = f"check the host key, then add it: ssh-keyscan -p {host.ssh_port} {host.ip} >> ~/.ssh/known_hosts"
+    elif type(exc).__name__ == "AuthenticationException":
+        hint = f"robocore uses ssh keys only: ssh-copy-id -p {host.ssh_port} {host.user}@{host.ip}"
+    elif "dial-stdio" in detail or "docker: not found" in detail:
+        hint = f"install the docker CLI on {host.name} (Debian: apt-get install docker.io)"
+    return HostError(f"host {host.name}: cannot reach its Docker daemon at {describe(host)}: {detail}", hint=hint)
 
 
 def _ssh_client(host: Host, timeout: int, connect_timeout: int) -> docker.DockerClient:
