@@ -94,6 +94,12 @@ def _program(namespace: Any) -> Any:
             ))
             return args
 
+        def print_help(self) -> None:
+            print("robocore [-p DIR] TASK [--task-opts] ...  run TASK on the robot project in DIR (default: .)")
+            print("robocore DIR TASK [--task-opts] ...       the same (robocore DIR init creates DIR)")
+            print()
+            super().print_help()
+
     return RobocoreProgram(namespace=namespace, version=__version__, name="robocore", binary="robocore")
 
 

@@ -141,6 +141,7 @@ def test_project_flag_without_value_is_a_usage_error() -> None:
 def test_help_lists_tasks_and_the_project_flag() -> None:
     done = robocore("--help")
     assert done.returncode == 0
+    assert done.stdout.startswith("robocore [-p DIR] TASK")
     assert "-p STRING, --project=STRING" in done.stdout
     assert "--pty" in done.stdout
     for name in ("validate", "prepare-base", "stage", "build", "sync", "run", "shell", "connect", "schema", "init"):
