@@ -51,6 +51,13 @@ def reported(body: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+def _require(component: str, task_name: str) -> None:
+    if not component:
+        from robocore.errors import UsageError
+
+        raise UsageError(f"{task_name} needs --component NAME", hint=f"robocore {task_name} --component talker")
+
+
 def _options(c: Context, **flags: Any) -> Any:
     from robocore.commands.context import Options
 
@@ -76,7 +83,9 @@ def validate(c: Context, dry_run: bool = False) -> None:
     optional=[],
 )
 @reported
-def init(c: Context, path: str, defaults: bool = False, distro: str = "", base: str = "", dry_run: bool = False) -> None:
+def init(
+    c: Context, path: str, defaults: bool = False, distro: str = "", base: str = "", dry_run: bool = False
+) -> None:
     """Create a robot project in PATH from the copier template."""
     from robocore.commands import init as command
 
@@ -94,7 +103,9 @@ def schema(c: Context) -> None:
 @task(name="prepare-base", help={"force": "Rebuild even if inputs are unchanged.", "dry_run": "Print the plan only.",
                                  "quiet": "Only errors.", "json": "Machine-readable result on stdout."})
 @reported
-def prepare_base(c: Context, force: bool = False, dry_run: bool = False, quiet: bool = False, json: bool = False) -> None:
+def prepare_base(
+    c: Context, force: bool = False, dry_run: bool = False, quiet: bool = False, json: bool = False
+) -> None:
     """Build the base image: ROS distro + common_packages; only when its inputs changed."""
     from robocore.commands import images
 
@@ -137,7 +148,9 @@ def sync(c: Context, host: str = "", dry_run: bool = False, quiet: bool = False,
 @task(help={"host": "Start/restart only this host.", "tag": "Deploy this released version.",
             "dry_run": "Print the container plan only.", "quiet": "Only errors.", "json": "Machine-readable result."})
 @reported
-def run(c: Context, host: str = "", tag: str = "", dry_run: bool = False, quiet: bool = False, json: bool = False) -> None:
+def run(
+    c: Context, host: str = "", tag: str = "", dry_run: bool = False, quiet: bool = False, json: bool = False
+) -> None:
     """(Re)start each host's containers and the discovery server."""
     from robocore.commands import run as command
 
@@ -177,9 +190,10 @@ def logs(c: Context, component: str = "", follow: bool = False, tail: int = 100,
             "devices": "'all' to pass every device of /dev.", "gpus": "Force GPUs on.", "no_gpus": "Force GPUs off.",
             "privileged": "Run privileged.", "dry_run": "Print the container spec only."})
 @reported
-def shell(c: Context, component: str, cmd: str = "", new: bool = False, devices: str = "", gpus: bool = False,
+def shell(c: Context, component: str = "", cmd: str = "", new: bool = False, devices: str = "", gpus: bool = False,
           no_gpus: bool = False, privileged: bool = False, dry_run: bool = False) -> None:
     """Interactive dev container in a component's environment (source mounted, ROS sourced)."""
+    _require(component, "shell")
     from robocore.commands import devshell
 
     code = devshell.run(_options(c, dry_run=dry_run), component=component, cmd=cmd or None, new=new,
@@ -192,8 +206,9 @@ def shell(c: Context, component: str, cmd: str = "", new: bool = False, devices:
 @task(help={"component": "The component whose live container to enter (required).",
             "cmd": "Run this instead of a shell.", "dry_run": "Print what would be run."})
 @reported
-def connect(c: Context, component: str, cmd: str = "", dry_run: bool = False) -> None:
+def connect(c: Context, component: str = "", cmd: str = "", dry_run: bool = False) -> None:
     """Shell inside the running container of a component on its host, as a ROS super client."""
+    _require(component, "connect")
     from robocore.commands import observe
 
     code = observe.connect(_options(c, dry_run=dry_run), component=component, cmd=cmd or None)
