@@ -630,12 +630,19 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter) -> Outcome:
                     secs = f" {event.seconds:.1f}s" if event.seconds is not None else ""
                     report.info(f"{name}: {event.package} {event.state}{secs}")
 
-            code = run_streaming(
-                client, plan.image, plan.argv, user=f"{uid}:{gid}", volumes=volumes,
-                environment={"HOME": "/tmp", "ROBOCORE_NO_INSTALL": "1", "PYTHONDONTWRITEBYTECODE": "1"},
-                labels={naming.LABEL_PROJECT: project.name, naming.LABEL_COMPONENT: name, naming.LABEL_ROLE: "build"},
-                platform=dockerfiles.platform(plan.arch) if plan.arch != native else None, on_line=on_line,
-            )
+            attempts = [plan.argv] + ([colcon.workspace_build_argv()] if plan.changed else [])
+            for argv in attempts:
+                code = run_streaming(
+                    client, plan.image, argv, user=f"{uid}:{gid}", volumes=volumes,
+                    environment={"HOME": "/tmp", "ROBOCORE_NO_INSTALL": "1", "PYTHONDONTWRITEBYTECODE": "1"},
+                    labels={naming.LABEL_PROJECT: project.name, naming.LABEL_COMPONENT: name,
+                            naming.LABEL_ROLE: "build"},
+                    platform=dockerfiles.platform(plan.arch) if plan.arch != native else None, on_line=on_line,
+                )
+                # an image whose colcon lacks colcon-package-selection: build everything instead
+                if not (code == 2 and any("--packages-above" in line for line in other[-3:])):
+                    break
+                other.clear()
     finally:
         client.close()
     if code != 0:
