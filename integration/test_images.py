@@ -206,3 +206,95 @@ def test_failed_build_names_the_package_and_shows_its_log(demo_project: Path, ru
 def test_dry_run_prints_the_plan(demo_project: Path, run_robocore: Any) -> None:
     out = run_robocore(demo_project, "stage", "--dry-run").stdout
     assert "FROM " in out and "up to date" in out
+
+
+# ------------------------------------------------------------------ common packages, repositories, pip
+
+
+def _ament_python_pkg(folder: Path, name: str, module_text: str) -> None:
+    (folder / name).mkdir(parents=True, exist_ok=True)
+    (folder / "resource").mkdir(exist_ok=True)
+    (folder / "resource" / name).write_text("")
+    (folder / name / "__init__.py").write_text(module_text)
+    (folder / "package.xml").write_text(
+        f'<?xml version="1.0"?>\n<package format="3"><name>{name}</name><version>0.1.0</version>'
+        f"<description>test</description><maintainer email=\"dev@example.com\">dev</maintainer>"
+        f"<license>Apache-2.0</license><export><build_type>ament_python</build_type></export></package>\n")
+    (folder / "setup.py").write_text(
+        "from setuptools import setup\n"
+        f"setup(name='{name}', version='0.1.0', packages=['{name}'], data_files=["
+        f"('share/ament_index/resource_index/packages', ['resource/{name}']), ('share/{name}', ['package.xml'])])\n")
+
+
+@pytest.fixture(scope="module")
+def deps_project(docker_client: Any, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A wheels project with a common package, a component with a git repository and pip packages."""
+    import subprocess
+
+    import yaml
+
+    root = tmp_path_factory.mktemp("deps") / "robocore-it-deps"
+    upstream = root.parent / "upstream-repo"
+    _ament_python_pkg(upstream, "it_dep_util", "VALUE = 'from a repository'\n")
+    for args in (["init", "-q", "-b", "main"], ["add", "-A"],
+                 ["-c", "user.name=t", "-c", "user.email=t@t", "commit", "-q", "-m", "init"]):
+        subprocess.run(["git", *args], cwd=upstream, check=True, capture_output=True)
+    _ament_python_pkg(root / "common" / "it_common_util", "it_common_util", "VALUE = 'from common'\n")
+    for comp in ("alpha", "beta"):
+        _ament_python_pkg(root / "components" / comp / "src" / f"it_{comp}_code", f"it_{comp}_code", "SECRET = 1\n")
+    robot = {
+        "ros_distro": "jazzy", "base": {"kind": "wheels"},
+        "hosts": [{"name": "devmachine", "ip": "127.0.0.1"}],
+        "common_packages": [{"name": "it_common_util", "folder": "common/it_common_util"}],
+        "components": [
+            {"name": "alpha", "runs_on": "devmachine", "folder": "components/alpha",
+             "repositories": [{"url": upstream.as_uri(), "version": "main"}],
+             "postinstall": ["python -c 'import it_dep_util' && touch /etc/alpha-postinstall-ran"]},
+            {"name": "beta", "runs_on": "devmachine", "folder": "components/beta", "pip_packages": ["six"]},
+        ],
+    }
+    (root / "robot.yaml").write_text(yaml.safe_dump(robot, sort_keys=False))
+    return root
+
+
+def test_common_packages_repositories_and_pip_are_in_the_images(
+        docker_client: Any, deps_project: Path, run_robocore: Any) -> None:
+    run_robocore(deps_project, "prepare-base", "--quiet")
+    run_robocore(deps_project, "stage", "--quiet")
+    project = _project(deps_project)
+    alpha, beta = (f"{naming.component_image(project.robot, project.name, c)}:latest" for c in ("alpha", "beta"))
+    script = ("set -e; ros2 pkg list | grep -x {pkg}; python -c 'import {mods}; print(\"imports-ok\")'; "
+              "test ! -e /robocore/ws && ! find / -xdev -path /proc -prune -o -name 'it_*_code*' -print | grep -q . "
+              "&& echo no-user-code")
+    out = docker_client.containers.run(
+        alpha, ["bash", "-c", script.format(pkg="it_dep_util", mods="it_common_util, it_dep_util")
+                + "; test -e /etc/alpha-postinstall-ran && echo postinstall-ok"],
+        remove=True, name=f"{PREFIX}-deps-{uuid.uuid4().hex[:8]}").decode()
+    assert "it_dep_util" in out and "imports-ok" in out and "no-user-code" in out and "postinstall-ok" in out, out
+    out = docker_client.containers.run(
+        beta, ["bash", "-c", script.format(pkg="it_common_util", mods="it_common_util, six")],
+        remove=True, name=f"{PREFIX}-deps-{uuid.uuid4().hex[:8]}").decode()
+    assert "imports-ok" in out and "no-user-code" in out, out
+    # a negative control for the import probe: a module that is not installed fails
+    probe = docker_client.containers.run(beta, ["bash", "-c", "python -c 'import it_dep_util' || echo missing"],
+                                         remove=True, name=f"{PREFIX}-deps-{uuid.uuid4().hex[:8]}").decode()
+    assert "missing" in probe
+
+
+def test_changing_one_components_packages_restages_only_that_one(
+        docker_client: Any, deps_project: Path, run_robocore: Any) -> None:
+    import yaml
+
+    run_robocore(deps_project, "prepare-base", "--quiet")
+    run_robocore(deps_project, "stage", "--quiet")
+    project = _project(deps_project)
+    before = _image_ids(docker_client, project)
+    data = yaml.safe_load((deps_project / "robot.yaml").read_text())
+    data["components"][1]["pip_packages"] = ["six", "idna"]
+    (deps_project / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    result = json.loads(run_robocore(deps_project, "stage", "--json").stdout)
+    actions = {r["what"].split(":")[0].rsplit("-", 1)[-1]: r["action"] for r in result["results"]}
+    assert actions == {"alpha": "up-to-date", "beta": "built"}, result
+    after = _image_ids(docker_client, _project(deps_project))
+    changed = {ref for ref in before if before[ref] != after[ref]}
+    assert changed == {f"{naming.component_image(project.robot, project.name, 'beta')}:latest"}
