@@ -595,7 +595,8 @@ def _log_tail(out: Path, package: str, lines: int = 30) -> str:
     return f"(no log under {latest})"
 
 
-def _colcon(project: Project, plan: BuildPlan, report: Reporter) -> Outcome:
+def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callable[[str, str], None]) -> Outcome:
+    """colcon build of one component in a throw-away container of its staged image."""
     from robocore.adapters.image_builder import run_streaming
 
     for sub in ("build", "install", "log"):
@@ -614,35 +615,34 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter) -> Outcome:
     native = native_arch()
     client = _client()
     try:
-        with report.progress() as update:
-            update(name, "colcon build")
+        update(name, "colcon build")
 
-            def on_line(line: str) -> None:
-                event = colcon.parse_event(line)
-                if event is None:
-                    if line.strip():
-                        other.append(line)
-                    return
-                events.append(event)
-                if event.state == "started":
-                    update(name, f"building {event.package}")
-                else:
-                    secs = f" {event.seconds:.1f}s" if event.seconds is not None else ""
-                    report.info(f"{name}: {event.package} {event.state}{secs}")
+        def on_line(line: str) -> None:
+            event = colcon.parse_event(line)
+            if event is None:
+                if line.strip():
+                    other.append(line)
+                return
+            events.append(event)
+            if event.state == "started":
+                update(name, f"building {event.package}")
+            else:
+                secs = f" {event.seconds:.1f}s" if event.seconds is not None else ""
+                report.info(f"{name}: {event.package} {event.state}{secs}")
 
-            attempts = [plan.argv] + ([colcon.workspace_build_argv()] if plan.changed else [])
-            for argv in attempts:
-                code = run_streaming(
-                    client, plan.image, argv, user=f"{uid}:{gid}", volumes=volumes,
-                    environment={"HOME": "/tmp", "ROBOCORE_NO_INSTALL": "1", "PYTHONDONTWRITEBYTECODE": "1"},
-                    labels={naming.LABEL_PROJECT: project.name, naming.LABEL_COMPONENT: name,
-                            naming.LABEL_ROLE: "build"},
-                    platform=dockerfiles.platform(plan.arch) if plan.arch != native else None, on_line=on_line,
-                )
-                # an image whose colcon lacks colcon-package-selection: build everything instead
-                if not (code == 2 and any("--packages-above" in line for line in other[-3:])):
-                    break
-                other.clear()
+        attempts = [plan.argv] + ([colcon.workspace_build_argv()] if plan.changed else [])
+        for argv in attempts:
+            code = run_streaming(
+                client, plan.image, argv, user=f"{uid}:{gid}", volumes=volumes,
+                environment={"HOME": "/tmp", "ROBOCORE_NO_INSTALL": "1", "PYTHONDONTWRITEBYTECODE": "1"},
+                labels={naming.LABEL_PROJECT: project.name, naming.LABEL_COMPONENT: name,
+                        naming.LABEL_ROLE: "build"},
+                platform=dockerfiles.platform(plan.arch) if plan.arch != native else None, on_line=on_line,
+            )
+            # an image whose colcon lacks colcon-package-selection: build everything instead
+            if not (code == 2 and any("--packages-above" in line for line in other[-3:])):
+                break
+            other.clear()
     finally:
         client.close()
     if code != 0:
@@ -683,6 +683,7 @@ def build(options: Options, *, component: str | None) -> None:
         plans.append(plan_build(project, comp, state.id))
     client.close()
     outcomes: list[Outcome] = []
+    todo: list[BuildPlan] = []
     for plan in plans:
         if plan.changed == []:
             outcomes.append(Outcome(what=plan.component.name, role="build", action="up-to-date"))
@@ -692,5 +693,25 @@ def build(options: Options, *, component: str | None) -> None:
             report.plain("  " + " ".join(plan.argv))
             outcomes.append(Outcome(what=plan.component.name, role="build", action="would-build", reason=plan.reason))
             continue
-        outcomes.append(_colcon(project, plan, report))
+        todo.append(plan)
+    outcomes += _run_colcon(project, todo, report)
     report.done(outcomes)
+
+
+def _run_colcon(project: Project, todo: Sequence[BuildPlan], report: Reporter) -> list[Outcome]:
+    """colcon builds of several components side by side (one container each); every one is tried."""
+    if not todo:
+        return []
+    outcomes: list[Outcome] = []
+    errors: list[BaseException] = []
+    with report.progress() as update, ThreadPoolExecutor(max_workers=min(MAX_PARALLEL, len(todo))) as pool:
+        futures = [pool.submit(_colcon, project, plan, report, update) for plan in todo]
+        for future in futures:
+            try:
+                outcomes.append(future.result())
+            except BaseException as exc:  # collected: the other components still build
+                errors.append(exc)
+    if errors:
+        report.done(outcomes)
+        raise errors[0]
+    return outcomes
