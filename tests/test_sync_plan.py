@@ -40,14 +40,14 @@ def test_rsync_argv_links_against_current_and_writes_to_staging(tmp_path: Path) 
 def test_remote_steps_are_fixed_scripts_with_arguments_as_argv(tmp_path: Path) -> None:
     evil = plan.ComponentSync(component="x", host="h", root=PurePosixPath("/tmp/a b;touch /tmp/pwned"),
                               sources=(), compose_name="h.yaml")
-    argv = plan.prepare_argv(evil)
+    argv = plan.prepare_argv([evil])
     assert argv[:2] == ["sh", "-c"] and argv[2] == plan.PREPARE_SCRIPT
     assert argv[3:] == ["sh", "/tmp/a b;touch /tmp/pwned"]
-    final = plan.finalize_argv(evil, "20260101T000000Z-abcdef", keep=2)
-    assert final[2] == plan.FINALIZE_SCRIPT and final[4:] == ["/tmp/a b;touch /tmp/pwned", "20260101T000000Z-abcdef",
-                                                              "h.yaml", "2"]
+    final = plan.finalize_argv([evil], "20260101T000000Z-abcdef", keep=2)
+    assert final[2] == plan.FINALIZE_SCRIPT and final[4:] == ["20260101T000000Z-abcdef", "2",
+                                                              "/tmp/a b;touch /tmp/pwned", "h.yaml"]
     with pytest.raises(ValueError):
-        plan.finalize_argv(evil, "../../etc")
+        plan.finalize_argv([evil], "../../etc")
 
 
 def test_ssh_quotes_every_remote_argument() -> None:
@@ -60,31 +60,34 @@ def test_ssh_quotes_every_remote_argument() -> None:
 
 def test_scripts_switch_current_atomically_and_prune(tmp_path: Path) -> None:
     """Run the real scripts locally with sh: the layout they leave is the contract with run."""
-    root = tmp_path / "robot" / "talker"
-    it = plan.ComponentSync(component="talker", host="h", root=PurePosixPath(str(root)), sources=(),
-                            compose_name="h.yaml")
-    ids = []
+    roots = [tmp_path / "robot" / "talker", tmp_path / "robot" / "odd name;x"]
+    items = [plan.ComponentSync(component=r.name, host="h", root=PurePosixPath(str(r)), sources=(),
+                                compose_name="h.yaml") for r in roots]
+    ids: list[str] = []
     for n in range(5):
-        out = subprocess.run(plan.prepare_argv(it), capture_output=True, text=True, check=True).stdout
-        keys = plan.parse_keyvals(out)
-        assert keys["staging"] == "0"
-        assert keys["current"] == ("" if n == 0 else f"releases/{ids[-1]}")
-        (root / "staging" / "install").mkdir(parents=True)
-        (root / "staging" / "install" / "v").write_text(str(n))
-        (root / "staging" / "h.yaml").write_text("services: {}\n")
+        out = subprocess.run(plan.prepare_argv(items), capture_output=True, text=True, check=True).stdout
+        for keys in plan.parse_prepare(out, len(items)):
+            assert keys["staging"] == "0"
+            assert keys["current"] == ("" if n == 0 else f"releases/{ids[-1]}")
+        for root in roots:
+            (root / "staging" / "install").mkdir(parents=True)
+            (root / "staging" / "install" / "v").write_text(str(n))
+            (root / "staging" / "h.yaml").write_text("services: {}\n")
         rid = plan.new_release_id(datetime(2026, 1, 1, 0, 0, n, tzinfo=timezone.utc), nonce=bytes([n]))
         ids.append(rid)
-        subprocess.run(plan.finalize_argv(it, rid, keep=3), check=True, capture_output=True)
-        assert (root / "current").is_symlink() and (root / "current" / "install" / "v").read_text() == str(n)
-        assert (root / "current" / "compose.yaml").read_text() == "services: {}\n"
-        assert not (root / "staging").exists()
-    assert sorted(p.name for p in (root / "releases").iterdir()) == ids[-3:]
+        subprocess.run(plan.finalize_argv(items, rid, keep=3), check=True, capture_output=True)
+        for root in roots:
+            assert (root / "current").is_symlink() and (root / "current" / "install" / "v").read_text() == str(n)
+            assert (root / "current" / "compose.yaml").read_text() == "services: {}\n"
+            assert not (root / "staging").exists()
+    for root in roots:
+        assert sorted(p.name for p in (root / "releases").iterdir()) == ids[-3:]
     # an interrupted copy: staging is reported and current is untouched
-    (root / "staging").mkdir()
-    keys = plan.parse_keyvals(subprocess.run(plan.prepare_argv(it), capture_output=True, text=True).stdout)
-    assert keys == {"staging": "1", "current": f"releases/{ids[-1]}"}
-    subprocess.run(plan.discard_argv(it), check=True)
-    assert not (root / "staging").exists() and (root / "current" / "install" / "v").read_text() == "4"
+    (roots[0] / "staging").mkdir()
+    out = subprocess.run(plan.prepare_argv(items[:1]), capture_output=True, text=True).stdout
+    assert plan.parse_prepare(out, 1) == [{"staging": "1", "current": f"releases/{ids[-1]}"}]
+    subprocess.run(plan.discard_argv(items[:1]), check=True)
+    assert not (roots[0] / "staging").exists() and (roots[0] / "current" / "install" / "v").read_text() == "4"
 
 
 def test_parse_stats_reads_rsync_3_output() -> None:

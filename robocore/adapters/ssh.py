@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import shlex
 import subprocess
+import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +26,8 @@ from robocore.errors import HostError, ToolMissing
 CONFIG_ENV = "ROBOCORE_SSH_CONFIG"
 #: Seconds to wait for a TCP connection and for the SSH handshake before calling a host unreachable.
 CONNECT_TIMEOUT = 6
+#: Seconds an idle shared ssh connection stays open.
+MULTIPLEX_SECONDS = 5
 
 
 def config_file() -> Path | None:
@@ -48,10 +51,22 @@ def ssh_options(host: Host, *, connect_timeout: int = CONNECT_TIMEOUT) -> list[s
         "-p", str(host.ssh_port),
         "-o", "BatchMode=yes",
         "-o", f"ConnectTimeout={connect_timeout}",
-        "-o", "ServerAliveInterval=5",
-        "-o", "ServerAliveCountMax=3",
+        "-o", "ServerAliveInterval=4",
+        "-o", "ServerAliveCountMax=2",
+        # One connection per host shared by the steps of a command (prepare, rsync, finalize):
+        # the master lingers MULTIPLEX_SECONDS after its last use, then exits.
+        "-o", "ControlMaster=auto",
+        "-o", f"ControlPath={control_dir()}/%C",
+        "-o", f"ControlPersist={MULTIPLEX_SECONDS}",
     ]
     return argv
+
+
+def control_dir() -> Path:
+    """A private folder for ssh control sockets (short path: unix sockets are limited to 108 bytes)."""
+    path = Path(tempfile.gettempdir()) / f"robocore-ssh-{os.getuid()}"
+    path.mkdir(mode=0o700, exist_ok=True)
+    return path
 
 
 def ssh_argv(host: Host, remote: Sequence[str], *, connect_timeout: int = CONNECT_TIMEOUT) -> list[str]:

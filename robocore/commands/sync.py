@@ -13,6 +13,7 @@ changed.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shlex
@@ -130,37 +131,55 @@ def sync(options: Options, *, host: str | None) -> None:
 
 
 def sync_host(project: Project, host: Host, items: list[plan.ComponentSync]) -> list[ComponentResult]:
-    """Sync every item of one host, one release id for all; record what the host now runs."""
+    """Sync every item of one host, one release id for all; record what the host now runs.
+
+    Three kinds of remote steps: one ``prepare`` for all components, one rsync per component
+    whose tree may differ, one ``finalize`` (and one ``discard``) for all components.
+    """
     release_id = plan.new_release_id()
     rsh = ssh.rsh_command(host)
     recorded = _read_state(project, host.name)
-    results = []
-    for item in items:
-        start = time.monotonic()
-        digest = _tree_digest(item)
-        prep = plan.parse_keyvals(ssh.run(host, plan.prepare_argv(item), timeout=60).stdout.decode())
-        stats = rsync.run(host, plan.rsync_argv(item, host, rsh))
+    start = time.monotonic()
+    digests = [_tree_digest(item) for item in items]
+    preps = plan.parse_prepare(ssh.run(host, plan.prepare_argv(items), timeout=60).stdout.decode(), len(items))
+    changed: list[plan.ComponentSync] = []
+    unchanged: list[plan.ComponentSync] = []
+    stats: dict[str, plan.RsyncStats] = {}
+    seconds: dict[str, float] = {}
+    for item, digest, prep in zip(items, digests, preps, strict=True):
         previous = recorded.get(item.component, {})
         current = prep.get("current", "")
-        changed = (
-            stats.changed
-            or prep.get("staging") == "1"  # resuming an interrupted copy: its content is unknown
-            or not current
-            or current != f"{plan.RELEASES}/{previous.get('release', '')}"
-            or digest != previous.get("digest")
-        )
-        if changed:
-            ssh.run(host, plan.finalize_argv(item, release_id), timeout=120)
-            release = release_id
+        same_release = bool(current) and current == f"{plan.RELEASES}/{previous.get('release', '')}"
+        resuming = prep.get("staging") == "1"  # an interrupted copy: its content is unknown
+        if same_release and not resuming and digest == previous.get("digest"):
+            stats[item.component] = plan.RsyncStats()  # quick check: nothing to send
+            unchanged.append(item)
+            continue
+        t = time.monotonic()
+        stats[item.component] = rsync.run(host, plan.rsync_argv(item, host, rsh))
+        seconds[item.component] = time.monotonic() - t
+        if stats[item.component].changed or resuming or not same_release or digest != previous.get("digest"):
+            changed.append(item)
         else:
-            ssh.run(host, plan.discard_argv(item), timeout=120)
-            release = current.removeprefix(f"{plan.RELEASES}/")
+            unchanged.append(item)
+    if changed:
+        ssh.run(host, plan.finalize_argv(changed, release_id), timeout=120)
+    if unchanged:
+        ssh.run(host, plan.discard_argv(unchanged), timeout=120)
+    results = []
+    for item, digest, prep in zip(items, digests, preps, strict=True):
+        is_new = item in changed
+        release = release_id if is_new else prep.get("current", "").removeprefix(f"{plan.RELEASES}/")
         recorded[item.component] = {"release": release, "digest": digest}
-        _write_state(project, host.name, recorded)
+        st = stats[item.component]
         results.append(ComponentResult(
-            component=item.component, host=host.name, release=release, changed=changed,
-            sent=stats.sent, received=stats.received, files=stats.files, seconds=time.monotonic() - start,
+            component=item.component, host=host.name, release=release, changed=is_new, sent=st.sent,
+            received=st.received, files=st.files, seconds=seconds.get(item.component, 0.0),
         ))
+    _write_state(project, host.name, recorded)
+    if results:
+        total = time.monotonic() - start
+        results = [dataclasses.replace(r, seconds=round(total, 2)) for r in results]
     return results
 
 
@@ -208,12 +227,15 @@ def _print_dry_run(project: Project, hosts: list[Host], plans: dict[str, list[pl
             out.print(f"# {h.name}: this machine, nothing to copy")
             continue
         rsh = ssh.rsh_command(h)
-        for item in plans[h.name]:
-            out.print(f"# {h.name} / {item.component} -> {item.root}", markup=False)
-            out.print(shlex.join(ssh.ssh_argv(h, plan.prepare_argv(item))), markup=False, soft_wrap=True)
+        items = plans[h.name]
+        if not items:
+            continue
+        out.print(f"# {h.name}: " + ", ".join(f"{i.component} -> {i.root}" for i in items), markup=False)
+        out.print(shlex.join(ssh.ssh_argv(h, plan.prepare_argv(items))), markup=False, soft_wrap=True)
+        for item in items:
             out.print(shlex.join(plan.rsync_argv(item, h, rsh)), markup=False, soft_wrap=True)
-            out.print(shlex.join(ssh.ssh_argv(h, plan.finalize_argv(item, plan.new_release_id()))),
-                      markup=False, soft_wrap=True)
+        out.print(shlex.join(ssh.ssh_argv(h, plan.finalize_argv(items, plan.new_release_id()))),
+                  markup=False, soft_wrap=True)
 
 
 def _print_table(rows: list[ComponentResult]) -> None:
@@ -222,8 +244,8 @@ def _print_table(rows: list[ComponentResult]) -> None:
     from robocore.ui import stdout
 
     table = Table(title="sync")
-    for col in ("host", "component", "release", "changed", "sent", "received", "files", "time"):
-        table.add_column(col, justify="right" if col in {"sent", "received", "files", "time"} else "left",
+    for col in ("host", "component", "release", "changed", "sent", "received", "files", "host time"):
+        table.add_column(col, justify="right" if col in {"sent", "received", "files", "host time"} else "left",
                          no_wrap=col == "release")
     for r in rows:
         table.add_row(r.host, r.component, r.release, "yes" if r.changed else "no", _human(r.sent),

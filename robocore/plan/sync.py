@@ -8,12 +8,14 @@ On a remote host every component gets ``<mount_root>/<component>/``::
     staging/                    the release being copied (absent when idle)
     current -> releases/<id>    switched atomically once a release is complete
 
-A sync (1) creates ``staging`` (``prepare``), (2) rsyncs into it with ``--link-dest`` against
+A sync (1) creates ``staging`` (``prepare``, one ssh call per host), (2) rsyncs into it with ``--link-dest`` against
 ``current`` so unchanged files become hard links and changed ones move as rsync deltas, then
 (3) renames it to ``releases/<id>`` and switches ``current`` with ``ln -s`` to a temp name and
-``mv -T`` (a rename(2), atomic), and prunes old releases (``finalize``). If anything stops
+``mv -T`` (a rename(2), atomic), and prunes old releases (``finalize``, one ssh call per host). If anything stops
 before (3), ``current`` still names the previous complete release; the next sync reuses the
-partial ``staging``. If nothing changed, ``staging`` is dropped and ``current`` is kept.
+partial ``staging``. If nothing changed, ``staging`` is dropped and ``current`` is kept; a
+component whose local tree has the same quick-check digest (paths, sizes, mtimes, modes) as
+the release ``current`` names is not rsynced at all.
 
 Remote steps are argv lists: a fixed POSIX sh script run with ``sh -c SCRIPT sh ARG...``, its
 arguments passed as positional parameters, never interpolated into the script.
@@ -24,7 +26,7 @@ from __future__ import annotations
 import hashlib
 import os
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path, PurePosixPath
@@ -39,37 +41,40 @@ CURRENT = "current"
 COMPOSE_NAME = "compose.yaml"
 _RELEASE_RE = re.compile(r"^\d{8}T\d{6}Z-[0-9a-f]{6}$")
 
-# $1 = component root. Prints "staging=<0|1>" and "current=<link target or empty>".
+# Arguments: component roots. For each, in order, prints "staging=<0|1>" then "current=<target>".
 PREPARE_SCRIPT = """\
 set -eu
-root=$1
-mkdir -p -- "$root/releases"
-if [ -d "$root/staging" ]; then echo staging=1; else echo staging=0; mkdir -p -- "$root/staging"; fi
-if [ -L "$root/current" ]; then echo "current=$(readlink -- "$root/current")"; else echo current=; fi
+for root in "$@"; do
+    mkdir -p -- "$root/releases"
+    if [ -d "$root/staging" ]; then echo staging=1; else echo staging=0; mkdir -p -- "$root/staging"; fi
+    if [ -L "$root/current" ]; then echo "current=$(readlink -- "$root/current")"; else echo current=; fi
+done
 """
 
-# $1 = component root, $2 = release id, $3 = compose file name in the release ("" for none),
-# $4 = releases to keep.
+# Arguments: release id, releases to keep, then (component root, compose file name or "") pairs.
 FINALIZE_SCRIPT = """\
 set -eu
-root=$1; id=$2; compose=$3; keep=$4
-cd -- "$root"
-if [ -n "$compose" ] && [ -f "staging/$compose" ]; then ln -f -- "staging/$compose" staging/compose.yaml; fi
-mv -T -- staging "releases/$id"
-rm -f -- .current.tmp
-ln -s -- "releases/$id" .current.tmp
-mv -T -- .current.tmp current
-live=$(readlink -- current)
-ls -1 releases | sort -r | tail -n "+$((keep + 1))" | while IFS= read -r old; do
-    [ "releases/$old" = "$live" ] || rm -rf -- "releases/$old"
+id=$1; keep=$2; shift 2
+while [ "$#" -ge 2 ]; do
+    root=$1; compose=$2; shift 2
+    cd -- "$root"
+    if [ -n "$compose" ] && [ -f "staging/$compose" ]; then ln -f -- "staging/$compose" staging/compose.yaml; fi
+    mv -T -- staging "releases/$id"
+    rm -f -- .current.tmp
+    ln -s -- "releases/$id" .current.tmp
+    mv -T -- .current.tmp current
+    live=$(readlink -- current)
+    ls -1 releases | sort -r | tail -n "+$((keep + 1))" | while IFS= read -r old; do
+        [ "releases/$old" = "$live" ] || rm -rf -- "releases/$old"
+    done
+    echo "current=$live"
 done
-echo "current=$live"
 """
 
-# $1 = component root: drop an unchanged staging copy.
+# Arguments: component roots: drop their unchanged staging copies.
 DISCARD_SCRIPT = """\
 set -eu
-rm -rf -- "$1/staging"
+for root in "$@"; do rm -rf -- "$root/staging"; done
 """
 
 
@@ -124,21 +129,30 @@ def remote_sh(script: str, *args: str) -> list[str]:
     return ["sh", "-c", script, "sh", *args]
 
 
-def prepare_argv(item: ComponentSync) -> list[str]:
-    """Remote argv that creates ``staging`` and reports whether it existed and where current points."""
-    return remote_sh(PREPARE_SCRIPT, str(item.root))
+def prepare_argv(items: Sequence[ComponentSync]) -> list[str]:
+    """Remote argv creating each item's ``staging`` and reporting whether it existed and where current points."""
+    return remote_sh(PREPARE_SCRIPT, *(str(i.root) for i in items))
 
 
-def finalize_argv(item: ComponentSync, release_id: str, keep: int = KEEP_RELEASES) -> list[str]:
-    """Remote argv that turns ``staging`` into ``releases/<id>``, switches ``current`` and prunes."""
+def parse_prepare(output: str, count: int) -> list[dict[str, str]]:
+    """The ``staging``/``current`` pairs printed by :data:`PREPARE_SCRIPT`, one dict per item."""
+    rows = [plain for plain in output.splitlines() if "=" in plain]
+    if len(rows) != 2 * count:
+        raise ValueError(f"expected {2 * count} lines from the prepare step, got {len(rows)}")
+    return [parse_keyvals("\n".join(rows[2 * i: 2 * i + 2])) for i in range(count)]
+
+
+def finalize_argv(items: Sequence[ComponentSync], release_id: str, keep: int = KEEP_RELEASES) -> list[str]:
+    """Remote argv turning each item's ``staging`` into ``releases/<id>``, switching ``current``, pruning."""
     if not is_release_id(release_id):
         raise ValueError(f"not a release id: {release_id!r}")
-    return remote_sh(FINALIZE_SCRIPT, str(item.root), release_id, item.compose_name, str(max(1, keep)))
+    pairs = [arg for i in items for arg in (str(i.root), i.compose_name)]
+    return remote_sh(FINALIZE_SCRIPT, release_id, str(max(1, keep)), *pairs)
 
 
-def discard_argv(item: ComponentSync) -> list[str]:
-    """Remote argv that removes ``staging`` (nothing changed)."""
-    return remote_sh(DISCARD_SCRIPT, str(item.root))
+def discard_argv(items: Sequence[ComponentSync]) -> list[str]:
+    """Remote argv removing the ``staging`` copies of unchanged items."""
+    return remote_sh(DISCARD_SCRIPT, *(str(i.root) for i in items))
 
 
 def rsync_argv(item: ComponentSync, host: Host, rsh: str, *, io_timeout: int = 60) -> list[str]:

@@ -1,0 +1,210 @@
+"""A one-line change to the talker, deployed to a remote robot host: robocore vs the naive path.
+
+Setup (not timed): one simulated robot host (Docker-in-Docker + sshd, integration/robot_host/)
+reached over ssh://, the template project (wheels base) with talker, listener and the discovery
+server on that host, taken through prepare-base, stage, build, sync and run.
+
+Timed, side by side in the same run, each until the listener ON THE REMOTE HOST prints the
+edited text:
+  robocore: edit -> `build --component talker` -> `sync` -> `run`
+  naive:    edit -> `docker build` of an image with the workspace inside (colcon build in a RUN
+            step, FROM the same staged image) -> `docker save | ssh host docker load` -> replace
+            the talker container on the host with one from that image
+
+Prints both times, the ratio (goal >= 10x) and the bytes sync moved for the edit (goal < 50 KB).
+
+    python bench/deploy.py [--rounds N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "integration"))
+
+from robot_host.hosts import RobotFleet  # noqa: E402
+
+PROJECT = "robocore-it-demo"  # shares the cached images of the integration suites
+
+
+def robocore(project: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    proc = subprocess.run([sys.executable, "-m", "robocore", "-p", str(project), *args],
+                          capture_output=True, text=True, timeout=3600)
+    if proc.returncode != 0:
+        raise SystemExit(f"robocore {' '.join(args)} failed ({proc.returncode}):\n{proc.stdout}\n{proc.stderr}")
+    return proc
+
+
+def make_project(parent: Path, ip: str) -> Path:
+    import yaml
+
+    root = parent / PROJECT
+    proc = subprocess.run([sys.executable, "-m", "robocore", "init", str(root), "--defaults", "--base", "wheels"],
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise SystemExit(f"robocore init failed:\n{proc.stderr}")
+    data = yaml.safe_load((root / "robot.yaml").read_text())
+    data["hosts"] = [{"name": "robot", "ip": ip, "user": "root", "arch": "amd64"}]
+    for comp in data["components"]:
+        comp["runs_on"] = "robot"
+    (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    return root
+
+
+def talker_file(project: Path) -> Path:
+    return project / "components" / "talker" / "src" / "demo_talker" / "demo_talker" / "talker.py"
+
+
+def set_greeting(project: Path, text: str) -> None:
+    path = talker_file(project)
+    lines = path.read_text().splitlines(keepends=True)
+    for i, line in enumerate(lines):
+        if "msg.data = f\"" in line:
+            indent = line[: len(line) - len(line.lstrip())]
+            lines[i] = f'{indent}msg.data = f"{text} #{{self.count}}"\n'
+            break
+    else:
+        raise SystemExit("talker.py has no `msg.data = f\"...\"` line to edit")
+    path.write_text("".join(lines))
+
+
+def wait_heard(client: Any, container: str, needle: str, timeout: float = 120) -> float:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            logs = client.containers.get(container).logs(tail=50).decode(errors="replace")
+        except Exception:
+            logs = ""
+        if f"I heard: {needle}" in logs:
+            return time.monotonic()
+        time.sleep(0.2)
+    raise SystemExit(f"the listener never heard {needle!r} within {timeout:.0f} s")
+
+
+def robocore_path(project: Path, client: Any, text: str) -> tuple[float, int, dict[str, float]]:
+    steps: dict[str, float] = {}
+    start = time.monotonic()
+    set_greeting(project, text)
+    t = time.monotonic()
+    robocore(project, "build", "--component", "talker", "--quiet")
+    steps["build"] = time.monotonic() - t
+    t = time.monotonic()
+    rows = json.loads(robocore(project, "sync", "--json").stdout)["results"]
+    steps["sync"] = time.monotonic() - t
+    sent = sum(int(r["sent"]) for r in rows if r["component"] == "talker")
+    t = time.monotonic()
+    robocore(project, "run", "--quiet")
+    steps["run"] = time.monotonic() - t
+    t = time.monotonic()
+    end = wait_heard(client, f"{PROJECT}-listener", text)
+    steps["until heard"] = end - t
+    return end - start, sent, steps
+
+
+NAIVE_DOCKERFILE = """\
+FROM {image}
+COPY src /robocore/ws/src
+RUN ["/robocore/entrypoint.sh", "colcon", "--log-base", "/tmp/log", "build", "--base-paths", "/robocore/ws", \
+"--build-base", "/tmp/build", "--install-base", "/robocore/install"]
+"""
+
+
+def naive_path(project: Path, client: Any, fleet: RobotFleet, text: str) -> tuple[float, int, dict[str, float]]:
+    steps: dict[str, float] = {}
+    host = fleet.hosts[0]
+    image = f"{PROJECT}-talker-naive:bench"
+    start = time.monotonic()
+    set_greeting(project, text)
+    t = time.monotonic()
+    with tempfile.TemporaryDirectory(prefix="robocore-bench-naive-") as ctx:
+        shutil.copytree(project / "components" / "talker" / "src", Path(ctx) / "src")
+        Path(ctx, "Dockerfile").write_text(NAIVE_DOCKERFILE.format(image=f"{PROJECT}-talker:latest"))
+        subprocess.run(["docker", "build", "-q", "-t", image, ctx], check=True, capture_output=True)
+    steps["docker build"] = time.monotonic() - t
+    t = time.monotonic()
+    save = subprocess.Popen(["docker", "save", image], stdout=subprocess.PIPE)
+    load = subprocess.Popen(["ssh", "-F", str(fleet.ssh_config), f"root@{host.ip}", "--", "docker load -q"],
+                            stdin=subprocess.PIPE, stdout=subprocess.DEVNULL)
+    assert save.stdout is not None and load.stdin is not None
+    moved = 0
+    while chunk := save.stdout.read(1 << 20):
+        load.stdin.write(chunk)
+        moved += len(chunk)
+    load.stdin.close()
+    if save.wait() != 0 or load.wait() != 0:
+        raise SystemExit("docker save | docker load failed")
+    steps["save | load"] = time.monotonic() - t
+    t = time.monotonic()
+    old = client.containers.get(f"{PROJECT}-talker")
+    attrs = old.attrs
+    mounts = [m for m in attrs["Mounts"] if m["Destination"] != "/robocore/install"]
+    old.remove(force=True)
+    client.containers.run(
+        image, name=f"{PROJECT}-talker", detach=True,
+        entrypoint=attrs["Config"]["Entrypoint"], command=attrs["Config"]["Cmd"], environment=attrs["Config"]["Env"],
+        network_mode=attrs["HostConfig"]["NetworkMode"], ipc_mode=attrs["HostConfig"]["IpcMode"] or None,
+        volumes=[f"{m['Source']}:{m['Destination']}:ro" for m in mounts],
+        labels={"dev.robocore.bench": "naive"},
+    )
+    steps["replace container"] = time.monotonic() - t
+    t = time.monotonic()
+    end = wait_heard(client, f"{PROJECT}-listener", text)
+    steps["until heard"] = end - t
+    return end - start, moved, steps
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--rounds", type=int, default=1, help="measure each path this many times (alternating)")
+    args = parser.parse_args()
+    parent = Path(tempfile.mkdtemp(prefix="robocore-bench-deploy-"))
+    try:
+        with RobotFleet(1) as fleet:
+            project = make_project(parent, fleet.hosts[0].ip)
+            t = time.monotonic()
+            for step in ("prepare-base", "stage", "build", "sync", "run"):
+                robocore(project, step, "--quiet")
+            client = fleet.hosts[0].docker(fleet)
+            wait_heard(client, f"{PROJECT}-listener", "hello from talker")
+            print(f"setup (not timed): prepare-base, stage, build, sync, run incl. first image delivery: "
+                  f"{time.monotonic() - t:.1f} s", flush=True)
+            fast: list[tuple[float, int, dict[str, float]]] = []
+            naive: list[tuple[float, int, dict[str, float]]] = []
+            for n in range(args.rounds):
+                # robocore first: it starts from the container run created (install tree mounted)
+                fast.append(robocore_path(project, client, f"robocore edit {n}"))
+                naive.append(naive_path(project, client, fleet, f"naive edit {n}"))
+                robocore(project, "run", "--quiet")  # back to robocore's own container for the next round
+            client.close()
+    finally:
+        shutil.rmtree(parent, ignore_errors=True)
+        subprocess.run(["docker", "image", "rm", "-f", f"{PROJECT}-talker-naive:bench"], capture_output=True)
+    best_fast = min(fast, key=lambda r: r[0])
+    best_naive = min(naive, key=lambda r: r[0])
+    print()
+    print(f"{'path':<10} {'seconds':>8} {'bytes moved':>14}   steps")
+    for label, (secs, moved, steps) in (("robocore", best_fast), ("naive", best_naive)):
+        detail = ", ".join(f"{k} {v:.1f}s" for k, v in steps.items())
+        print(f"{label:<10} {secs:>8.1f} {moved:>14,}   {detail}")
+    ratio = best_naive[0] / best_fast[0]
+    print()
+    print(f"ratio naive/robocore: {ratio:.1f}x (goal >= 10x)  -> {'met' if ratio >= 10 else 'NOT met'}")
+    print(f"bytes moved by sync for the edit: {best_fast[1]:,} (goal < 50 KB) -> "
+          f"{'met' if best_fast[1] < 50_000 else 'NOT met'}; naive moved {best_naive[1]:,} bytes")
+    print(f"rounds: {args.rounds}; best of each shown; all robocore: "
+          + ", ".join(f"{r[0]:.1f}s" for r in fast) + "; all naive: " + ", ".join(f"{r[0]:.1f}s" for r in naive))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+
