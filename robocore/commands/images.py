@@ -461,6 +461,18 @@ def _existing_base(project: Project, client: docker.DockerClient, arch: str, *, 
     return BaseRef(ref=ref, arch=arch, inputs=state.labels[naming.LABEL_INPUTS])
 
 
+def _warn_stale_base(project: Project, client: docker.DockerClient, bases: dict[str, BaseRef],
+                     report: Reporter) -> None:
+    """Say so when robot.yaml or common packages changed since the base was built."""
+    if any(pkg.repo for pkg in project.robot.common_packages):
+        return  # git sources are only fetched by prepare-base
+    for arch, base in bases.items():
+        current = plan_base(project, client, arch, dry_run=True)
+        if current.inputs != base.inputs and not base.inputs.startswith("("):
+            report.info(f"[yellow]warning[/]: the inputs of {base.ref} changed since it was built "
+                        "(common packages or base settings); run prepare-base to rebuild it")
+
+
 def stage(options: Options, *, refresh: bool, component: str | None, force: bool) -> None:
     """Build component images (in parallel), then write the per-host compose files."""
     from robocore.commands.composefiles import write_compose_files
@@ -480,6 +492,7 @@ def stage(options: Options, *, refresh: bool, component: str | None, force: bool
     from robocore.adapters.image_builder import image_state
 
     bases = {arch: _existing_base(project, client, arch, dry_run=options.dry_run) for arch in _arches(project, comps)}
+    _warn_stale_base(project, client, bases, report)
     outcomes: list[Outcome] = []
     work: list[tuple[Planned, str]] = []
     for comp in comps:
