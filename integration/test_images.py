@@ -298,3 +298,31 @@ def test_changing_one_components_packages_restages_only_that_one(
     after = _image_ids(docker_client, _project(deps_project))
     changed = {ref for ref in before if before[ref] != after[ref]}
     assert changed == {f"{naming.component_image(project.robot, project.name, 'beta')}:latest"}
+
+
+def test_build_runs_as_the_invoking_user_even_when_that_is_not_root(
+        demo_project: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """As root, pretend to be UID 4242 (owning a copy of the project): the build's files must be 4242's."""
+    import shutil
+
+    from robocore.commands import images
+    from robocore.commands.context import Options
+
+    uid = os.getuid()
+    copy = tmp_path / demo_project.name  # same folder name: same project name, same staged images
+    shutil.copytree(demo_project, copy, ignore=shutil.ignore_patterns("build"))
+    listener = _role(_project(copy), "listener")
+    if uid == 0:
+        uid = 4242
+        for sub in ("build", "install", "log"):  # what robocore, running as 4242, would have created
+            (copy / ".robocore" / "build" / listener.name / sub).mkdir(parents=True)
+        for path in [copy, *copy.rglob("*")]:
+            os.lchown(path, uid, uid)
+        monkeypatch.setattr(os, "getuid", lambda: uid)
+        monkeypatch.setattr(os, "getgid", lambda: uid)
+    images.build(Options(project_dir=copy, quiet=True), component=listener.name)
+    produced = [p for p in (copy / ".robocore" / "build" / listener.name).rglob("*")
+                if not p.is_symlink() and p.name != images.BUILD_STATE]  # that one is written by robocore itself
+    assert any(p.name == "setup.bash" for p in produced)
+    wrong = [str(p) for p in produced if p.stat().st_uid != uid]
+    assert not wrong, f"files in .robocore/build not owned by the invoking user: {wrong[:5]}"
