@@ -18,7 +18,6 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import textwrap
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -70,129 +69,12 @@ def docker_client() -> Iterator[object]:
     client.close()
 
 
-# A minimal stand-in for the copier template, used only while `robocore init` is not implemented.
-_MINIMAL_ROBOT = """\
-ros_distro: jazzy
-ros_domain_id: 0
-base:
-  kind: wheels
-hosts:
-  - name: devmachine
-    ip: 127.0.0.1
-components:
-  - name: talker
-    runs_on: devmachine
-    folder: components/talker
-    entrypoint: ros2 run demo_talker talker
-  - name: listener
-    runs_on: devmachine
-    folder: components/listener
-    entrypoint: ros2 run demo_listener listener
-"""
-
-_NODE = {
-    "talker": '''\
-import rclpy
-from rclpy.node import Node
-from std_msgs.msg import String
-
-
-class Talker(Node):
-    def __init__(self):
-        super().__init__("talker")
-        self.pub = self.create_publisher(String, "chatter", 10)
-        self.count = 0
-        self.create_timer(0.5, self.tick)
-
-    def tick(self):
-        msg = String()
-        msg.data = f"Hello World: {self.count}"
-        self.count += 1
-        self.get_logger().info(f"Publishing: '{msg.data}'")
-        self.pub.publish(msg)
-
-
-def main():
-    rclpy.init()
-    rclpy.spin(Talker())
-''',
-    "listener": '''\
-import rclpy
-from rclpy.node import Node
-from std_msgs.msg import String
-
-
-class Listener(Node):
-    def __init__(self):
-        super().__init__("listener")
-        self.create_subscription(String, "chatter", self.heard, 10)
-
-    def heard(self, msg):
-        self.get_logger().info(f"I heard: '{msg.data}'")
-
-
-def main():
-    rclpy.init()
-    rclpy.spin(Listener())
-''',
-}
-
-
-def write_minimal_project(root: Path) -> None:
-    """A two-component (talker, listener) wheels project equivalent to the template's defaults."""
-    root.mkdir(parents=True, exist_ok=True)
-    (root / "robot.yaml").write_text(_MINIMAL_ROBOT)
-    for role, code in _NODE.items():
-        pkg = f"demo_{role}"
-        base = root / "components" / role / "src" / pkg
-        (base / pkg).mkdir(parents=True, exist_ok=True)
-        (base / "resource").mkdir(exist_ok=True)
-        (base / "resource" / pkg).write_text("")
-        (base / pkg / "__init__.py").write_text("")
-        (base / pkg / f"{role}.py").write_text(code)
-        (base / "package.xml").write_text(textwrap.dedent(f"""\
-            <?xml version="1.0"?>
-            <package format="3">
-              <name>{pkg}</name>
-              <version>0.1.0</version>
-              <description>Demo {role}</description>
-              <maintainer email="dev@example.com">dev</maintainer>
-              <license>Apache-2.0</license>
-              <exec_depend>rclpy</exec_depend>
-              <exec_depend>std_msgs</exec_depend>
-              <export><build_type>ament_python</build_type></export>
-            </package>
-            """))
-        (base / "setup.cfg").write_text(
-            f"[develop]\nscript_dir=$base/lib/{pkg}\n[install]\ninstall_scripts=$base/lib/{pkg}\n"
-        )
-        (base / "setup.py").write_text(textwrap.dedent(f"""\
-            from setuptools import setup
-
-            setup(
-                name="{pkg}",
-                version="0.1.0",
-                packages=["{pkg}"],
-                data_files=[
-                    ("share/ament_index/resource_index/packages", ["resource/{pkg}"]),
-                    ("share/{pkg}", ["package.xml"]),
-                ],
-                install_requires=["setuptools"],
-                entry_points={{"console_scripts": ["{role} = {pkg}.{role}:main"]}},
-            )
-            """))
-
-
 def make_demo_project(parent: Path, name: str = DEMO_NAME) -> Path:
-    """``robocore init PARENT/NAME --defaults --base wheels`` (or the minimal stand-in while init is missing)."""
+    """``robocore init PARENT/NAME --defaults --base wheels``: the template project on the wheels base."""
     root = parent / name
     if root.exists():
         shutil.rmtree(root)
-    proc = _robocore(None, "init", str(root), "--defaults", "--base", "wheels", check=False)
-    if proc.returncode == 3 and "not implemented" in proc.stderr:
-        write_minimal_project(root)
-    elif proc.returncode != 0:
-        pytest.fail(f"robocore init failed ({proc.returncode}):\n{proc.stdout}\n{proc.stderr}", pytrace=False)
+    _robocore(None, "init", str(root), "--defaults", "--base", "wheels")
     return root
 
 
