@@ -503,6 +503,12 @@ def stage(options: Options, *, refresh: bool, component: str | None, force: bool
         reason = decide(image_state(client, planned.plan.ref), planned, force=force)
         if options.dry_run:
             _show_plan(report, planned, reason)
+            if comp.repositories:
+                from robocore.adapters import vcs
+
+                folders = {i: dockerfiles.repo_folder(r) for i, r in enumerate(comp.repositories)}
+                report.plain(f"# {comp.name}: repositories (vcstool .repos), fetched on this machine into repos/\n"
+                             + vcs.repos_file(comp.repositories, folders))
         if reason is None:
             outcomes.append(Outcome(what=planned.plan.ref, role="component", action="up-to-date"))
         elif options.dry_run:
