@@ -137,3 +137,33 @@ def test_repo_folder_from_url() -> None:
 def test_base_tag_per_arch() -> None:
     assert dockerfiles.base_tag("amd64", "amd64") == "latest"
     assert dockerfiles.base_tag("arm64", "amd64") == "latest-arm64"
+
+
+def _shim(args: list[str], prefixes: list[Path]) -> Any:
+    import subprocess
+    import sys
+
+    from robocore import resources
+
+    env = {"AMENT_PREFIX_PATH": ":".join(str(p) for p in prefixes), "PATH": "/usr/bin:/bin"}
+    code = resources.read("ros2").decode()
+    return subprocess.run([sys.executable, "-c", code, *args], env=env, capture_output=True, text=True)
+
+
+def test_ros2_shim_runs_executables_and_lists_packages(tmp_path: Path) -> None:
+    first, second = tmp_path / "install" / "pkg_a", tmp_path / "venv"
+    for prefix, pkg in ((first, "pkg_a"), (second, "rclpy")):
+        (prefix / "share/ament_index/resource_index/packages").mkdir(parents=True)
+        (prefix / "share/ament_index/resource_index/packages" / pkg).write_text("")
+    exe = first / "lib/pkg_a/hello"
+    exe.parent.mkdir(parents=True)
+    exe.write_text("#!/bin/sh\necho \"hello $*\"\n")
+    exe.chmod(0o755)
+    done = _shim(["run", "pkg_a", "hello", "--ros-args", "-p", "x:=1"], [first, second])
+    assert done.returncode == 0 and done.stdout.strip() == "hello --ros-args -p x:=1", done.stderr
+    assert _shim(["pkg", "list"], [first, second]).stdout.split() == ["pkg_a", "rclpy"]
+    assert _shim(["pkg", "prefix", "rclpy"], [first, second]).stdout.strip() == str(second)
+    assert _shim(["pkg", "executables", "pkg_a"], [first, second]).stdout.strip() == "pkg_a hello"
+    missing = _shim(["run", "pkg_a", "nope"], [first, second])
+    assert missing.returncode == 1 and "No executable found" in missing.stderr
+    assert "Package 'zzz' not found" in _shim(["run", "zzz", "x"], [first]).stderr
