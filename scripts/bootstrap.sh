@@ -8,6 +8,7 @@ need_debs=()
 command -v mmdebstrap >/dev/null || need_debs+=(mmdebstrap)
 command -v rsync >/dev/null || need_debs+=(rsync)
 command -v ssh >/dev/null || need_debs+=(openssh-client)
+command -v git >/dev/null || need_debs+=(git)
 if [ "${ROBOCORE_GUI_TOOLS:-0}" = 1 ]; then
   command -v Xvfb >/dev/null || need_debs+=(xvfb)
   command -v xauth >/dev/null || need_debs+=(xauth)
