@@ -74,7 +74,7 @@ def log_lines(container: Any, marker: str, since: float | None = None) -> list[s
 
 
 def remove_project_containers(client: Any, project: str) -> None:
-    """Remove every container of ``project`` (by label) and those named ``<project>-*``."""
+    """Remove every container of ``project`` (by label or ``<project>-*`` name) and its server state volumes."""
     seen = set()
     for container in client.containers.list(all=True, filters={"label": f"dev.robocore.project={project}"}):
         seen.add(container.id)
@@ -82,6 +82,9 @@ def remove_project_containers(client: Any, project: str) -> None:
     for container in client.containers.list(all=True, filters={"name": f"{project}-"}):
         if container.id not in seen and container.name.startswith(f"{project}-"):
             container.remove(force=True)
+    for volume in client.volumes.list(filters={"name": f"{project}-discovery-"}):
+        if volume.name.startswith(f"{project}-discovery-"):
+            volume.remove(force=True)
 
 
 def containers_of(client: Any, project: str) -> Iterator[Any]:

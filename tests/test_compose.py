@@ -81,7 +81,8 @@ def test_compose_matches_the_specs(case: str) -> None:
         for spec in specs:
             service = document["services"][spec.service]
             assert service["labels"]["dev.robocore.spec"] == spec.spec_hash
-            assert service["environment"] == spec.env
+            assert {k: v.replace("$$", "$") for k, v in service["environment"].items()} == spec.env
+            assert [a.replace("$$", "$") for a in service.get("command", [])] == list(spec.command or [])
             for dependency in service.get("depends_on", []):
                 assert dependency in document["services"]  # dependencies are on the same host
         named = {m.source for s in specs for m in s.mounts if m.is_named_volume}
@@ -94,7 +95,8 @@ def test_discovery_server_is_in_its_hosts_file_only() -> None:
     jetson = yaml.safe_load(compose.render(project, "jetson"))["services"]
     assert "discovery-0" in ipc and "discovery-1" not in ipc
     assert "discovery-1" in jetson and "discovery-0" not in jetson
-    assert jetson["discovery-1"]["command"] == ["fastdds", "discovery", "-l", "0.0.0.0", "-p", "11900"]
+    assert jetson["discovery-1"]["command"][4:] == ["fastdds", "discovery", "-l", "0.0.0.0", "-p", "11900",
+                                                    "-x", containers.DISCOVERY_PROFILE]
     assert jetson["perception"]["depends_on"] == ["discovery-1"]
     assert ipc["driver"]["environment"]["ROS_DISCOVERY_SERVER"] == "10.1.0.2:11811;10.1.0.3:11900"
 

@@ -10,7 +10,7 @@ import pytest
 
 from robocore.commands.run import Action, Existing, decide
 from robocore.config.model import Robot
-from robocore.plan import containers, naming
+from robocore.plan import containers, dds, naming
 from robocore.plan.containers import ContainerSpec, component_spec, discovery_spec, docker_ports, host_specs
 
 ROOT = Path("/srv/myrobot")
@@ -166,7 +166,13 @@ def test_discovery_spec() -> None:
     assert spec.name == "myrobot-discovery-0"
     assert spec.image == "myrobot-base:latest"
     assert spec.entrypoint == (naming.ENTRYPOINT,)
-    assert spec.command == ("fastdds", "discovery", "-i", "0", "-l", "0.0.0.0", "-p", "12000")
+    assert spec.command is not None
+    assert spec.command[:2] == ("sh", "-c") and spec.command[2] == containers.DISCOVERY_SCRIPT
+    assert spec.command[4:] == ("fastdds", "discovery", "-i", "0", "-l", "0.0.0.0", "-p", "12000",
+                                "-x", containers.DISCOVERY_PROFILE)
+    assert spec.env["ROBOCORE_DS_HOLD"] == str(dds.restart_hold_seconds(p.robot))
+    assert spec.env["ROBOCORE_DS_XML"] == dds.server_profile_xml(p.robot)
+    assert [(m.source, m.target) for m in spec.mounts] == [("myrobot-discovery-0-state", containers.DISCOVERY_STATE)]
     assert spec.network_mode == "host"
     assert spec.labels[naming.LABEL_ROLE] == "discovery"
     assert spec.env["ROS_DISCOVERY_SERVER"] == ";192.168.1.10:11811"  # linked to server 1, own slot empty
@@ -203,7 +209,7 @@ def test_docker_kwargs_and_compose_agree() -> None:
     kwargs, service = spec.docker_kwargs(), spec.compose_service()
     assert kwargs["image"] == service["image"]
     assert kwargs["name"] == service["container_name"]
-    assert kwargs["environment"] == service["environment"]
+    assert kwargs["environment"] == service["environment"]  # no "$" in these values
     assert kwargs["labels"] == service["labels"]
     assert kwargs["entrypoint"] == service["entrypoint"]
     assert kwargs["command"] == service["command"]
@@ -237,3 +243,13 @@ def test_decide() -> None:
     actions = decide([disc, talk], [*same, gone], images)
     assert actions[0] == Action("remove", "myrobot-old", "no longer planned on this host")
     assert [a.verb for a in actions[1:]] == ["keep", "keep"]
+
+
+def test_compose_escapes_dollars_run_does_not() -> None:
+    spec = talker(environment={"GREETING": "cost $5"}, entrypoint="sh -c 'echo $HOME'")
+    assert spec.env["GREETING"] == "cost $5"
+    assert spec.docker_kwargs()["environment"]["GREETING"] == "cost $5"
+    assert spec.docker_kwargs()["command"] == ["sh", "-c", "echo $HOME", "--ros-args", "-p", "rate:=2"]
+    service = spec.compose_service()
+    assert service["environment"]["GREETING"] == "cost $$5"
+    assert service["command"][2] == "echo $$HOME"

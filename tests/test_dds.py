@@ -177,3 +177,19 @@ def test_udp_super_client_drops_builtin_transports() -> None:
     root = parse(dds.super_client_xml(robot("jazzy", transport="udp")))
     assert root.findtext(".//useBuiltinTransports") == "false"
     assert root.findtext(".//userTransports/transport_id") == root.findtext(".//transport_descriptor/transport_id")
+
+
+@pytest.mark.parametrize("distro", ["humble", "jazzy", "kilted"])
+def test_server_profile_sets_a_short_lease(distro: str) -> None:
+    r = robot(distro)
+    root = parse(dds.server_profile_xml(r))
+    assert "\n" not in dds.server_profile_xml(r)  # one line: it travels in an environment variable
+    assert root.findtext(".//discoveryProtocol") == "SERVER"
+    assert int(root.findtext(".//leaseDuration/sec") or 0) == dds.SERVER_LEASE_SECONDS
+    assert int(root.findtext(".//leaseAnnouncement/sec") or 0) < dds.SERVER_LEASE_SECONDS
+
+
+def test_restart_hold_outlasts_the_lease_on_2x_only() -> None:
+    assert dds.restart_hold_seconds(robot("jazzy")) > dds.SERVER_LEASE_SECONDS
+    assert dds.restart_hold_seconds(robot("humble")) > dds.SERVER_LEASE_SECONDS
+    assert dds.restart_hold_seconds(robot("kilted")) == 0  # 3.x servers get a new GUID on each start

@@ -10,6 +10,7 @@ with a per-host summary and a :class:`~robocore.errors.GroupError`.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
 from collections.abc import Callable, Sequence
@@ -21,8 +22,14 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from robocore.commands.context import Options
 from robocore.config.model import Host
 from robocore.errors import DockerError, GroupError, HostError, RobocoreError, UsageError
-from robocore.plan import naming
-from robocore.plan.containers import ROLE_COMPONENT, ROLE_DISCOVERY, ContainerSpec, host_specs
+from robocore.plan import dds, naming
+from robocore.plan.containers import (
+    ROLE_COMPONENT,
+    ROLE_DISCOVERY,
+    ContainerSpec,
+    discovery_state_volume,
+    host_specs,
+)
 from robocore.project import Project
 from robocore.ui import console, stdout
 
@@ -394,8 +401,15 @@ def print_table(table: Any) -> None:
 # --------------------------------------------------------------------------- down
 
 
-def stop_host(project: Project, host: Host, *, dry_run: bool, quiet: bool) -> HostOutcome:
-    """Remove this project's containers from one host: components first, discovery servers last."""
+def stop_host(project: Project, host: Host, *, dry_run: bool, quiet: bool, forget_servers: bool) -> HostOutcome:
+    """Remove this project's containers from one host: components first, discovery servers last.
+
+    ``forget_servers`` also removes the discovery servers' state volumes, so that the next start is
+    a first start (no restart hold): right when every host goes down, wrong when clients elsewhere
+    keep running.
+    """
+    from docker.errors import NotFound
+
     outcome = HostOutcome(host.name)
     client = connect(project, host)
     try:
@@ -407,6 +421,12 @@ def stop_host(project: Project, host: Host, *, dry_run: bool, quiet: bool) -> Ho
                 container.remove(force=True)
                 if not quiet:
                     console().print(f"[bold]{host.name}[/]: removed {container.name}")
+        if forget_servers and not dry_run:
+            for server in dds.servers(project.robot):
+                if server.host != host.name:
+                    continue
+                with contextlib.suppress(NotFound):
+                    client.volumes.get(discovery_state_volume(project.name, server.index)).remove(force=True)
     finally:
         client.close()
     return outcome
@@ -416,9 +436,12 @@ def down(options: Options, *, host: str | None) -> None:
     """Stop and remove this project's containers on every host (or ``--host``)."""
     project = options.load()
     hosts = select_hosts(project, host)
-    results, failures = for_each_host(
-        hosts, lambda h: stop_host(project, h, dry_run=options.dry_run, quiet=options.quiet)
-    )
+    forget = host is None  # every host goes down: the next start of each server is a first start
+
+    def work(h: Host) -> HostOutcome:
+        return stop_host(project, h, dry_run=options.dry_run, quiet=options.quiet, forget_servers=forget)
+
+    results, failures = for_each_host(hosts, work)
     if options.dry_run:
         for name, out in results.items():
             for action in out.actions:

@@ -133,12 +133,16 @@ class ContainerSpec:
         return kwargs
 
     def compose_service(self) -> dict[str, Any]:
-        """The compose-file service of this spec (compose specification, plain YAML types)."""
+        """The compose-file service of this spec (compose specification, plain YAML types).
+
+        Compose substitutes ``$VAR`` in every value; each ``$`` is written ``$$`` so that the
+        container gets exactly what ``run`` gives it.
+        """
         service: dict[str, Any] = {"image": self.image, "container_name": self.name}
         if self.entrypoint is not None:
-            service["entrypoint"] = list(self.entrypoint)
+            service["entrypoint"] = [compose_escape(a) for a in self.entrypoint]
         if self.command is not None:
-            service["command"] = list(self.command)
+            service["command"] = [compose_escape(a) for a in self.command]
         service["network_mode"] = self.network_mode
         if self.ipc_mode:
             service["ipc"] = self.ipc_mode
@@ -146,9 +150,9 @@ class ContainerSpec:
             service["init"] = True
         if self.depends_on:
             service["depends_on"] = list(self.depends_on)
-        service["environment"] = self.env
+        service["environment"] = {k: compose_escape(v) for k, v in self.env.items()}
         if self.mounts:
-            service["volumes"] = [m.text for m in self.mounts]
+            service["volumes"] = [compose_escape(m.text) for m in self.mounts]
         if self.devices:
             service["devices"] = list(self.devices)
         if self.ports:
@@ -164,6 +168,11 @@ class ContainerSpec:
         service["restart"] = self.restart
         service["labels"] = self.labels
         return service
+
+
+def compose_escape(text: str) -> str:
+    """``text`` with every ``$`` doubled: compose's escape for a literal dollar sign."""
+    return text.replace("$", "$$")
 
 
 def docker_ports(ports: tuple[str, ...]) -> dict[str, Any]:
@@ -281,11 +290,37 @@ def discovery_service(index: int) -> str:
     return f"discovery-{index}"
 
 
+#: In a discovery server container: the state volume (a marker that the server ran before) and its profile.
+DISCOVERY_STATE = "/robocore/discovery"
+DISCOVERY_PROFILE = "/tmp/robocore-discovery.xml"
+#: The discovery container's command (argv: this script, then ``fastdds discovery ...``). A restart (the
+#: marker exists in the state volume) waits ROBOCORE_DS_HOLD seconds first: see dds.restart_hold_seconds.
+#: Fixed text: the values come from the environment, nothing is interpolated.
+DISCOVERY_SCRIPT = (
+    f'marker="{DISCOVERY_STATE}/started"; '
+    'if [ -e "$marker" ] && [ "${ROBOCORE_DS_HOLD:-0}" -gt 0 ]; then '
+    'echo "robocore: discovery server restarted; silent for ${ROBOCORE_DS_HOLD} s so that clients drop '
+    'the previous instance"; sleep "$ROBOCORE_DS_HOLD"; fi; '
+    'touch "$marker"; '
+    f'printf "%s\\n" "$ROBOCORE_DS_XML" > {DISCOVERY_PROFILE}; '
+    'exec "$@"'
+)
+
+
+def discovery_state_volume(project_name: str, index: int) -> str:
+    """The named volume that remembers that discovery server ``index`` ran before (removed by a full ``down``)."""
+    return f"{project_name}-discovery-{index}-state"
+
+
 def discovery_spec(project: Project, index: int, *, tag: str | None = None) -> ContainerSpec:
     """The container of discovery server ``index``: the base image running ``fastdds discovery``."""
     robot = project.robot
     endpoint = dds.servers(robot)[index]
     env = dds.server_environment(robot, index)
+    env["ROBOCORE_DS_XML"] = dds.server_profile_xml(robot)
+    env["ROBOCORE_DS_HOLD"] = str(dds.restart_hold_seconds(robot))
+    command = ("sh", "-c", DISCOVERY_SCRIPT, "robocore-discovery", *dds.server_command(robot, index),
+               "-x", DISCOVERY_PROFILE)
     return ContainerSpec(
         name=naming.discovery_container_name(project.name, index),
         service=discovery_service(index),
@@ -294,10 +329,11 @@ def discovery_spec(project: Project, index: int, *, tag: str | None = None) -> C
         project=project.name,
         image=image_ref(project, naming.base_image(robot, project.name), tag),
         entrypoint=(naming.ENTRYPOINT,),
-        command=tuple(dds.server_command(robot, index)),
+        command=command,
         environment=tuple(sorted(env.items())),
         network_mode="host",
         ipc_mode=ipc_mode(project),
+        mounts=(Mount(discovery_state_volume(project.name, index), DISCOVERY_STATE),),
         restart="unless-stopped",
     )
 

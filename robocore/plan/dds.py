@@ -146,6 +146,39 @@ def server_command(robot: Robot, index: int) -> list[str]:
     return argv
 
 
+#: Liveliness of discovery servers as their clients see it. Shorter than Fast DDS's 20 s default so that
+#: a restarted server is usable sooner (see :func:`restart_hold_seconds`).
+SERVER_LEASE_SECONDS = 8
+SERVER_ANNOUNCEMENT_SECONDS = 2
+
+
+def restart_hold_seconds(robot: Robot) -> int:
+    """Seconds a *restarted* discovery server waits before serving.
+
+    A 2.x server restarts with the same GUID (its ``-i`` id). Its clients keep the proxy of the
+    previous instance, whose liveliness the new instance keeps refreshing, and they discard what
+    the new instance sends (its sequence numbers start again): a participant started after the
+    restart never matches one started before it (measured with Jazzy's Fast DDS 2.14: no
+    recovery in 90 s). Staying silent for longer than the server's lease makes every client drop
+    the old proxy and register again from scratch, which takes a few seconds. Fast DDS 3.x
+    servers get a new GUID on every start (no ``-i``) and need no hold.
+    """
+    return SERVER_LEASE_SECONDS + 4 if robot.fastdds_line < 3 else 0
+
+
+def server_profile_xml(robot: Robot) -> str:
+    """The server's own profile (``fastdds discovery -x``): SERVER with robocore's lease settings, one line."""
+    ns = _NS[3 if robot.fastdds_line >= 3 else 2]
+    return (
+        f'<?xml version="1.0" encoding="UTF-8"?><dds><profiles xmlns="{ns}">'
+        '<participant profile_name="robocore_server" is_default_profile="true"><rtps><builtin><discovery_config>'
+        "<discoveryProtocol>SERVER</discoveryProtocol>"
+        f"<leaseDuration><sec>{SERVER_LEASE_SECONDS}</sec></leaseDuration>"
+        f"<leaseAnnouncement><sec>{SERVER_ANNOUNCEMENT_SECONDS}</sec></leaseAnnouncement>"
+        "</discovery_config></builtin></rtps></participant></profiles></dds>"
+    )
+
+
 def profile_files(robot: Robot) -> dict[str, str]:
     """The XML profiles to write to ``.robocore/dds/``: file name -> XML text."""
     files = {SUPER_CLIENT_PROFILE: super_client_xml(robot)}
