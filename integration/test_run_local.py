@@ -235,3 +235,37 @@ def test_connect_opens_an_interactive_shell_in_a_tty(running: Path) -> None:
     assert "tty=/dev/pts/" in text and "super=TRUE" in text, text
     # Sourcing the component's install tree puts it on AMENT_PREFIX_PATH (the echoed command itself has no match).
     assert re.search(r"prefix=\S*/robocore/install", text), f"the install tree is not sourced:\n{text}"
+
+
+def test_compose_up_runs_the_robot_and_run_keeps_it(project_copy: Any, docker_client: Any, run_robocore: Any) -> None:
+    """The generated compose file is a working artifact: `docker-compose up` starts the robot, and robocore
+    then sees exactly its own specs (same spec labels, same images) and recreates nothing."""
+    from robocore.commands.composefiles import write_compose_files
+    from robocore.project import Project
+
+    root = project_copy()
+    project = Project.load(root)
+    (path,) = write_compose_files(project)
+    compose = ["docker-compose", "-p", root.name, "-f", str(path)]
+    try:
+        up = subprocess.run([*compose, "up", "-d"], capture_output=True, text=True, timeout=300)
+        assert up.returncode == 0, up.stderr
+        listener = docker_client.containers.get(f"{root.name}-listener")
+        assert wait_for(lambda: log_lines(listener, HEARD), HEAR_WITHIN), "compose-started listener heard nothing"
+        started = ids(docker_client, root.name)
+        assert set(started) == {"discovery-0", "talker", "listener"}
+        out = json.loads(run_robocore(root, "run", "--json").stdout)
+        assert {a["verb"] for host in out.values() for a in host["actions"]} == {"keep"}
+        assert ids(docker_client, root.name) == started
+    finally:
+        subprocess.run([*compose, "down", "-v"], capture_output=True, timeout=300)
+
+
+def test_golden_compose_files_are_accepted_by_docker_compose() -> None:
+    """The unit tests' golden compose files (GPUs, devices, named volumes, ports, `$` escapes) pass `config`."""
+    goldens = sorted((Path(__file__).parents[1] / "tests" / "golden" / "compose").glob("*.yaml"))
+    assert goldens
+    for path in goldens:
+        proc = subprocess.run(["docker-compose", "-f", str(path), "config", "-q"], capture_output=True, text=True)
+        assert proc.returncode == 0, f"{path.name}: {proc.stderr}"
+        assert "variable is not set" not in proc.stderr, f"{path.name}: unescaped $: {proc.stderr}"
