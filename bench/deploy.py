@@ -25,6 +25,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import uuid
 from pathlib import Path
 from typing import Any
 
@@ -87,7 +88,9 @@ def wait_heard(client: Any, container: str, needle: str, timeout: float = 120) -
         if f"I heard: {needle}" in logs:
             return time.monotonic()
         time.sleep(0.2)
-    raise SystemExit(f"the listener never heard {needle!r} within {timeout:.0f} s")
+    talker = client.containers.get(container.replace("listener", "talker"))
+    raise SystemExit(f"the listener never heard {needle!r} within {timeout:.0f} s\n--- listener\n{logs[-1500:]}\n"
+                     f"--- talker ({talker.status}, {talker.labels})\n{talker.logs(tail=20).decode(errors='replace')}")
 
 
 def robocore_path(project: Path, client: Any, text: str) -> tuple[float, int, dict[str, float]]:
@@ -162,14 +165,30 @@ def naive_path(project: Path, client: Any, fleet: RobotFleet, text: str) -> tupl
     return end - start, moved, steps
 
 
+def shape_link(fleet: RobotFleet, mbit: float) -> None:
+    """Limit traffic towards the robot host: tbf on the host-side veth of its eth0."""
+    host = fleet.hosts[0]
+    index = host.ssh(fleet, "cat", "/sys/class/net/eth0/iflink").strip()
+    links = subprocess.run(["ip", "-o", "link"], capture_output=True, text=True, check=True).stdout
+    veth = next(line.split(":")[1].strip().split("@")[0] for line in links.splitlines()
+                if line.split(":")[0].strip() == index)
+    subprocess.run(["tc", "qdisc", "replace", "dev", veth, "root", "tbf", "rate", f"{mbit}mbit",
+                    "burst", "256kb", "latency", "100ms"], check=True)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--rounds", type=int, default=1, help="measure each path this many times (alternating)")
+    parser.add_argument("--link-mbit", type=float, default=0,
+                        help="shape the link to the robot host to this many Mbit/s (tc tbf on its veth; "
+                             "0: unshaped local bridge). Applies to both paths.")
     args = parser.parse_args()
     parent = Path(tempfile.mkdtemp(prefix="robocore-bench-deploy-"))
     try:
         with RobotFleet(1) as fleet:
             project = make_project(parent, fleet.hosts[0].ip)
+            if args.link_mbit:
+                shape_link(fleet, args.link_mbit)
             t = time.monotonic()
             for step in ("prepare-base", "stage", "build", "sync", "run"):
                 robocore(project, step, "--quiet")
@@ -181,8 +200,9 @@ def main() -> int:
             naive: list[tuple[float, int, dict[str, float]]] = []
             for n in range(args.rounds):
                 # robocore first: it starts from the container run created (install tree mounted)
-                fast.append(robocore_path(project, client, f"robocore edit {n}"))
-                naive.append(naive_path(project, client, fleet, f"naive edit {n}"))
+                token = uuid.uuid4().hex[:8]  # unique text: no build cache can serve an earlier round
+                fast.append(robocore_path(project, client, f"robocore edit {n} {token}"))
+                naive.append(naive_path(project, client, fleet, f"naive edit {n} {token}"))
                 robocore(project, "run", "--quiet")  # back to robocore's own container for the next round
             client.close()
     finally:
@@ -200,6 +220,8 @@ def main() -> int:
     print(f"ratio naive/robocore: {ratio:.1f}x (goal >= 10x)  -> {'met' if ratio >= 10 else 'NOT met'}")
     print(f"bytes moved by sync for the edit: {best_fast[1]:,} (goal < 50 KB) -> "
           f"{'met' if best_fast[1] < 50_000 else 'NOT met'}; naive moved {best_naive[1]:,} bytes")
+    link = f"{args.link_mbit:g} Mbit/s (tc tbf)" if args.link_mbit else "unshaped Docker bridge on this machine"
+    print(f"link to the robot host: {link}")
     print(f"rounds: {args.rounds}; best of each shown; all robocore: "
           + ", ".join(f"{r[0]:.1f}s" for r in fast) + "; all naive: " + ", ".join(f"{r[0]:.1f}s" for r in naive))
     return 0
