@@ -51,8 +51,8 @@ class Row:
 
 def uptime_text(started_at: str, now: datetime | None = None) -> str:
     """``3d 2h``, ``5m 10s``... from Docker's ``State.StartedAt`` (RFC 3339, nanoseconds)."""
-    try:
-        stamp = datetime.fromisoformat(started_at[:26].rstrip("Z") + "+00:00") if started_at else None
+    try:  # Docker writes UTC with "Z" and up to 9 fraction digits; whole seconds are enough
+        stamp = datetime.strptime(started_at[:19], "%Y-%m-%dT%H:%M:%S").replace(tzinfo=timezone.utc)
     except ValueError:
         stamp = None
     if stamp is None or stamp.year < 2000:
