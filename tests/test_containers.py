@@ -261,7 +261,7 @@ def test_uptime_text() -> None:
     from robocore.commands.observe import uptime_text
 
     now = datetime(2026, 1, 2, 3, 4, 5, tzinfo=timezone.utc)
-    assert uptime_text("2026-01-02T03:04:00.123456789Z", now) == "4s"
+    assert uptime_text("2026-01-02T03:04:00.123456789Z", now) == "5s"  # whole seconds
     assert uptime_text("2026-01-02T02:54:05Z", now) == "10m 0s"
     assert uptime_text("2026-01-01T01:00:00.5Z", now) == "1d 2h"
     assert uptime_text("0001-01-01T00:00:00Z", now) == "-"  # never started
