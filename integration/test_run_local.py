@@ -269,3 +269,20 @@ def test_golden_compose_files_are_accepted_by_docker_compose() -> None:
         proc = subprocess.run(["docker-compose", "-f", str(path), "config", "-q"], capture_output=True, text=True)
         assert proc.returncode == 0, f"{path.name}: {proc.stderr}"
         assert "variable is not set" not in proc.stderr, f"{path.name}: unescaped $: {proc.stderr}"
+
+
+def test_discovery_port_taken_is_reported(project_copy: Any, docker_client: Any, run_robocore: Any) -> None:
+    """Another server on the same UDP port (another project): run says so instead of reporting success."""
+    root = project_copy()
+    data = yaml.safe_load((root / "robot.yaml").read_text())
+    port = data["discovery"]["servers"][0]["port"]
+    image = f"{data['image_prefix']}base:latest"
+    squatter = docker_client.containers.run(image, ["fastdds", "discovery", "-i", "0", "-p", str(port)],
+                                            name=f"{root.name}-squatter", network_mode="host", detach=True)
+    try:
+        assert wait_for(lambda: b"Server is running" in squatter.logs(), 30), squatter.logs().decode()
+        proc = run_robocore(root, "run", check=False)
+        assert proc.returncode == 8, proc.stderr
+        assert "discovery-0 did not start" in proc.stderr and "UDP port" in proc.stderr
+    finally:
+        squatter.remove(force=True)

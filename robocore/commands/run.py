@@ -315,6 +315,8 @@ def _apply(client: docker.DockerClient, action: Action, spec: ContainerSpec | No
                 container.remove(force=True)
             created = client.containers.create(**spec.docker_kwargs())
             created.start()
+            if spec.role == ROLE_DISCOVERY:
+                wait_server_ready(created, spec, host)
             say(f"{'recreated' if action.verb == 'replace' else 'created'} {action.name}"
                 + (f" ({action.reason})" if action.reason else ""))
     except APIError as exc:
@@ -323,6 +325,38 @@ def _apply(client: docker.DockerClient, action: Action, spec: ContainerSpec | No
         if "bind source path does not exist" in text:
             hint = "run `robocore sync` first" if not host.is_local else "run `robocore build` first"
         raise DockerError(f"host {host.name}: {action.verb} {action.name} failed: {text}", hint=hint) from None
+
+
+#: What a discovery server container logs once it serves (Fast DDS 2.x, 3.x) or while it holds after a restart.
+_SERVER_READY = ("Server is running", "Server started", "robocore: discovery server restarted")
+SERVER_READY_TIMEOUT = 20.0
+
+
+def wait_server_ready(container: Any, spec: ContainerSpec, host: Host, timeout: float = SERVER_READY_TIMEOUT) -> None:
+    """Wait until a discovery server container serves; DockerError with its last log line if it stops instead.
+
+    The usual cause is another server (another project) holding the same UDP port on that host.
+    """
+    import re
+    import time
+
+    deadline = time.monotonic() + timeout
+    while True:
+        text = re.sub(r"\x1b\[[0-9;]*m", "", container.logs(tail=50).decode(errors="replace"))
+        container.reload()
+        restarted = int(container.attrs.get("RestartCount", 0)) > 0  # it already failed once
+        if not restarted and any(marker in text for marker in _SERVER_READY):
+            return
+        if restarted or container.status in {"exited", "dead", "restarting"} or time.monotonic() > deadline:
+            lines = [line.strip() for line in text.splitlines() if line.strip()]
+            errors = [line for line in lines if "rror" in line or "failed" in line]
+            last = (errors or lines or ["no output"])[-1]
+            raise DockerError(
+                f"host {host.name}: discovery server {spec.service} did not start ({container.status}): {last[-200:]}",
+                hint="is another discovery server using its UDP port on that host? "
+                "choose another port in robot.yaml (discovery.servers[].port)",
+            )
+        time.sleep(0.3)
 
 
 def run(options: Options, *, host: str | None, tag: str | None) -> None:
