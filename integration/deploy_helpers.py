@@ -20,6 +20,21 @@ HEARD = "I heard"
 PUBLISHED = "Publishing"
 
 
+def compose_command() -> list[str]:
+    """``docker-compose`` (v1) or ``docker compose`` (v2 plugin); fails the test when neither exists."""
+    import subprocess
+
+    import pytest
+
+    if shutil.which("docker-compose"):
+        return ["docker-compose"]
+    probe = subprocess.run(["docker", "compose", "version"], capture_output=True)
+    if probe.returncode == 0:
+        return ["docker", "compose"]
+    pytest.fail("the compose tests need docker-compose (apt-get install docker-compose) or the compose v2 plugin",
+                pytrace=False)
+
+
 def free_udp_port() -> int:
     """A UDP port nobody listens on right now (host networking: the discovery server binds it)."""
     for _ in range(200):

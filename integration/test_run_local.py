@@ -20,7 +20,7 @@ from typing import Any
 
 import pytest
 import yaml
-from deploy_helpers import HEARD, copy_project, log_lines, remove_project_containers, wait_for
+from deploy_helpers import HEARD, compose_command, copy_project, log_lines, remove_project_containers, wait_for
 
 pytestmark = pytest.mark.docker
 
@@ -108,7 +108,7 @@ def test_generated_compose_file_is_accepted_and_matches_run(project_copy: Any, d
     files = list((root / ".robocore" / "compose").glob("*.yaml"))
     assert files
     for path in files:
-        proc = subprocess.run(["docker-compose", "-f", str(path), "config"], capture_output=True, text=True)
+        proc = subprocess.run([*compose_command(), "-f", str(path), "config"], capture_output=True, text=True)
         assert proc.returncode == 0, proc.stderr
         services = yaml.safe_load(proc.stdout)["services"]
         for container in docker_client.containers.list(filters={"label": f"dev.robocore.project={root.name}"}):
@@ -246,7 +246,7 @@ def test_compose_up_runs_the_robot_and_run_keeps_it(project_copy: Any, docker_cl
     root = project_copy()
     project = Project.load(root)
     (path,) = write_compose_files(project)
-    compose = ["docker-compose", "-p", root.name, "-f", str(path)]
+    compose = [*compose_command(), "-p", root.name, "-f", str(path)]
     try:
         up = subprocess.run([*compose, "up", "-d"], capture_output=True, text=True, timeout=300)
         assert up.returncode == 0, up.stderr
@@ -266,7 +266,7 @@ def test_golden_compose_files_are_accepted_by_docker_compose() -> None:
     goldens = sorted((Path(__file__).parents[1] / "tests" / "golden" / "compose").glob("*.yaml"))
     assert goldens
     for path in goldens:
-        proc = subprocess.run(["docker-compose", "-f", str(path), "config", "-q"], capture_output=True, text=True)
+        proc = subprocess.run([*compose_command(), "-f", str(path), "config", "-q"], capture_output=True, text=True)
         assert proc.returncode == 0, f"{path.name}: {proc.stderr}"
         assert "variable is not set" not in proc.stderr, f"{path.name}: unescaped $: {proc.stderr}"
 
