@@ -242,14 +242,14 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
     outcome = HostOutcome(host.name)
     check_install_trees(project, host)
     client = connect(project, host)
+    local = None
     try:
-        local = None
         if not host.is_local:
             from robocore.adapters.docker_hosts import local_client
 
             local = local_client()
             if not dry_run:
-                _deliver(client, _robocore_images(specs, project), project, host, outcome, quiet=quiet)
+                _deliver(client, local, _robocore_images(specs, project), project, host, outcome, quiet=quiet)
         image_ids = _image_ids(client, local, specs, project, host, dry_run=dry_run)
         containers = {c.name: c for c in managed_containers(client, project.name)}
         _check_name_conflicts(client, specs, containers, host)
@@ -262,16 +262,19 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
             _apply(client, action, by_name.get(action.name), containers.get(action.name), host, quiet=quiet)
     finally:
         client.close()
+        if local is not None:
+            local.close()
     return outcome
 
 
-def _deliver(client: docker.DockerClient, images: list[str], project: Project, host: Host, outcome: HostOutcome,
-             *, quiet: bool) -> None:
+def _deliver(client: docker.DockerClient, local: docker.DockerClient, images: list[str], project: Project,
+             host: Host, outcome: HostOutcome, *, quiet: bool) -> None:
     try:
         from robocore.adapters.image_delivery import ensure_images
     except ImportError:  # image delivery not available: the host must already have the images
         return
-    deliveries = ensure_images(client, images, registry=project.robot.registry, progress=not quiet, label=host.name)
+    deliveries = ensure_images(client, images, registry=project.robot.registry, progress=not quiet, label=host.name,
+                               source=local)
     outcome.notes += [str(d) for d in deliveries.values() if getattr(d, "action", "present") != "present"]
 
 
