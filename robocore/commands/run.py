@@ -247,7 +247,7 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
         if not host.is_local:
             from robocore.adapters.docker_hosts import local_client
 
-            local = local_client()
+            local = local_client(timeout=600)  # also streams images (docker save) to the host
             if not dry_run:
                 _deliver(client, local, _robocore_images(specs, project), project, host, outcome, quiet=quiet)
         image_ids = _image_ids(client, local, specs, project, host, dry_run=dry_run)
