@@ -9,9 +9,10 @@ command -v mmdebstrap >/dev/null || need_debs+=(mmdebstrap)
 command -v rsync >/dev/null || need_debs+=(rsync)
 command -v ssh >/dev/null || need_debs+=(openssh-client)
 command -v git >/dev/null || need_debs+=(git)
-if [ "${ROBOCORE_GUI_TOOLS:-0}" = 1 ]; then
+if [ "${ROBOCORE_TEST_TOOLS:-0}" = 1 ]; then
   command -v Xvfb >/dev/null || need_debs+=(xvfb)
   command -v xauth >/dev/null || need_debs+=(xauth)
+  command -v docker-compose >/dev/null || docker compose version >/dev/null 2>&1 || need_debs+=(docker-compose)
 fi
 if [ ${#need_debs[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
