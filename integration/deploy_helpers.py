@@ -58,7 +58,10 @@ def copy_project(source: Path, parent: Path, name: str, *, transport: str = "shm
     root.mkdir(parents=True)
     shutil.copytree(source / "components", root / "components", symlinks=True)
     for install in (source / ".robocore" / "build").glob("*/install"):
-        shutil.copytree(install, root / ".robocore" / "build" / install.parent.name / "install", symlinks=True)
+        target = root / ".robocore" / "build" / install.parent.name
+        shutil.copytree(install, target / "install", symlinks=True)
+        for state in install.parent.glob(".robocore-*.json"):  # the build's state (what run labels)
+            shutil.copy2(state, target / state.name)
     data = yaml.safe_load((source / "robot.yaml").read_text())
     data["ros_domain_id"] = random.randint(100, 230)
     data["discovery"] = {"servers": [{"host": data["hosts"][0]["name"], "port": free_udp_port()}],

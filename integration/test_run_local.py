@@ -286,3 +286,24 @@ def test_discovery_port_taken_is_reported(project_copy: Any, docker_client: Any,
         assert "discovery-0 did not start" in proc.stderr and "UDP port" in proc.stderr
     finally:
         squatter.remove(force=True)
+
+
+def test_edit_build_run_restarts_only_the_rebuilt_component(project_copy: Any, docker_client: Any,
+                                                            run_robocore: Any) -> None:
+    """Local install trees are mounted in place: after `build`, `run` recreates the rebuilt component
+    (whose process still runs the old code) and nothing else; the listener hears the new text."""
+    root = project_copy()
+    run_robocore(root, "run", "--quiet")
+    first = ids(docker_client, root.name)
+    code = root / "components" / "talker" / "src" / "demo_talker" / "demo_talker" / "talker.py"
+    text = code.read_text()
+    assert 'f"hello from talker #' in text
+    code.write_text(text.replace('f"hello from talker #', 'f"rebuilt talker #'))
+    run_robocore(root, "build", "--component", "talker", "--quiet")
+    run_robocore(root, "run", "--quiet")
+    second = ids(docker_client, root.name)
+    assert {name for name in first if first[name] != second[name]} == {"talker"}
+    listener = docker_client.containers.get(f"{root.name}-listener")
+    assert wait_for(lambda: log_lines(listener, "rebuilt talker #"), HEAR_WITHIN), "the new code was never heard"
+    again = json.loads(run_robocore(root, "run", "--json").stdout)
+    assert {a["verb"] for host in again.values() for a in host["actions"]} == {"keep"}

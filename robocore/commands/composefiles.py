@@ -31,11 +31,16 @@ def write_dds_profiles(project: Project) -> list[Path]:
 
 def write_compose_files(project: Project, *, tag: str | None = None) -> list[Path]:
     """Write one compose file per host (and the DDS profiles they mount); return the compose paths."""
+    from robocore.commands.run import with_local_build
+    from robocore.plan.containers import host_specs
+
     write_dds_profiles(project)
     paths = []
     for host in project.robot.hosts:
         path = project.compose_file(host.name)
-        write_atomic(path, compose.render(project, host.name, tag=tag))
+        # The same labels `run` gives the containers (local components: the build they run).
+        specs = with_local_build(project, host, host_specs(project, host.name, tag=tag))
+        write_atomic(path, compose.render(project, host.name, tag=tag, specs=specs))
         paths.append(path)
     known = {p.name for p in paths}
     for stale in project.compose_file("x").parent.glob("*.yaml"):

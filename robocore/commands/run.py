@@ -236,11 +236,44 @@ def _image_ids(
     return ids
 
 
+#: Label of a local component's container: the state of the build it runs (see with_local_build).
+LABEL_BUILD = "dev.robocore.build"
+
+
+def with_local_build(project: Project, host: Host, specs: Sequence[ContainerSpec]) -> list[ContainerSpec]:
+    """Add the state of each local component's last build to its spec's labels.
+
+    Local containers mount ``.robocore/build/<c>/install`` in place, so a rebuild changes
+    nothing in the spec; without this label ``run`` would keep the container on the code it
+    loaded at start. The build writes a small state file (package hashes) after each success.
+    """
+    import dataclasses
+    import hashlib
+
+    if not host.is_local:
+        return list(specs)
+    from robocore.commands.images import BUILD_STATE
+
+    out = []
+    for spec in specs:
+        if spec.role == ROLE_COMPONENT:
+            try:
+                state = (project.build_dir(spec.service) / BUILD_STATE).read_bytes()
+            except OSError:
+                state = b""
+            if state:
+                digest = hashlib.sha256(state).hexdigest()[:16]
+                spec = dataclasses.replace(spec, extra_labels=(*spec.extra_labels, (LABEL_BUILD, digest)))
+        out.append(spec)
+    return out
+
+
 def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *, dry_run: bool,
                 quiet: bool) -> HostOutcome:
     """Bring one host to its planned containers (or, with ``dry_run``, say what that would take)."""
     outcome = HostOutcome(host.name)
     check_install_trees(project, host)
+    specs = with_local_build(project, host, specs)
     client = connect(project, host)
     local = None
     try:
