@@ -315,3 +315,134 @@ def test_run_with_a_stopped_host_names_it_and_deploys_the_other(fleet: RobotFlee
     client = fleet.hosts[0].docker(fleet)
     assert client.containers.get(f"{robot.name}-talker").status == "running"
     client.close()
+
+
+# --------------------------------------------------------------------------- TLS and plain TCP
+
+
+def _pki(folder: Path, server_ip: str) -> dict[str, Path]:
+    """A CA, a server certificate for ``server_ip``, a client certificate, and a rogue client
+    certificate from another CA (the negative control)."""
+    import datetime
+    import ipaddress
+
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+
+    now = datetime.datetime.now(datetime.timezone.utc)
+
+    def name(text: str) -> x509.Name:
+        return x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, text)])
+
+    def write_key(key: Any, path: Path) -> Path:
+        path.write_bytes(key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
+                                           serialization.NoEncryption()))
+        return path
+
+    def cert(subject: str, key: Any, issuer: str, issuer_key: Any, *, ca: bool = False,
+             ip: str | None = None, client: bool = False) -> x509.Certificate:
+        builder = (x509.CertificateBuilder().subject_name(name(subject)).issuer_name(name(issuer))
+                   .public_key(key.public_key()).serial_number(x509.random_serial_number())
+                   .not_valid_before(now - datetime.timedelta(minutes=5))
+                   .not_valid_after(now + datetime.timedelta(days=1))
+                   .add_extension(x509.BasicConstraints(ca=ca, path_length=None), critical=True))
+        if ip:
+            builder = builder.add_extension(
+                x509.SubjectAlternativeName([x509.IPAddress(ipaddress.ip_address(ip))]), critical=False)
+            builder = builder.add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH]), critical=False)
+        if client:
+            builder = builder.add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.CLIENT_AUTH]), critical=False)
+        return builder.sign(issuer_key, hashes.SHA256())
+
+    def pem(c: x509.Certificate, path: Path) -> Path:
+        path.write_bytes(c.public_bytes(serialization.Encoding.PEM))
+        return path
+
+    ca_key, rogue_key = ec.generate_private_key(ec.SECP256R1()), ec.generate_private_key(ec.SECP256R1())
+    server_key, client_key = ec.generate_private_key(ec.SECP256R1()), ec.generate_private_key(ec.SECP256R1())
+    out = {
+        "ca": pem(cert("robocore test CA", ca_key, "robocore test CA", ca_key, ca=True), folder / "ca.pem"),
+        "server": pem(cert("robot", server_key, "robocore test CA", ca_key, ip=server_ip), folder / "server.pem"),
+        "server_key": write_key(server_key, folder / "server-key.pem"),
+        "client": pem(cert("dev", client_key, "robocore test CA", ca_key, client=True), folder / "cert.pem"),
+        "client_key": write_key(client_key, folder / "key.pem"),
+        "rogue": pem(cert("mallory", rogue_key, "mallory", rogue_key, client=True), folder / "rogue.pem"),
+        "rogue_key": write_key(rogue_key, folder / "rogue-key.pem"),
+    }
+    return out
+
+
+TLS_DIR = "/etc/robocore-tls"
+
+
+@pytest.fixture(scope="module")
+def tcp_fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[RobotFleet, dict[str, Path]]]:
+    """robot 0 serves Docker on TCP 2376 with TLS client verification, robot 1 on plain TCP 2375."""
+    pki: dict[str, Path] = {}
+    folder = tmp_path_factory.mktemp("pki")
+
+    def setup(host: Any) -> None:
+        if host.name.endswith("-0"):
+            pki.update(_pki(folder, host.ip))
+            archive = io.BytesIO()
+            with tarfile.open(fileobj=archive, mode="w") as tar:
+                for key, file in (("ca", "ca.pem"), ("server", "server.pem"), ("server_key", "server-key.pem")):
+                    tar.add(pki[key], arcname=f"robocore-tls/{file}")
+                info = tarfile.TarInfo("robocore-tls/ready")
+                tar.addfile(info, io.BytesIO(b""))
+            host.container.get_wrapped_container().put_archive("/etc", archive.getvalue())
+
+    tls_args = (f"--tlsverify --tlscacert={TLS_DIR}/ca.pem --tlscert={TLS_DIR}/server.pem "
+                f"--tlskey={TLS_DIR}/server-key.pem --host tcp://0.0.0.0:2376")
+    env = [{"DOCKERD_ARGS": tls_args, "DOCKERD_WAIT_FILE": f"{TLS_DIR}/ready"},
+           {"DOCKERD_ARGS": "--host tcp://0.0.0.0:2375"}]
+    with RobotFleet(2, env=env, setup=setup) as hosts:
+        yield hosts, pki
+
+
+def test_docker_over_tls_with_client_certificates(tcp_fleet: tuple[RobotFleet, dict[str, Path]],
+                                                  tiny_images: list[str], docker_client: Any) -> None:
+    from robocore.adapters.docker_hosts import client_for
+    from robocore.config.model import DockerAccess, TlsFiles
+
+    fleet, pki = tcp_fleet
+    ip = fleet.hosts[0].ip
+    host = Host(name="tls-robot", ip=ip, docker=DockerAccess.tls, docker_port=2376,
+                tls=TlsFiles(ca_cert=str(pki["ca"]), client_cert="cert.pem", client_key="key.pem"))
+    client = client_for(host, timeout=120, project_root=pki["ca"].parent)  # relative paths: project folder
+    try:
+        assert client.version()["Version"]
+        assert client.api.base_url.startswith("https://")
+        result = ensure_images(client, [TINY], registry=None, progress=False, label=host.name)
+        assert result[TINY].action == "loaded"
+        assert client.images.get(TINY).id == docker_client.images.get(TINY).id
+    finally:
+        client.close()
+    # negative control: a client certificate from another CA is refused, and the host is named
+    rogue = Host(name="tls-robot", ip=ip, docker=DockerAccess.tls, docker_port=2376,
+                 tls=TlsFiles(ca_cert=str(pki["ca"]), client_cert=str(pki["rogue"]), client_key=str(pki["rogue_key"])))
+    with pytest.raises(HostError) as caught:
+        client_for(rogue, timeout=30)
+    assert "tls-robot" in caught.value.message
+
+
+def test_plain_tcp_only_when_insecure_and_with_a_warning(tcp_fleet: tuple[RobotFleet, dict[str, Path]],
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    from robocore.adapters.docker_hosts import client_for
+    from robocore.config.model import DockerAccess
+
+    fleet, _ = tcp_fleet
+    ip = fleet.hosts[1].ip
+    with pytest.raises(HostError):
+        client_for(Host(name="plain", ip=ip, docker=DockerAccess.tcp, docker_port=2375), timeout=30)
+    capsys.readouterr()
+    client = client_for(Host(name="plain", ip=ip, docker=DockerAccess.tcp, docker_port=2375, insecure=True),
+                        timeout=30)
+    try:
+        assert client.version()["Version"]
+    finally:
+        client.close()
+    err = capsys.readouterr().err
+    assert "warning" in err and "plain" in err and "tcp://" in err, err

@@ -1,5 +1,6 @@
 #!/bin/sh
-# Entry point of the simulated robot host: sshd (key from $AUTHORIZED_KEY) plus dockerd.
+# Entry point of the simulated robot host: sshd (key from $AUTHORIZED_KEY) plus dockerd
+# (extra daemon flags from $DOCKERD_ARGS, e.g. a TLS or plain TCP listener).
 set -eu
 mkdir -p /run/sshd /root/.ssh
 chmod 700 /root/.ssh
@@ -9,4 +10,8 @@ if [ -n "${AUTHORIZED_KEY:-}" ]; then
 fi
 ssh-keygen -A >/dev/null
 /usr/sbin/sshd -e
+# Optional: wait for files put into the container after it started (e.g. TLS certificates for its address).
+if [ -n "${DOCKERD_WAIT_FILE:-}" ]; then
+    while [ ! -f "$DOCKERD_WAIT_FILE" ]; do sleep 0.2; done
+fi
 exec dockerd --host unix:///var/run/docker.sock ${DOCKERD_ARGS:-}

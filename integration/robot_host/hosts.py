@@ -18,6 +18,7 @@ import subprocess
 import tempfile
 import time
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -63,8 +64,13 @@ class RobotHost:
 class RobotFleet:
     """``count`` robot hosts on one private network; a context manager that removes everything."""
 
-    def __init__(self, count: int = 2, tag: str = "") -> None:
+    def __init__(self, count: int = 2, tag: str = "", *, env: list[dict[str, str]] | None = None,
+                 setup: Callable[[RobotHost], None] | None = None) -> None:
+        """``env[i]``: extra environment of host i (e.g. DOCKERD_ARGS); ``setup(host)`` runs once its
+        address is known and before waiting for its daemon (e.g. to put TLS certificates in)."""
         self.count = count
+        self.env = env or [{} for _ in range(count)]
+        self.setup = setup
         self.tag = tag or uuid.uuid4().hex[:6]
         self.dir = Path(tempfile.mkdtemp(prefix="robocore-it-ssh-"))
         self.key = self.dir / "id_ed25519"
@@ -108,11 +114,15 @@ class RobotFleet:
                     hostname=name,
                 )
             )
+            for key, value in self.env[index].items():
+                container.with_env(key, value)
             container.start()
             wrapped = container.get_wrapped_container()
             wrapped.reload()
             ip = wrapped.attrs["NetworkSettings"]["Networks"][self.network.name]["IPAddress"]
             self.hosts.append(RobotHost(name=name, container=container, ip=ip))
+            if self.setup is not None:
+                self.setup(self.hosts[-1])
         self.ssh_config.write_text(
             "Host *\n"
             f"  IdentityFile {self.key}\n"

@@ -177,7 +177,11 @@ def _tcp_like(host: Host, base_url: str, timeout: int, connect_timeout: int, tls
     try:
         # Fail fast on a dead host: requests would otherwise wait for the full API timeout.
         socket.create_connection((host.ip, port), timeout=connect_timeout).close()
-        client = docker.DockerClient(base_url=base_url, tls=tls, timeout=timeout, version="auto")
+        client = docker.DockerClient(base_url=base_url, tls=tls, timeout=timeout, version=_BOOTSTRAP_API)
+        api: Any = client.api
+        # Not the environment's proxy or CA bundle (REQUESTS_CA_BUNDLE would replace the host's CA).
+        api.trust_env = False
+        api._version = api._retrieve_server_version()
         client.ping()
     except Exception as exc:
         if isinstance(exc, (OSError, docker.errors.DockerException)) or type(exc).__module__.split(".")[0] in {
