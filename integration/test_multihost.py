@@ -58,8 +58,16 @@ def tiny_images(docker_client: Any) -> Iterator[list[str]]:
         Path(ctx, "extra.txt").write_text("one more layer\n" * 100)
         docker_client.images.build(path=ctx, tag=DERIVED, rm=True)
     yield [TINY, DERIVED]
-    for name in (DERIVED, TINY):
-        docker_client.images.remove(name, force=True)
+    remove_local_tags(docker_client, ("robocore-it-tiny",))
+
+
+def remove_local_tags(docker_client: Any, repositories: tuple[str, ...]) -> None:
+    """Remove this machine's tags of ``repositories``, also under a registry prefix (push tags)."""
+    names = set(repositories) | {f"{r}-derived" for r in repositories}
+    for image in docker_client.images.list():
+        for tag in image.tags:
+            if tag.rsplit(":", 1)[0].rsplit("/", 1)[-1] in names:
+                docker_client.images.remove(tag, force=True)
 
 
 @pytest.fixture(scope="module")
@@ -297,6 +305,14 @@ def test_release_run_tag_and_rollback(fleet: RobotFleet, robot: Path, registry: 
     assert container_image(fleet, 1, listener) == f"{robot.name}-listener:latest"
     data.pop("registry")
     (robot / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    import docker
+
+    local = docker.from_env()
+    for image in local.images.list():
+        for tag in image.tags:
+            if tag.startswith(f"{registry}/"):  # the release's push tags on this machine
+                local.images.remove(tag)
+    local.close()
 
 
 def test_run_with_a_stopped_host_names_it_and_deploys_the_other(fleet: RobotFleet, robot: Path) -> None:
