@@ -13,6 +13,8 @@ if [ "${ROBOCORE_TEST_TOOLS:-0}" = 1 ]; then
   command -v Xvfb >/dev/null || need_debs+=(xvfb)
   command -v xauth >/dev/null || need_debs+=(xauth)
   command -v docker-compose >/dev/null || docker compose version >/dev/null 2>&1 || need_debs+=(docker-compose)
+  command -v docker-registry >/dev/null || need_debs+=(docker-registry)
+  command -v ssh-keygen >/dev/null || need_debs+=(openssh-client)
 fi
 if [ ${#need_debs[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
