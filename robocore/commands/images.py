@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 from robocore.commands.context import Options
 from robocore.config.loader import ROBOT_FILE
-from robocore.config.model import BaseKind, Component
+from robocore.config.model import BaseKind, Component, docker_arch
 from robocore.errors import BuildError, ConfigError, DockerError, Problem, ToolMissing, UsageError
 from robocore.files import write_atomic
 from robocore.plan import colcon, dockerfiles, naming
@@ -36,7 +36,6 @@ if TYPE_CHECKING:
 
     from robocore.adapters.image_builder import ContextFile, ImageState
 
-ARCH_OF_MACHINE = {"x86_64": "amd64", "amd64": "amd64", "aarch64": "arm64", "arm64": "arm64"}
 QEMU_NAME = {"arm64": "aarch64", "amd64": "x86_64"}
 BINFMT_DIR = Path("/proc/sys/fs/binfmt_misc")
 BUILD_STATE = ".robocore-build.json"
@@ -46,8 +45,7 @@ MAX_PARALLEL = 4
 
 def native_arch() -> str:
     """The dev machine's arch in Docker terms."""
-    machine = host_platform.machine().lower()
-    return ARCH_OF_MACHINE.get(machine, machine)
+    return docker_arch(host_platform.machine())
 
 
 def check_emulation(arch: str, native: str, who: str) -> None:
@@ -428,14 +426,20 @@ def prepare_base(options: Options, *, force: bool) -> None:
         reason = decide(image_state(client, planned.plan.ref), planned, force=force)
         if options.dry_run:
             _show_plan(report, planned, reason)
-        if reason is None:
-            outcomes.append(Outcome(what=planned.plan.ref, role="base", action="up-to-date"))
-        elif options.dry_run:
-            outcomes.append(Outcome(what=planned.plan.ref, role="base", action="would-build", reason=reason))
-        else:
-            work.append((planned, reason))
+        _triage(planned, reason, options.dry_run, outcomes, work)
     outcomes += _run_builds(report, work, parallel=False)
     report.done(outcomes)
+
+
+def _triage(planned: Planned, reason: str | None, dry_run: bool,
+            outcomes: list[Outcome], work: list[tuple[Planned, str]]) -> None:
+    """Up to date, would build (dry run) or queued for building: the one decision per image."""
+    if reason is None:
+        outcomes.append(Outcome(what=planned.plan.ref, role=planned.plan.role, action="up-to-date"))
+    elif dry_run:
+        outcomes.append(Outcome(what=planned.plan.ref, role=planned.plan.role, action="would-build", reason=reason))
+    else:
+        work.append((planned, reason))
 
 
 def _selected(project: Project, component: str | None) -> list[Component]:
@@ -509,12 +513,7 @@ def stage(options: Options, *, refresh: bool, component: str | None, force: bool
                 folders = {i: dockerfiles.repo_folder(r) for i, r in enumerate(comp.repositories)}
                 report.plain(f"# {comp.name}: repositories (vcstool .repos), fetched on this machine into repos/\n"
                              + vcs.repos_file(comp.repositories, folders))
-        if reason is None:
-            outcomes.append(Outcome(what=planned.plan.ref, role="component", action="up-to-date"))
-        elif options.dry_run:
-            outcomes.append(Outcome(what=planned.plan.ref, role="component", action="would-build", reason=reason))
-        else:
-            work.append((planned, reason))
+        _triage(planned, reason, options.dry_run, outcomes, work)
     client.close()
     outcomes += _run_builds(report, work, parallel=True)
     if options.dry_run:

@@ -15,18 +15,16 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from robocore.config.model import BaseKind, RosDistro
+from robocore.config.model import Arch, BaseKind, RosDistro, docker_arch
 from robocore.errors import UsageError
 
 #: Where the generated robot.yaml's ``yaml-language-server`` comment points (relative to the project).
 SCHEMA_FILE = Path(".robocore") / "robot.schema.json"
 
-_ARCHES = {"x86_64": "amd64", "amd64": "amd64", "aarch64": "arm64", "arm64": "arm64"}
-
-
 def machine_arch() -> str:
     """This machine's architecture as a Docker platform name (amd64 when robocore has no name for it)."""
-    return _ARCHES.get(platform.machine().lower(), "amd64")
+    arch = docker_arch(platform.machine())
+    return arch if arch in {a.value for a in Arch} else "amd64"
 
 
 def current_user() -> str:

@@ -65,6 +65,15 @@ class Arch(str, Enum):
     arm64 = "arm64"
 
 
+_DOCKER_ARCH = {"x86_64": "amd64", "amd64": "amd64", "aarch64": "arm64", "arm64": "arm64"}
+
+
+def docker_arch(machine: str) -> str:
+    """A ``platform.machine()`` name in Docker terms (amd64, arm64); unknown names come back lower-cased."""
+    machine = machine.lower()
+    return _DOCKER_ARCH.get(machine, machine)
+
+
 class DockerAccess(str, Enum):
     """How robocore reaches a host's Docker daemon."""
 
