@@ -177,6 +177,58 @@ def test_noop_build_then_one_edit_rebuilds_only_that_package(demo_project: Path,
     assert installed and any("# edited by test_images" in p.read_text() for p in installed)
 
 
+def _talker_says(client: Any, project: Project, comp: Component, needle: str, timeout: float = 30) -> str:
+    """Start the talker from its install tree; return its output once it prints ``needle`` (or fail)."""
+    assert comp.entrypoint
+    container = _start(client, project, comp, shlex.split(comp.entrypoint), random.randint(150, 220))
+    try:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            out = _logs(container)
+            container.reload()
+            if needle in out or container.status == "exited":
+                return out
+            time.sleep(0.5)
+        return _logs(container)
+    finally:
+        container.remove(force=True)
+
+
+def test_module_edit_is_copied_without_colcon_and_runs_but_a_new_module_needs_colcon(
+        docker_client: Any, demo_project: Path, run_robocore: Any) -> None:
+    """The fast path writes the edited module into the install tree and the node runs it; adding a
+    module (which only colcon can install) goes through colcon: the negative control."""
+    project = _project(demo_project)
+    talker = _role(project, "talker")
+    assert talker.folder
+    module = next(p for p in (demo_project / talker.folder).rglob("talker.py"))
+    original = module.read_text()
+    token = uuid.uuid4().hex[:8]
+    try:
+        module.write_text(original.replace('f"hello from talker #', f'f"patched {token} #'))
+        assert module.read_text() != original
+        result = json.loads(run_robocore(demo_project, "build", "--component", talker.name, "--json").stdout)
+        (row,) = result["results"]
+        assert row["action"] == "built" and "no colcon" in row["reason"], row
+        out = _talker_says(docker_client, project, talker, f"patched {token}")
+        assert f"patched {token} #" in out, out[-1500:]
+
+        extra = module.parent / "robocore_it_extra.py"
+        extra.write_text(f"WORD = 'extra {token}'\n")
+        module.write_text(module.read_text().replace(
+            "import rclpy\n", "import rclpy\n\nfrom .robocore_it_extra import WORD\n", 1).replace(
+            f'f"patched {token} #', 'f"{WORD} #'))
+        result = json.loads(run_robocore(demo_project, "build", "--component", talker.name, "--json").stdout)
+        (row,) = result["results"]
+        assert row["action"] == "built" and "colcon: " in row["reason"] and "file added" in row["reason"], row
+        out = _talker_says(docker_client, project, talker, f"extra {token}")
+        assert f"extra {token} #" in out, out[-1500:]
+    finally:
+        module.write_text(original)
+        (module.parent / "robocore_it_extra.py").unlink(missing_ok=True)
+        run_robocore(demo_project, "build", "--component", talker.name)
+
+
 def test_failed_build_names_the_package_and_shows_its_log(demo_project: Path, run_robocore: Any) -> None:
     project = _project(demo_project)
     listener = _role(project, "listener")
@@ -305,7 +357,7 @@ def test_build_runs_as_the_invoking_user_even_when_that_is_not_root(
     """As root, pretend to be UID 4242 (owning a copy of the project): the build's files must be 4242's."""
     import shutil
 
-    from robocore.commands import images
+    from robocore.commands import build
     from robocore.commands.context import Options
 
     uid = os.getuid()
@@ -320,9 +372,9 @@ def test_build_runs_as_the_invoking_user_even_when_that_is_not_root(
             os.lchown(path, uid, uid)
         monkeypatch.setattr(os, "getuid", lambda: uid)
         monkeypatch.setattr(os, "getgid", lambda: uid)
-    images.build(Options(project_dir=copy, quiet=True), component=listener.name)
+    build.build(Options(project_dir=copy, quiet=True), component=listener.name)
     produced = [p for p in (copy / ".robocore" / "build" / listener.name).rglob("*")
-                if not p.is_symlink() and p.name != images.BUILD_STATE]  # that one is written by robocore itself
+                if not p.is_symlink() and p.name != build.BUILD_STATE]  # that one is written by robocore itself
     assert any(p.name == "setup.bash" for p in produced)
     wrong = [str(p) for p in produced if p.stat().st_uid != uid]
     assert not wrong, f"files in .robocore/build not owned by the invoking user: {wrong[:5]}"

@@ -104,13 +104,13 @@ def main(argv: list[str] | None = None) -> int:
 
     path = Path(args.dir).resolve()
     options = Options(project_dir=path)
-    from robocore.commands import images, observe, run
+    from robocore.commands import build, images, observe, run
 
     try:
         _step(f"init {path}", lambda: create_project(path))
         _step("prepare-base", lambda: images.prepare_base(options, force=False))
         _step("stage", lambda: images.stage(options, refresh=False, component=None, force=False))
-        _step("build", lambda: images.build(options, component=None))
+        _step("build", lambda: build.build(options, component=None))
         _step("run", lambda: run.run(options, host=None, tag=None))
         lines = wait_for_messages(options, args.timeout)
         console().rule("[bold]the listener hears the talker through the discovery server")

@@ -126,13 +126,15 @@ def stage(c: Context, refresh: bool = False, component: str = "", force: bool = 
 
 
 @task(help={"component": "Build only this component.", "dry_run": "Print the plan only.",
+            "full": "Always run colcon, even for edits that only change files colcon copies as they are.",
             "quiet": "Only errors.", "json": "Machine-readable result on stdout."})
 @reported
-def build(c: Context, component: str = "", dry_run: bool = False, quiet: bool = False, json: bool = False) -> None:
+def build(c: Context, component: str = "", full: bool = False, dry_run: bool = False, quiet: bool = False,
+          json: bool = False) -> None:
     """colcon-build each component's workspace inside its staged image."""
-    from robocore.commands import images
+    from robocore.commands import build as command
 
-    images.build(_options(c, dry_run=dry_run, quiet=quiet, json=json), component=component or None)
+    command.build(_options(c, dry_run=dry_run, quiet=quiet, json=json), component=component or None, full=full)
 
 
 @task(help={"host": "Sync only this host.", "dry_run": "Print the rsync commands only.", "quiet": "Only errors.",

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from robocore.commands import images
+from robocore.commands import build, images
 from robocore.config.model import Robot
 from robocore.plan import colcon
 from robocore.plan.inputs import FileDigest, inputs_hash, tree_hash
@@ -96,19 +96,19 @@ def test_package_hashes_follow_content_not_timestamps(tmp_path: Path) -> None:
 
     project = make_project(tmp_path)
     ws = tmp_path / "ws/talker"
-    first = images.package_hashes(ws)
+    first = build.package_hashes(ws)
     assert list(first) == ["pkg_talker"]
     node = ws / "src/pkg_talker/node.py"
     os.utime(node, (1, 1))
-    assert images.package_hashes(ws) == first
+    assert build.package_hashes(ws) == first
     node.write_text("print('edited')\n")
-    assert images.package_hashes(ws) != first
+    assert build.package_hashes(ws) != first
     # build outputs and caches inside the workspace are not sources
     (ws / "build").mkdir()
     (ws / "build/x.txt").write_text("x")
     (ws / "src/pkg_talker/__pycache__").mkdir()
     (ws / "src/pkg_talker/__pycache__/node.cpython-311.pyc").write_bytes(b"\0")
-    assert images.package_hashes(ws) == images.package_hashes(ws)
+    assert build.package_hashes(ws) == build.package_hashes(ws)
     assert project.robot.component("talker").folder == "ws/talker"
 
 

@@ -1,11 +1,10 @@
-"""prepare-base, stage and build (issue #3).
+"""prepare-base and stage: the images (issue #3); the colcon build is in :mod:`robocore.commands.build`.
 
 - prepare-base: the base image (ROS + common packages), per arch of the hosts that need it;
-- stage: one image per component (dependencies, no user code), in parallel, then compose files;
-- build: colcon inside each component's staged image, workspace and outputs bind-mounted.
+- stage: one image per component (dependencies, no user code), in parallel, then compose files.
 
 Images are rebuilt only when the content hash of their inputs (label ``dev.robocore.inputs``)
-changes; colcon builds are skipped when no package's sources changed since the last success.
+changes.
 """
 
 from __future__ import annotations
@@ -25,10 +24,9 @@ from robocore.commands.context import Options
 from robocore.config.loader import ROBOT_FILE
 from robocore.config.model import BaseKind, Component, docker_arch
 from robocore.errors import BuildError, ConfigError, DockerError, Problem, ToolMissing, UsageError
-from robocore.files import write_atomic
-from robocore.plan import colcon, dockerfiles, naming
+from robocore.plan import dockerfiles, naming
 from robocore.plan.dockerfiles import ContextEntry, ImagePlan
-from robocore.plan.inputs import FileDigest, digest_bytes, inputs_hash, tree_hash
+from robocore.plan.inputs import inputs_hash
 from robocore.project import Project
 
 if TYPE_CHECKING:
@@ -38,7 +36,6 @@ if TYPE_CHECKING:
 
 QEMU_NAME = {"arm64": "aarch64", "amd64": "x86_64"}
 BINFMT_DIR = Path("/proc/sys/fs/binfmt_misc")
-BUILD_STATE = ".robocore-build.json"
 SKIP_WS_DIRS = frozenset({"build", "install", "log"})
 MAX_PARALLEL = 4
 
@@ -522,214 +519,3 @@ def stage(options: Options, *, refresh: bool, component: str | None, force: bool
         for path in write_compose_files(project):
             report.info(f"wrote {path.relative_to(project.root)}")
     report.done(outcomes)
-
-
-# ---------------------------------------------------------------------------------------------- colcon build
-
-
-def package_hashes(ws: Path) -> dict[str, str]:
-    """``{package name: content hash of its folder}`` for every package of a workspace."""
-    folders: dict[str, list[tuple[str, Path]]] = {}
-    files = list(_workspace_files(ws))
-    roots = sorted((rel.rsplit("/", 1)[0] if "/" in rel else "" for rel, _ in files
-                    if rel.rsplit("/", 1)[-1] == "package.xml"), key=len, reverse=True)
-    names: dict[str, str] = {}
-    for root in roots:
-        name = colcon.package_name((ws / root / "package.xml").read_text(errors="replace")) or root or ws.name
-        names[root] = name
-        folders[root] = []
-    for rel, path in files:
-        owner = next((r for r in roots if r == "" or rel.startswith(r + "/")), None)
-        if owner is not None:
-            folders[owner].append((rel, path))
-    out: dict[str, str] = {}
-    for root, members in folders.items():
-        digests = []
-        for rel, path in members:
-            info = path.lstat()
-            data = os.readlink(path).encode() if path.is_symlink() else path.read_bytes()
-            digests.append(FileDigest(rel, bool(info.st_mode & 0o111), digest_bytes(data)))
-        out[names[root]] = tree_hash(digests)
-    return out
-
-
-@dataclass(frozen=True)
-class BuildPlan:
-    """What ``build`` does for one component."""
-
-    component: Component
-    image: str
-    image_id: str
-    arch: str
-    workspace: Path
-    out: Path
-    packages: dict[str, str]
-    changed: list[str] | None  # None: everything; []: nothing
-    reason: str
-
-    @property
-    def argv(self) -> list[str]:
-        """The colcon command line."""
-        return colcon.workspace_build_argv(self.changed or ())
-
-
-def _previous(out: Path) -> dict[str, Any]:
-    try:
-        data = json.loads((out / BUILD_STATE).read_text())
-        return data if isinstance(data, dict) else {}
-    except (OSError, ValueError):
-        return {}
-
-
-def plan_build(project: Project, comp: Component, image_id: str) -> BuildPlan:
-    """Which packages of ``comp`` must be (re)built, from the last successful build's state."""
-    assert comp.folder is not None
-    ws = project.root / comp.folder
-    out = project.build_dir(comp.name)
-    packages = package_hashes(ws)
-    before = _previous(out)
-    old: dict[str, str] = before.get("packages", {}) if isinstance(before.get("packages"), dict) else {}
-    changed: list[str] | None
-    if not (out / "install").is_dir() or before.get("image") != image_id:
-        changed, reason = None, "first build" if not before else "image changed"
-    elif set(old) != set(packages):
-        changed, reason = None, "packages added or removed"
-    else:
-        changed = sorted(name for name, digest in packages.items() if old.get(name) != digest)
-        reason = f"changed: {', '.join(changed)}" if changed else "up to date"
-    image = f"{naming.component_image(project.robot, project.name, comp.name)}:latest"
-    return BuildPlan(component=comp, image=image, image_id=image_id, arch=project.robot.host(comp.runs_on).arch.value,
-                     workspace=ws, out=out, packages=packages, changed=changed, reason=reason)
-
-
-def _log_tail(out: Path, package: str, lines: int = 30) -> str:
-    latest = out / "log" / "latest_build"
-    for log in (latest / package / "stdout_stderr.log", latest / "logger_all.log"):
-        try:
-            text = log.read_text(errors="replace").splitlines()
-        except OSError:
-            continue
-        return "\n".join(f"  {line}" for line in text[-lines:])
-    return f"(no log under {latest})"
-
-
-def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callable[[str, str], None]) -> Outcome:
-    """colcon build of one component in a throw-away container of its staged image."""
-    from robocore.adapters.image_builder import run_streaming
-
-    for sub in ("build", "install", "log"):
-        (plan.out / sub).mkdir(parents=True, exist_ok=True)
-    uid, gid = os.getuid(), os.getgid()
-    volumes = {
-        str(plan.workspace): naming.CONTAINER_WS,
-        str(plan.out / "build"): colcon.CONTAINER_BUILD,
-        str(plan.out / "install"): naming.CONTAINER_INSTALL,
-        str(plan.out / "log"): colcon.CONTAINER_LOG,
-    }
-    events: list[colcon.PackageEvent] = []
-    other: list[str] = []
-    start = time.monotonic()
-    name = plan.component.name
-    native = native_arch()
-    client = _client()
-    try:
-        update(name, "colcon build")
-
-        def on_line(line: str) -> None:
-            event = colcon.parse_event(line)
-            if event is None:
-                if line.strip():
-                    other.append(line)
-                return
-            events.append(event)
-            if event.state == "started":
-                update(name, f"building {event.package}")
-            else:
-                secs = f" {event.seconds:.1f}s" if event.seconds is not None else ""
-                report.info(f"{name}: {event.package} {event.state}{secs}")
-
-        attempts = [plan.argv] + ([colcon.workspace_build_argv()] if plan.changed else [])
-        for argv in attempts:
-            code = run_streaming(
-                client, plan.image, argv, user=f"{uid}:{gid}", volumes=volumes,
-                environment={"HOME": "/tmp", "ROBOCORE_NO_INSTALL": "1", "PYTHONDONTWRITEBYTECODE": "1"},
-                labels={naming.LABEL_PROJECT: project.name, naming.LABEL_COMPONENT: name,
-                        naming.LABEL_ROLE: "build"},
-                platform=dockerfiles.platform(plan.arch) if plan.arch != native else None, on_line=on_line,
-            )
-            # an image whose colcon lacks colcon-package-selection: build everything instead
-            if not (code == 2 and any("--packages-above" in line for line in other[-3:])):
-                break
-            other.clear()
-    finally:
-        client.close()
-    if code != 0:
-        failed = [e.package for e in events if e.state == "failed"]
-        if failed:
-            raise BuildError(f"component {name}: colcon build failed in package {failed[0]} "
-                             f"(log: {plan.out.relative_to(project.root)}/log/latest_build/{failed[0]})\n"
-                             + _log_tail(plan.out, failed[0]),
-                             hint=f"fix it in {plan.component.folder}, then run build --component {name}")
-        tail = "\n".join(f"  {line}" for line in other[-20:])
-        raise BuildError(f"component {name}: colcon build exited {code}\n{tail}")
-    write_atomic(plan.out / BUILD_STATE, json.dumps({"image": plan.image_id, "packages": plan.packages}, indent=1))
-    built = [e.package for e in events if e.state == "finished"]
-    return Outcome(what=name, role="build", action="built", reason=plan.reason, image_id=plan.image_id,
-                   seconds=time.monotonic() - start, packages=built)
-
-
-def build(options: Options, *, component: str | None) -> None:
-    """colcon-build component workspaces inside their staged images (incremental)."""
-    project = options.load()
-    report = Reporter(options)
-    comps = [c for c in _selected(project, component) if c.folder is not None]
-    if component and not comps:
-        raise UsageError(f"component {component!r} has no folder: nothing to build")
-    from robocore.adapters.image_builder import image_state
-
-    client = _client()
-    plans: list[BuildPlan] = []
-    for comp in comps:
-        ref = f"{naming.component_image(project.robot, project.name, comp.name)}:latest"
-        state = image_state(client, ref)
-        if state is None:
-            if options.dry_run:
-                report.plain(f"# {comp.name}: no staged image {ref} yet (run stage)")
-                continue
-            raise BuildError(f"component {comp.name}: no staged image {ref}", hint="run `stage` first")
-        check_emulation(project.robot.host(comp.runs_on).arch.value, native_arch(), f"component {comp.name}")
-        plans.append(plan_build(project, comp, state.id))
-    client.close()
-    outcomes: list[Outcome] = []
-    todo: list[BuildPlan] = []
-    for plan in plans:
-        if plan.changed == []:
-            outcomes.append(Outcome(what=plan.component.name, role="build", action="up-to-date"))
-            continue
-        if options.dry_run:
-            report.plain(f"# {plan.component.name} ({plan.reason}) in {plan.image}:")
-            report.plain("  " + " ".join(plan.argv))
-            outcomes.append(Outcome(what=plan.component.name, role="build", action="would-build", reason=plan.reason))
-            continue
-        todo.append(plan)
-    outcomes += _run_colcon(project, todo, report)
-    report.done(outcomes)
-
-
-def _run_colcon(project: Project, todo: Sequence[BuildPlan], report: Reporter) -> list[Outcome]:
-    """colcon builds of several components side by side (one container each); every one is tried."""
-    if not todo:
-        return []
-    outcomes: list[Outcome] = []
-    errors: list[BaseException] = []
-    with report.progress() as update, ThreadPoolExecutor(max_workers=min(MAX_PARALLEL, len(todo))) as pool:
-        futures = [pool.submit(_colcon, project, plan, report, update) for plan in todo]
-        for future in futures:
-            try:
-                outcomes.append(future.result())
-            except BaseException as exc:  # collected: the other components still build
-                errors.append(exc)
-    if errors:
-        report.done(outcomes)
-        raise errors[0]
-    return outcomes

@@ -252,7 +252,7 @@ def with_local_build(project: Project, host: Host, specs: Sequence[ContainerSpec
 
     if not host.is_local:
         return list(specs)
-    from robocore.commands.images import BUILD_STATE
+    from robocore.commands.build import BUILD_STATE
 
     out = []
     for spec in specs:

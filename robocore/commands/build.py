@@ -1,0 +1,388 @@
+"""build: colcon inside each component's staged image, incremental, with a copy fast path (issues #3, #4).
+
+The workspace and the outputs (``.robocore/build/<c>/{build,install,log}``) are bind-mounted
+into a throw-away container of the component's staged image, which runs as the invoking user.
+A package is rebuilt only when its source hash differs from the last successful build's, which
+is recorded in ``.robocore/build/<c>/.robocore-build.json`` (``BUILD_STATE``) together with the
+source file list and the plain copies colcon made of them. When an edit only touches files that
+colcon copies verbatim (Python modules of ament_python packages, launch and config files), the new
+contents are written over those copies and colcon is not started at all
+(:mod:`robocore.plan.install_patch`); ``--full`` always runs colcon.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import tempfile
+import time
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from robocore.commands.context import Options
+from robocore.commands.images import (
+    MAX_PARALLEL,
+    Outcome,
+    Reporter,
+    _client,
+    _selected,
+    _workspace_files,
+    check_emulation,
+    native_arch,
+)
+from robocore.config.model import Component
+from robocore.errors import BuildError, UsageError
+from robocore.files import write_atomic
+from robocore.plan import colcon, dockerfiles, install_patch, naming
+from robocore.plan.inputs import FileDigest, digest_bytes, tree_hash
+from robocore.project import Project
+
+BUILD_STATE = ".robocore-build.json"
+#: Output folders searched for plain copies of source files (not log/).
+COPY_FOLDERS = ("install", "build")
+
+#: ``{package: {package-relative path: (digest, executable)}}``
+WorkspaceFiles = dict[str, dict[str, tuple[str, bool]]]
+
+
+def workspace_packages(ws: Path) -> tuple[dict[str, str], WorkspaceFiles]:
+    """Every package of a workspace: ``({name: workspace-relative folder}, {name: its files})``."""
+    files = list(_workspace_files(ws))
+    roots = sorted((rel.rsplit("/", 1)[0] if "/" in rel else "" for rel, _ in files
+                    if rel.rsplit("/", 1)[-1] == "package.xml"), key=len, reverse=True)
+    names = {root: colcon.package_name((ws / root / "package.xml").read_text(errors="replace")) or root or ws.name
+             for root in roots}
+    found: WorkspaceFiles = {names[root]: {} for root in roots}
+    for rel, path in files:
+        owner = next((r for r in roots if r == "" or rel.startswith(r + "/")), None)
+        if owner is None:
+            continue
+        info = path.lstat()
+        data = os.readlink(path).encode() if path.is_symlink() else path.read_bytes()
+        inside = rel[len(owner) + 1:] if owner else rel
+        found[names[owner]][inside] = (digest_bytes(data), bool(info.st_mode & 0o111))
+    return {name: root for root, name in names.items()}, found
+
+
+def package_hashes(ws: Path) -> dict[str, str]:
+    """``{package name: content hash of its folder}`` for every package of a workspace."""
+    roots, files = workspace_packages(ws)
+    return {name: _package_hash(roots[name], members) for name, members in files.items()}
+
+
+def _package_hash(root: str, members: Mapping[str, tuple[str, bool]]) -> str:
+    return tree_hash(FileDigest(f"{root}/{rel}" if root else rel, executable, digest)
+                     for rel, (digest, executable) in members.items())
+
+
+@dataclass(frozen=True)
+class BuildPlan:
+    """What ``build`` does for one component."""
+
+    component: Component
+    image: str
+    image_id: str
+    arch: str
+    workspace: Path
+    out: Path
+    packages: dict[str, str]
+    files: WorkspaceFiles
+    roots: dict[str, str]  # package -> workspace-relative folder
+    changed: list[str] | None  # None: everything; []: nothing
+    reason: str
+    patches: tuple[install_patch.Patch, ...] = ()  # non-empty: copy files instead of running colcon
+    copies: Mapping[str, Mapping[str, list[str]]] | None = None  # the last build's plain copies
+
+    @property
+    def argv(self) -> list[str]:
+        """The colcon command line."""
+        return colcon.workspace_build_argv(self.changed or ())
+
+
+def _previous(out: Path) -> dict[str, Any]:
+    try:
+        data = json.loads((out / BUILD_STATE).read_text())
+        return data if isinstance(data, dict) else {}
+    except (OSError, ValueError):
+        return {}
+
+
+def _recorded_files(before: Mapping[str, Any]) -> WorkspaceFiles:
+    raw = before.get("files")
+    if not isinstance(raw, dict):
+        return {}
+    out: WorkspaceFiles = {}
+    for package, members in raw.items():
+        if isinstance(members, dict):
+            out[package] = {rel: (str(v[0]), bool(v[1])) for rel, v in members.items()
+                            if isinstance(v, list) and len(v) == 2}
+    return out
+
+
+def plan_build(project: Project, comp: Component, image_id: str, *, full: bool = False) -> BuildPlan:
+    """Which packages of ``comp`` must be (re)built, from the last successful build's state.
+
+    Unless ``full``, an edit that only changes plain-copied files becomes a list of patches.
+    """
+    assert comp.folder is not None
+    ws = project.root / comp.folder
+    out = project.build_dir(comp.name)
+    roots, files = workspace_packages(ws)
+    packages = {name: _package_hash(roots[name], members) for name, members in files.items()}
+    before = _previous(out)
+    old: dict[str, str] = before.get("packages", {}) if isinstance(before.get("packages"), dict) else {}
+    changed: list[str] | None
+    patches: list[install_patch.Patch] = []
+    copies = before.get("copies") if isinstance(before.get("copies"), dict) else None
+    if not (out / "install").is_dir() or before.get("image") != image_id:
+        changed, reason = None, "first build" if not before else "image changed"
+    elif set(old) != set(packages):
+        changed, reason = None, "packages added or removed"
+    else:
+        changed = sorted(name for name, digest in packages.items() if old.get(name) != digest)
+        reason = f"changed: {', '.join(changed)}" if changed else "up to date"
+        if changed and not full and copies is not None:
+            patches, why = install_patch.plan_patches(changed, _recorded_files(before), files, copies)
+            if patches:
+                reason += f" ({len(patches)} file{'s' if len(patches) != 1 else ''} copied, no colcon)"
+            elif why:
+                reason += f" (colcon: {why})"
+    image = f"{naming.component_image(project.robot, project.name, comp.name)}:latest"
+    return BuildPlan(component=comp, image=image, image_id=image_id, arch=project.robot.host(comp.runs_on).arch.value,
+                     workspace=ws, out=out, packages=packages, files=files, roots=roots, changed=changed, reason=reason,
+                     patches=tuple(patches), copies=copies)
+
+
+def _log_tail(out: Path, package: str, lines: int = 30) -> str:
+    latest = out / "log" / "latest_build"
+    for log in (latest / package / "stdout_stderr.log", latest / "logger_all.log"):
+        try:
+            text = log.read_text(errors="replace").splitlines()
+        except OSError:
+            continue
+        return "\n".join(f"  {line}" for line in text[-lines:])
+    return f"(no log under {latest})"
+
+
+# ---------------------------------------------------------------------------------------------- colcon
+
+
+def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callable[[str, str], None]) -> Outcome:
+    """colcon build of one component in a throw-away container of its staged image."""
+    from robocore.adapters.image_builder import run_streaming
+
+    for sub in ("build", "install", "log"):
+        (plan.out / sub).mkdir(parents=True, exist_ok=True)
+    uid, gid = os.getuid(), os.getgid()
+    volumes = {
+        str(plan.workspace): naming.CONTAINER_WS,
+        str(plan.out / "build"): colcon.CONTAINER_BUILD,
+        str(plan.out / "install"): naming.CONTAINER_INSTALL,
+        str(plan.out / "log"): colcon.CONTAINER_LOG,
+    }
+    events: list[colcon.PackageEvent] = []
+    other: list[str] = []
+    start = time.monotonic()
+    name = plan.component.name
+    native = native_arch()
+    client = _client()
+    try:
+        update(name, "colcon build")
+
+        def on_line(line: str) -> None:
+            event = colcon.parse_event(line)
+            if event is None:
+                if line.strip():
+                    other.append(line)
+                return
+            events.append(event)
+            if event.state == "started":
+                update(name, f"building {event.package}")
+            else:
+                secs = f" {event.seconds:.1f}s" if event.seconds is not None else ""
+                report.info(f"{name}: {event.package} {event.state}{secs}")
+
+        attempts = [plan.argv] + ([colcon.workspace_build_argv()] if plan.changed else [])
+        for argv in attempts:
+            code = run_streaming(
+                client, plan.image, argv, user=f"{uid}:{gid}", volumes=volumes,
+                environment={"HOME": "/tmp", "ROBOCORE_NO_INSTALL": "1", "PYTHONDONTWRITEBYTECODE": "1"},
+                labels={naming.LABEL_PROJECT: project.name, naming.LABEL_COMPONENT: name,
+                        naming.LABEL_ROLE: "build"},
+                platform=dockerfiles.platform(plan.arch) if plan.arch != native else None, on_line=on_line,
+            )
+            # an image whose colcon lacks colcon-package-selection: build everything instead
+            if not (code == 2 and any("--packages-above" in line for line in other[-3:])):
+                break
+            other.clear()
+    finally:
+        client.close()
+    if code != 0:
+        failed = [e.package for e in events if e.state == "failed"]
+        if failed:
+            raise BuildError(f"component {name}: colcon build failed in package {failed[0]} "
+                             f"(log: {plan.out.relative_to(project.root)}/log/latest_build/{failed[0]})\n"
+                             + _log_tail(plan.out, failed[0]),
+                             hint=f"fix it in {plan.component.folder}, then run build --component {name}")
+        tail = "\n".join(f"  {line}" for line in other[-20:])
+        raise BuildError(f"component {name}: colcon build exited {code}\n{tail}")
+    record_build(plan)
+    built = [e.package for e in events if e.state == "finished"]
+    return Outcome(what=name, role="build", action="built", reason=plan.reason, image_id=plan.image_id,
+                   seconds=time.monotonic() - start, packages=built)
+
+
+def build(options: Options, *, component: str | None, full: bool = False) -> None:
+    """colcon-build component workspaces inside their staged images (incremental; plain copies patched)."""
+    project = options.load()
+    report = Reporter(options)
+    comps = [c for c in _selected(project, component) if c.folder is not None]
+    if component and not comps:
+        raise UsageError(f"component {component!r} has no folder: nothing to build")
+    from robocore.adapters.image_builder import image_state
+
+    client = _client()
+    plans: list[BuildPlan] = []
+    for comp in comps:
+        ref = f"{naming.component_image(project.robot, project.name, comp.name)}:latest"
+        state = image_state(client, ref)
+        if state is None:
+            if options.dry_run:
+                report.plain(f"# {comp.name}: no staged image {ref} yet (run stage)")
+                continue
+            raise BuildError(f"component {comp.name}: no staged image {ref}", hint="run `stage` first")
+        check_emulation(project.robot.host(comp.runs_on).arch.value, native_arch(), f"component {comp.name}")
+        plans.append(plan_build(project, comp, state.id, full=full))
+    client.close()
+    outcomes: list[Outcome] = []
+    todo: list[BuildPlan] = []
+    for plan in plans:
+        if plan.changed == []:
+            outcomes.append(Outcome(what=plan.component.name, role="build", action="up-to-date"))
+            continue
+        if options.dry_run:
+            if plan.patches:
+                report.plain(f"# {plan.component.name} ({plan.reason}):")
+                for patch in plan.patches:
+                    report.plain(f"  copy {patch.package}/{patch.source} -> " + ", ".join(patch.targets))
+            else:
+                report.plain(f"# {plan.component.name} ({plan.reason}) in {plan.image}:")
+                report.plain("  " + " ".join(plan.argv))
+            outcomes.append(Outcome(what=plan.component.name, role="build", action="would-build", reason=plan.reason))
+            continue
+        if plan.patches:
+            patched = apply_patches(plan)
+            if patched is not None:
+                outcomes.append(patched)
+                continue
+            plan = dataclasses.replace(plan, patches=(), reason=plan.reason.split(" (")[0]
+                                       + " (colcon: an output differs from what the last build wrote)")
+        todo.append(plan)
+    outcomes += _run_colcon(project, todo, report)
+    report.done(outcomes)
+
+
+def _run_colcon(project: Project, todo: Sequence[BuildPlan], report: Reporter) -> list[Outcome]:
+    """colcon builds of several components side by side (one container each); every one is tried."""
+    if not todo:
+        return []
+    outcomes: list[Outcome] = []
+    errors: list[BaseException] = []
+    with report.progress() as update, ThreadPoolExecutor(max_workers=min(MAX_PARALLEL, len(todo))) as pool:
+        futures = [pool.submit(_colcon, project, plan, report, update) for plan in todo]
+        for future in futures:
+            try:
+                outcomes.append(future.result())
+            except BaseException as exc:  # collected: the other components still build
+                errors.append(exc)
+    if errors:
+        report.done(outcomes)
+        raise errors[0]
+    return outcomes
+
+
+# ---------------------------------------------------------------------------------------------- state
+
+
+def output_candidates(out: Path, files: WorkspaceFiles) -> dict[str, str]:
+    """Digests of the regular files under ``out``/{install,build} named like some source file."""
+    names = {rel.rsplit("/", 1)[-1] for members in files.values() for rel in members}
+    found: dict[str, str] = {}
+    for folder in COPY_FOLDERS:
+        for dirpath, _, filenames in os.walk(out / folder):
+            for name in filenames:
+                if name not in names:
+                    continue
+                path = Path(dirpath) / name
+                if path.is_symlink() or not path.is_file():
+                    continue
+                found[path.relative_to(out).as_posix()] = digest_bytes(path.read_bytes())
+    return found
+
+
+def record_build(plan: BuildPlan) -> None:
+    """Write the build state after a successful colcon run: package hashes, files and their copies."""
+    outputs = output_candidates(plan.out, plan.files)
+    copies = {package: install_patch.verbatim_copies(members, outputs) for package, members in plan.files.items()}
+    _write_state(plan, copies)
+
+
+def _write_state(plan: BuildPlan, copies: Mapping[str, Mapping[str, list[str]]]) -> None:
+    state = {
+        "image": plan.image_id,
+        "packages": plan.packages,
+        "files": {p: {rel: [d, x] for rel, (d, x) in sorted(m.items())} for p, m in sorted(plan.files.items())},
+        "copies": copies,
+    }
+    write_atomic(plan.out / BUILD_STATE, json.dumps(state, indent=1, sort_keys=True))
+
+
+# ---------------------------------------------------------------------------------------------- fast path
+
+
+def apply_patches(plan: BuildPlan) -> Outcome | None:
+    """Write each patched source over its recorded copies; None (nothing written) if any copy was changed.
+
+    Every target is checked first (a regular file still holding the recorded content), then each is
+    replaced atomically with the new content and the target's permissions.
+    """
+    start = time.monotonic()
+    for patch in plan.patches:
+        for target in patch.targets:
+            path = plan.out / target
+            if path.is_symlink() or not path.is_file() or digest_bytes(path.read_bytes()) != patch.old_digest:
+                return None
+    for patch in plan.patches:
+        source = _source_path(plan, patch)
+        data = source.read_bytes()
+        if digest_bytes(data) != patch.digest:  # edited again since planning: let colcon do it
+            return None
+        for target in patch.targets:
+            _replace(plan.out / target, data)
+    assert plan.copies is not None
+    _write_state(plan, plan.copies)
+    return Outcome(what=plan.component.name, role="build", action="built", reason=plan.reason,
+                   image_id=plan.image_id, seconds=time.monotonic() - start,
+                   packages=sorted({p.package for p in plan.patches}))
+
+
+def _source_path(plan: BuildPlan, patch: install_patch.Patch) -> Path:
+    root = plan.roots[patch.package]
+    return plan.workspace / root / patch.source if root else plan.workspace / patch.source
+
+
+def _replace(path: Path, data: bytes) -> None:
+    mode = path.stat().st_mode & 0o7777
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+        os.chmod(tmp, mode)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
