@@ -12,9 +12,10 @@ edited text:
             step, FROM the same staged image) -> `docker save | ssh host docker load` -> replace
             the talker container on the host with one from that image
 
-Prints both times, the ratio (goal >= 10x) and the bytes sync moved for the edit (goal < 50 KB).
+For each link speed (default: the unshaped bridge and 100 Mbit/s), prints both times, the ratio
+(goal >= 10x) and the bytes sync moved for the edit (goal < 50 KB).
 
-    python bench/deploy.py [--rounds N]
+    python bench/deploy.py [--rounds N] [--links 0,100] [--separate]
 """
 
 from __future__ import annotations
@@ -172,32 +173,45 @@ def naive_path(project: Path, client: Any, fleet: RobotFleet, text: str) -> tupl
 
 
 def shape_link(fleet: RobotFleet, mbit: float) -> None:
-    """Limit traffic towards the robot host: tbf on the host-side veth of its eth0."""
+    """Limit traffic towards the robot host to ``mbit`` (tc tbf on the host-side veth of its eth0); 0: unshaped."""
     host = fleet.hosts[0]
     index = host.ssh(fleet, "cat", "/sys/class/net/eth0/iflink").strip()
     links = subprocess.run(["ip", "-o", "link"], capture_output=True, text=True, check=True).stdout
     veth = next(line.split(":")[1].strip().split("@")[0] for line in links.splitlines()
                 if line.split(":")[0].strip() == index)
+    if not mbit:
+        subprocess.run(["tc", "qdisc", "del", "dev", veth, "root"], capture_output=True)
+        return
     subprocess.run(["tc", "qdisc", "replace", "dev", veth, "root", "tbf", "rate", f"{mbit}mbit",
                     "burst", "256kb", "latency", "100ms"], check=True)
 
 
+Result = tuple[float, int, dict[str, float]]
+
+
+def describe_link(mbit: float) -> str:
+    return f"{mbit:g} Mbit/s (tc tbf)" if mbit else "unshaped bridge"
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--rounds", type=int, default=1, help="measure each path this many times (alternating)")
-    parser.add_argument("--link-mbit", type=float, default=0,
-                        help="shape the link to the robot host to this many Mbit/s (tc tbf on its veth; "
-                             "0: unshaped local bridge). Applies to both paths.")
+    parser.add_argument("--rounds", type=int, default=2, help="measure each path this many times per link")
+    parser.add_argument("--links", default="0,100",
+                        help="comma-separated link speeds to the robot host in Mbit/s, each measured in turn "
+                             "(tc tbf on its veth; 0: this machine's unshaped Docker bridge). Default: the "
+                             "bridge and a 100 Mbit/s Wi-Fi-class link")
     parser.add_argument("--separate", action="store_true",
                         help="robocore path as three commands (build; sync; run), each timed, instead of the one "
                              "command `build sync run`")
     args = parser.parse_args()
+    links = [float(x) for x in args.links.split(",") if x.strip()]
+    if any(links) and shutil.which("tc") is None:
+        raise SystemExit("--links: shaping needs tc (iproute2) and root; use --links 0 for the unshaped bridge only")
     parent = Path(tempfile.mkdtemp(prefix="robocore-bench-deploy-"))
+    results: dict[float, tuple[list[Result], list[Result]]] = {}
     try:
         with RobotFleet(1) as fleet:
             project = make_project(parent, fleet.hosts[0].ip)
-            if args.link_mbit:
-                shape_link(fleet, args.link_mbit)
             t = time.monotonic()
             for step in ("prepare-base", "stage", "build", "sync", "run"):
                 robocore(project, step, "--quiet")
@@ -205,37 +219,41 @@ def main() -> int:
             wait_heard(client, f"{PROJECT}-listener", "hello from talker")
             print(f"setup (not timed): prepare-base, stage, build, sync, run incl. first image delivery: "
                   f"{time.monotonic() - t:.1f} s", flush=True)
-            fast: list[tuple[float, int, dict[str, float]]] = []
-            naive: list[tuple[float, int, dict[str, float]]] = []
-            for n in range(args.rounds):
-                # robocore first: it starts from the container run created (install tree mounted)
-                token = uuid.uuid4().hex[:8]  # unique text: no build cache can serve an earlier round
-                fast.append(robocore_path(project, client, f"robocore edit {n} {token}", separate=args.separate))
-                naive.append(naive_path(project, client, fleet, f"naive edit {n} {token}"))
-                robocore(project, "run", "--quiet")  # back to robocore's own container for the next round
+            for mbit in links:
+                shape_link(fleet, mbit)
+                fast: list[Result] = []
+                naive: list[Result] = []
+                for n in range(args.rounds):
+                    # robocore first: it starts from the container run created (install tree mounted)
+                    token = uuid.uuid4().hex[:8]  # unique text: no build cache can serve an earlier round
+                    fast.append(robocore_path(project, client, f"robocore edit {n} {token}", separate=args.separate))
+                    naive.append(naive_path(project, client, fleet, f"naive edit {n} {token}"))
+                    robocore(project, "run", "--quiet")  # back to robocore's own container for the next round
+                    print(f"{describe_link(mbit)}, round {n + 1}: robocore {fast[-1][0]:.1f} s, "
+                          f"naive {naive[-1][0]:.1f} s", flush=True)
+                results[mbit] = (fast, naive)
+            shape_link(fleet, 0)
             client.close()
     finally:
         shutil.rmtree(parent, ignore_errors=True)
         subprocess.run(["docker", "image", "rm", "-f", f"{PROJECT}-talker-naive:bench"], capture_output=True)
-    best_fast = min(fast, key=lambda r: r[0])
-    best_naive = min(naive, key=lambda r: r[0])
     print()
-    print(f"{'path':<10} {'seconds':>8} {'bytes moved':>14}   steps")
-    for label, (secs, moved, steps) in (("robocore", best_fast), ("naive", best_naive)):
-        detail = ", ".join(f"{k} {v:.1f}s" for k, v in steps.items())
-        print(f"{label:<10} {secs:>8.1f} {moved:>14,}   {detail}")
-    ratio = best_naive[0] / best_fast[0]
+    print(f"{'link':<22} {'path':<9} {'seconds':>8} {'bytes moved':>14}   steps (best of {args.rounds} rounds)")
+    verdicts = []
+    for mbit, (fast, naive) in results.items():
+        best_fast = min(fast, key=lambda r: r[0])
+        best_naive = min(naive, key=lambda r: r[0])
+        for label, (secs, moved, steps) in (("robocore", best_fast), ("naive", best_naive)):
+            detail = ", ".join(f"{k} {v:.1f}s" for k, v in steps.items())
+            print(f"{describe_link(mbit):<22} {label:<9} {secs:>8.1f} {moved:>14,}   {detail}")
+        ratio = best_naive[0] / best_fast[0]
+        verdicts.append(f"{describe_link(mbit)}: ratio naive/robocore {ratio:.1f}x (goal >= 10x) -> "
+                        f"{'met' if ratio >= 10 else 'NOT met'}; sync moved {best_fast[1]:,} bytes (goal < 50 KB) -> "
+                        f"{'met' if best_fast[1] < 50_000 else 'NOT met'}")
     print()
-    print(f"ratio naive/robocore: {ratio:.1f}x (goal >= 10x)  -> {'met' if ratio >= 10 else 'NOT met'}")
-    print(f"bytes moved by sync for the edit: {best_fast[1]:,} (goal < 50 KB) -> "
-          f"{'met' if best_fast[1] < 50_000 else 'NOT met'}; naive moved {best_naive[1]:,} bytes")
-    link = f"{args.link_mbit:g} Mbit/s (tc tbf)" if args.link_mbit else "unshaped Docker bridge on this machine"
-    print(f"link to the robot host: {link}")
-    print(f"rounds: {args.rounds}; best of each shown; all robocore: "
-          + ", ".join(f"{r[0]:.1f}s" for r in fast) + "; all naive: " + ", ".join(f"{r[0]:.1f}s" for r in naive))
+    print("\n".join(verdicts))
     return 0
 
 
 if __name__ == "__main__":
     sys.exit(main())
-

@@ -159,13 +159,13 @@ def run(
     command.run(_options(c, dry_run=dry_run, quiet=quiet, json=json), host=host or None, tag=tag or None)
 
 
-@task(help={"host": "Stop only this host.", "dry_run": "Print what would be removed."})
+@task(help={"host": "Stop only this host.", "dry_run": "Print what would be removed.", "quiet": "Only errors."})
 @reported
-def down(c: Context, host: str = "", dry_run: bool = False) -> None:
+def down(c: Context, host: str = "", dry_run: bool = False, quiet: bool = False) -> None:
     """Stop and remove the robot's containers."""
     from robocore.commands import run as command
 
-    command.down(_options(c, dry_run=dry_run), host=host or None)
+    command.down(_options(c, dry_run=dry_run, quiet=quiet), host=host or None)
 
 
 @task(help={"json": "Machine-readable output.", "dry_run": "Print what would be queried."})

@@ -42,7 +42,7 @@ def test_default_server_is_first_host_on_11811() -> None:
     assert env["ROS_DOMAIN_ID"] == "7"
     assert env["RMW_IMPLEMENTATION"] == "rmw_fastrtps_cpp"
     assert "ROS_SUPER_CLIENT" not in env
-    assert "FASTRTPS_DEFAULT_PROFILES_FILE" not in env
+    assert env["FASTRTPS_DEFAULT_PROFILES_FILE"] == env["FASTDDS_DEFAULT_PROFILES_FILE"] == "/robocore/dds/client.xml"
 
 
 @pytest.mark.parametrize("distro", ["humble", "jazzy"])
@@ -106,7 +106,7 @@ def test_super_client_env_points_at_a_generated_profile(distro: str) -> None:
 def test_udp_transport_settings() -> None:
     jazzy = robot("jazzy", transport="udp")
     assert dds.client_environment(jazzy)["FASTDDS_BUILTIN_TRANSPORTS"] == "UDPv4"
-    assert "FASTRTPS_DEFAULT_PROFILES_FILE" not in dds.client_environment(jazzy)
+    assert parse(dds.client_xml(jazzy)).findtext(".//transport_descriptor/type") == "UDPv4"  # same as the variable
     assert "FASTDDS_BUILTIN_TRANSPORTS" not in dds.client_environment(robot("jazzy"))
     # Humble's Fast DDS 2.6 has no FASTDDS_BUILTIN_TRANSPORTS: a transport-only XML profile.
     humble = robot("humble", transport="udp")
@@ -117,7 +117,23 @@ def test_udp_transport_settings() -> None:
     assert client.find(".//transport_descriptor/type").text == "UDPv4"  # type: ignore[union-attr]
     # It must not set the discovery protocol, or ROS_DISCOVERY_SERVER would be ignored.
     assert client.find(".//discoveryProtocol") is None
-    assert "client.xml" not in dds.profile_files(robot("humble"))
+    assert parse(dds.profile_files(robot("humble"))["client.xml"]).find(".//transport_descriptor") is None
+
+
+@pytest.mark.parametrize("distro", ["humble", "jazzy", "kilted"])
+def test_profiles_shorten_discovery_through_the_server(distro: str) -> None:
+    r = robot(distro)
+    for xml in (dds.client_xml(r), dds.super_client_xml(r)):
+        config = parse(xml).find(".//discovery_config")
+        assert config is not None
+        period = config.find("clientAnnouncementPeriod/nanosec")
+        assert period is not None and period.text == str(dds.CLIENT_ANNOUNCEMENT_MS * 1_000_000)
+        assert config.findtext("initialAnnouncements/count") == str(dds.INITIAL_ANNOUNCEMENTS[0])
+    # the plain client leaves the protocol to ROS_DISCOVERY_SERVER
+    assert parse(dds.client_xml(r)).find(".//discoveryProtocol") is None
+    server = parse(dds.server_profile_xml(r)).find(".//discovery_config")
+    assert server is not None and server.findtext("discoveryProtocol") == "SERVER"
+    assert server.findtext("clientAnnouncementPeriod/nanosec") == str(dds.SERVER_ANNOUNCEMENT_MS * 1_000_000)
 
 
 # ------------------------------------------------------------------ server argv
