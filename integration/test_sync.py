@@ -12,6 +12,7 @@ import hashlib
 import json
 import os
 import random
+import shlex
 import shutil
 import signal
 import subprocess
@@ -200,6 +201,39 @@ def test_interrupted_sync_leaves_current_on_a_complete_release(fleet: RobotFleet
     assert "staging" not in fleet.hosts[0].ssh(fleet, "ls", "/root/robocore/talker").split()
     big.unlink()
     sync_json(project, "--host", "robot-a")
+
+
+def test_a_second_sync_to_a_host_being_synced_is_refused_and_names_the_first(
+        fleet: RobotFleet, project: Path) -> None:
+    """Another developer's sync holds robot-a's lock: this sync must not touch robot-a (its staging
+    would mix two trees), must say who holds it, and must still sync robot-b. Negative control: once
+    the lock is free, the same sync goes through."""
+    from robocore.plan import sync as plan
+
+    module = project / ".robocore" / "build" / "talker" / "install" / "demo_talker" / "lib" / "talker.py"
+    module.write_text(module.read_text() + "LOCKED_EDIT = 1\n")
+    before = current_target(fleet, 0, "talker")
+    holder = subprocess.Popen(
+        ["ssh", "-F", str(fleet.ssh_config), f"root@{fleet.hosts[0].ip}", "--",
+         shlex.join(plan.lock_argv("/root/robocore", "alice@her-laptop (pid 4242)"))],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == plan.LOCKED
+        proc = robocore(project, "sync", "--json", check=False)
+        assert proc.returncode != 0
+        assert "host robot-a: another sync to this host is in progress: alice@her-laptop (pid 4242)" in proc.stderr
+        assert "Traceback" not in proc.stderr
+        assert current_target(fleet, 0, "talker") == before
+        assert "staging" not in fleet.hosts[0].ssh(fleet, "ls", "/root/robocore/talker").split()
+        assert {row["host"] for row in json.loads(proc.stdout)["results"]} == {"robot-b"}
+    finally:
+        assert holder.stdin is not None
+        holder.stdin.close()
+        holder.wait(timeout=30)
+    after = sync_json(project)
+    assert after["robot-a"]["changed"] and current_target(fleet, 0, "talker") != before
+    remote = "/root/robocore/talker/current/install/demo_talker/lib/talker.py"
+    assert "LOCKED_EDIT = 1" in fleet.hosts[0].ssh(fleet, "cat", remote)
 
 
 def test_stopped_host_is_named_fast_and_the_other_host_still_syncs(fleet: RobotFleet, project: Path) -> None:

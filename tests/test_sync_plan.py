@@ -121,3 +121,22 @@ def test_manifest_digest_sees_size_time_and_deletions() -> None:
     assert plan.manifest_digest(list(reversed(rows))) == base
     assert plan.manifest_digest(rows[:1]) != base
     assert plan.manifest_digest([rows[0], ("install/b", 2, 21, 0o644, "")]) != base
+
+
+def test_the_sync_lock_admits_one_holder_and_names_it_to_the_next(tmp_path: Path) -> None:
+    """The real lock script, run locally with sh: a second taker is refused at once with the first's line."""
+    root = str(tmp_path / "robot root;$(touch pwned)")
+    first = subprocess.Popen(plan.lock_argv(root, "alice@laptop (pid 1)"), stdin=subprocess.PIPE,
+                             stdout=subprocess.PIPE, text=True)
+    assert first.stdout is not None and first.stdin is not None
+    assert first.stdout.readline().strip() == plan.LOCKED
+    second = subprocess.run(plan.lock_argv(root, "bob"), stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                            timeout=10)
+    assert second.returncode == plan.LOCK_BUSY and second.stdout == ""
+    assert second.stderr.strip() == "alice@laptop (pid 1)"
+    first.stdin.close()
+    assert first.wait(timeout=10) == 0
+    third = subprocess.run(plan.lock_argv(root, "bob"), stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                           timeout=10)
+    assert third.returncode == 0 and third.stdout.strip() == plan.LOCKED
+    assert not (tmp_path / "pwned").exists() and not Path("pwned").exists()

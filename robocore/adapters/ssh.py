@@ -12,16 +12,18 @@ argument is quoted with :func:`shlex.quote` here, in one place, and never interp
 from __future__ import annotations
 
 import os
+import selectors
 import shlex
 import subprocess
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from robocore.config.model import Host
-from robocore.errors import HostError, ToolMissing
+from robocore.errors import HostError, RobocoreError, ToolMissing
 
 CONFIG_ENV = "ROBOCORE_SSH_CONFIG"
 #: Seconds to wait for a TCP connection and for the SSH handshake before calling a host unreachable.
@@ -100,6 +102,47 @@ def run(host: Host, remote: Sequence[str], *, timeout: float = 120, stdin: bytes
     if check and proc.returncode != 0:
         raise HostError(f"host {host.name} ({host.ip}): {describe_failure(proc, remote)}", hint=_hint(proc))
     return proc
+
+
+@contextmanager
+def hold(host: Host, remote: Sequence[str], *, ready: str, what: str, timeout: float = 3 * CONNECT_TIMEOUT,
+         refused: Callable[[int, str], RobocoreError | None] | None = None) -> Iterator[None]:
+    """Keep ``remote`` running on ``host`` for the duration of the block (a lock held over ssh).
+
+    ``remote`` prints ``ready`` once it holds what it holds, and keeps it until its stdin closes,
+    which happens when the block ends, or when robocore dies, however it dies. ``what`` names it in
+    messages. If it exits instead,
+    ``refused(exit code, stderr)`` may turn that into a specific error; otherwise a HostError.
+    """
+    require_ssh()
+    proc = subprocess.Popen(ssh_argv(host, remote), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    assert proc.stdin is not None and proc.stdout is not None and proc.stderr is not None
+    try:
+        with selectors.DefaultSelector() as selector:
+            selector.register(proc.stdout, selectors.EVENT_READ)
+            line = proc.stdout.readline().decode(errors="replace").strip() if selector.select(timeout) else None
+        if line is None:
+            raise HostError(f"host {host.name} ({host.ip}): {what}: no answer within "
+                            f"{timeout:.0f} s", hint="is the host up and reachable over ssh?")
+        if line != ready:
+            code = proc.wait(timeout=timeout)
+            err = proc.stderr.read().decode(errors="replace")
+            error = refused(code, err) if refused else None
+            done = subprocess.CompletedProcess(proc.args, code, b"", err.encode())
+            raise error or HostError(f"host {host.name} ({host.ip}): {describe_failure(done, remote)}",
+                                     hint=_hint(done))
+        yield
+    finally:
+        if proc.poll() is None:
+            proc.stdin.close()
+            try:
+                proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        for stream in (proc.stdin, proc.stdout, proc.stderr):
+            stream.close()
 
 
 def describe_failure(proc: subprocess.CompletedProcess[bytes], remote: Sequence[str]) -> str:

@@ -14,6 +14,7 @@ changed.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import os
 import shlex
@@ -26,7 +27,7 @@ from typing import Any
 from robocore.adapters import rsync, ssh
 from robocore.commands.context import Options
 from robocore.config.model import Host
-from robocore.errors import GroupError, RobocoreError, UsageError
+from robocore.errors import GroupError, HostError, RobocoreError, UsageError
 from robocore.files import write_atomic
 from robocore.plan import layout
 from robocore.plan import sync as plan
@@ -131,11 +132,41 @@ def sync(options: Options, *, host: str | None) -> None:
 
 
 def sync_host(project: Project, host: Host, items: list[plan.ComponentSync]) -> list[ComponentResult]:
-    """Sync every item of one host, one release id for all; record what the host now runs.
+    """Sync every item of one host, one release id for all, under the host's sync lock; record what
+    the host now runs.
 
     Three kinds of remote steps: one ``prepare`` for all components, one rsync per component
     whose tree may differ, one ``finalize`` (and one ``discard``) for all components.
     """
+    with ssh.hold(host, plan.lock_argv(host.deploy_root, _holder()), ready=plan.LOCKED,
+                  what="taking the sync lock", refused=functools.partial(_lock_refused, host)):
+        return _sync_locked(project, host, items)
+
+
+def _holder() -> str:
+    """Who is syncing, for a developer who finds the lock taken: user@machine, pid and time."""
+    import getpass
+    import socket
+
+    try:
+        user = getpass.getuser()
+    except (KeyError, OSError):
+        user = str(os.getuid())
+    return f"{user}@{socket.gethostname()} (pid {os.getpid()}) since {time.strftime('%Y-%m-%d %H:%M:%S %Z')}"
+
+
+def _lock_refused(host: Host, code: int, stderr: str) -> RobocoreError | None:
+    if code == plan.LOCK_BUSY:
+        holder = stderr.strip().splitlines()[-1] if stderr.strip() else "another robocore"
+        return HostError(f"host {host.name}: another sync to this host is in progress: {holder}",
+                         hint="wait for it to finish, then sync again")
+    if code == 127:
+        return HostError(f"host {host.name}: flock is not installed there (robocore locks syncs with it)",
+                         hint="install util-linux on the host (apt-get install util-linux)")
+    return None
+
+
+def _sync_locked(project: Project, host: Host, items: list[plan.ComponentSync]) -> list[ComponentResult]:
     release_id = plan.new_release_id()
     rsh = ssh.rsh_command(host)
     recorded = _read_state(project, host.name)
@@ -231,6 +262,7 @@ def _print_dry_run(project: Project, hosts: list[Host], plans: dict[str, list[pl
         if not items:
             continue
         out.print(f"# {h.name}: " + ", ".join(f"{i.component} -> {i.root}" for i in items), markup=False)
+        out.print(f"# all of it while holding flock on {h.deploy_root}/{plan.LOCK_FILE} there", markup=False)
         out.print(shlex.join(ssh.ssh_argv(h, plan.prepare_argv(items))), markup=False, soft_wrap=True)
         for item in items:
             out.print(shlex.join(plan.rsync_argv(item, h, rsh)), markup=False, soft_wrap=True)

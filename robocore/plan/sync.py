@@ -17,6 +17,12 @@ partial ``staging``. If nothing changed, ``staging`` is dropped and ``current`` 
 component whose local tree has the same quick-check digest (paths, sizes, mtimes, modes) as
 the release ``current`` names is not rsynced at all.
 
+One sync at a time per host: the whole sequence runs while robocore holds ``flock`` on
+``<mount_root>/.robocore-sync.lock`` there (:func:`lock_argv`), so two developers syncing to
+one robot never write into the same ``staging``; the second is told who holds it and stops.
+The lock lives as long as the ssh session that holds it: it is released when robocore ends,
+however it ends.
+
 Remote steps are argv lists: a fixed POSIX sh script run with ``sh -c SCRIPT sh ARG...``, its
 arguments passed as positional parameters, never interpolated into the script.
 """
@@ -70,6 +76,26 @@ while [ "$#" -ge 2 ]; do
     echo "current=$live"
 done
 """
+
+#: Exit code of :data:`LOCK_SCRIPT` when another sync holds the lock.
+LOCK_BUSY = 75
+LOCK_FILE = ".robocore-sync.lock"
+LOCKED = "robocore-sync-locked"
+
+# Arguments: the host's mount root, a line saying who syncs. Holds an exclusive flock on the lock
+# file until stdin closes, with the holder line beside it; prints LOCKED once it holds it. If another
+# process holds it: prints that holder's line on stderr and exits LOCK_BUSY at once.
+LOCK_SCRIPT = f"""\
+set -eu
+mkdir -p -- "$1"
+lock="$1/{LOCK_FILE}"
+code=0
+flock -n -E {LOCK_BUSY} -- "$lock" sh -c 'printf "%s\\n" "$1" > "$2.holder"; echo {LOCKED}; exec cat >/dev/null' \\
+    sh "$2" "$lock" || code=$?
+if [ "$code" -eq {LOCK_BUSY} ]; then cat -- "$lock.holder" >&2 2>/dev/null || true; fi
+exit "$code"
+"""
+
 
 # Arguments: component roots: drop their unchanged staging copies.
 DISCARD_SCRIPT = """\
@@ -127,6 +153,14 @@ def is_release_id(text: str) -> bool:
 def remote_sh(script: str, *args: str) -> list[str]:
     """``sh -c SCRIPT sh ARG...``: a fixed script with its arguments as positional parameters."""
     return ["sh", "-c", script, "sh", *args]
+
+
+def lock_argv(mount_root: str, holder: str) -> list[str]:
+    """Remote argv holding the host's sync lock until its stdin closes (see :data:`LOCK_SCRIPT`).
+
+    ``holder`` (who, from where, when) is left beside the lock for whoever finds it taken.
+    """
+    return remote_sh(LOCK_SCRIPT, mount_root, holder)
 
 
 def prepare_argv(items: Sequence[ComponentSync]) -> list[str]:
