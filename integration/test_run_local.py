@@ -154,6 +154,22 @@ def test_unreachable_host_is_named_and_the_others_are_deployed(project_copy: Any
     assert "failed" in proc.stdout and "ok" in proc.stdout  # the per-host summary
 
 
+def test_an_empty_never_deployed_host_is_not_contacted(project_copy: Any, docker_client: Any,
+                                                        run_robocore: Any) -> None:
+    """A spare machine listed in robot.yaml with nothing on it, and offline, must not fail the run;
+    asked for by name (--host), it is contacted and named as unreachable (the control)."""
+    def add_spare(data: dict[str, Any]) -> None:
+        data["hosts"].append({"name": "spare", "ip": "192.0.2.1", "user": "robot"})  # TEST-NET-1: never answers
+
+    root = project_copy(edit=add_spare)
+    proc = run_robocore(root, "run", check=False, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "not contacted" in proc.stdout
+    assert set(ids(docker_client, root.name)) == {"discovery-0", "talker", "listener"}
+    named = run_robocore(root, "run", "--host", "spare", check=False, timeout=120)
+    assert named.returncode == 8 and "spare" in named.stderr and "192.0.2.1" in named.stderr, named.stderr
+
+
 def test_status_shows_components_and_nodes(running: Path, run_robocore: Any) -> None:
     status = json.loads(run_robocore(running, "status", "--json").stdout)
     rows = {row["component"]: row for row in status["components"]}

@@ -155,3 +155,21 @@ def test_key_paths_render_like_the_file() -> None:
 def test_did_you_mean() -> None:
     assert did_you_mean("rpi6", ["rpi5", "jetson"]) == "; did you mean 'rpi5'?"
     assert did_you_mean("xyz", ["rpi5", "jetson"]) == ""
+
+
+def test_a_loopback_discovery_server_is_fine_while_remote_hosts_run_nothing() -> None:
+    text = """\
+ros_distro: jazzy
+hosts:
+  - {name: dev, ip: 127.0.0.1}
+  - {name: spare, ip: 10.0.0.9}
+components:
+  - {name: talker, runs_on: dev, image: busybox}
+"""
+    assert parse_robot_text(text).host("spare").ip == "10.0.0.9"
+    with pytest.raises(ConfigError) as caught:
+        parse_robot_text(text.replace("runs_on: dev", "runs_on: spare"))
+    assert caught.value.lines() == [
+        "robot.yaml:3: hosts[0].ip: the discovery server runs on the first host by default, but '127.0.0.1' is a "
+        "loopback address that remote hosts (spare) cannot reach; give dev its LAN address, list a remote host first, "
+        "or set discovery.servers"]

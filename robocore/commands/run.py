@@ -40,6 +40,8 @@ T = TypeVar("T")
 
 #: Roles of the containers ``run`` and ``down`` manage (dev shells and build containers are left alone).
 MANAGED_ROLES = (ROLE_COMPONENT, ROLE_DISCOVERY)
+#: Note of a host ``run`` leaves alone: nothing planned there, and no run of this project ever reached it.
+NOT_CONTACTED = "nothing planned, never deployed here: not contacted"
 #: Seconds a host gets to answer before it is reported unreachable.
 HOST_CONNECT_TIMEOUT = 8
 
@@ -405,13 +407,16 @@ def run(options: Options, *, host: str | None, tag: str | None) -> None:
         write_compose_files(project, tag=tag)
 
     def work(h: Host) -> HostOutcome:
+        from robocore.commands.release import history, record_run  # history for rollback
         from robocore.commands.sync import with_synced_release  # restart on a newly synced release
 
         specs = with_synced_release(project, h, host_specs(project, h.name, tag=tag))
+        if not specs and not host and not history(project, h.name):
+            # nothing to start and nothing this project could have left there: an offline spare
+            # machine in robot.yaml must not fail the run
+            return HostOutcome(h.name, notes=[NOT_CONTACTED])
         outcome = deploy_host(project, h, specs, dry_run=options.dry_run, quiet=options.quiet)
         if not options.dry_run:
-            from robocore.commands.release import record_run  # history for rollback
-
             record_run(project, h, tag)
         return outcome
 

@@ -189,8 +189,10 @@ def _references(parts: Parts) -> Iterator[Found]:
 
 
 def _discovery_reachable(parts: Parts) -> Iterator[Found]:
-    """A discovery server on a loopback address cannot be reached from the robot's other machines."""
-    remote = [h.name for _, h in parts.hosts if not h.is_loopback and not h.is_local]
+    """A discovery server on a loopback address cannot be reached from the robot's other machines
+    (those that run components or servers: a spare machine with nothing on it needs no discovery)."""
+    used = {c.runs_on for _, c in parts.components} | {s.host for _, s in parts.servers}
+    remote = [h.name for _, h in parts.hosts if not h.is_loopback and not h.is_local and h.name in used]
     if not remote:
         return
     by_name = {h.name: h for _, h in parts.hosts}
