@@ -45,20 +45,41 @@ def test_unreachable_host_fails_fast_with_its_name(access: DockerAccess) -> None
     assert "nobody" in caught.value.message
 
 
-def test_ssh_settings_come_from_the_robocore_ssh_config(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_ssh_uses_the_robocore_ssh_config_and_one_shared_connection(tmp_path: Path,
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
     config = tmp_path / "ssh_config"
-    config.write_text("Host 10.1.*\n  IdentityFile ~/keys/robot\n  UserKnownHostsFile /tmp/kh\n"
-                      "  StrictHostKeyChecking accept-new\n")
+    config.write_text("Host 10.1.*\n  IdentityFile ~/keys/robot\n")
     monkeypatch.setenv(ssh.CONFIG_ENV, str(config))
     host = Host(name="r", ip="10.1.2.3", user="pi", ssh_port=2200)
-    settings = ssh.paramiko_settings(host, connect_timeout=4)
-    assert settings.params["port"] == 2200 and settings.params["username"] == "pi"
-    assert settings.params["timeout"] == 4 and settings.params["banner_timeout"] == 4
-    assert settings.params["key_filename"] == [str(Path("~/keys/robot").expanduser())]
-    assert settings.known_hosts == ["/tmp/kh"] and settings.strict is False
-    assert ssh.ssh_options(host)[:2] == ["-F", str(config)]
-    other = ssh.paramiko_settings(Host(name="s", ip="192.168.1.1"))
-    assert "key_filename" not in other.params and other.strict is True
+    argv = ssh.ssh_argv(host, ["docker", "system", "dial-stdio"], connect_timeout=4)
+    assert argv[:3] == ["ssh", "-F", str(config)]
+    assert argv[argv.index("-p") + 1] == "2200" and "ConnectTimeout=4" in argv and "BatchMode=yes" in argv
+    assert "ControlMaster=auto" in argv and any(a.startswith("ControlPath=") for a in argv)
+    assert argv[-2:] == ["pi@10.1.2.3", "docker system dial-stdio"]
+
+
+def test_docker_requests_go_through_the_ssh_child(tmp_path: Path) -> None:
+    """The transport with a stand-in for ssh: a local process that answers one HTTP request on its
+    stdin/stdout, as `docker system dial-stdio` relays them to the daemon."""
+    import sys
+
+    from robocore.adapters import docker_over_ssh
+
+    server = tmp_path / "fake_dial_stdio.py"
+    server.write_text(
+        "import sys\n"
+        "head = b''\n"
+        "while not head.endswith(b'\\r\\n\\r\\n'):\n"
+        "    head += sys.stdin.buffer.read(1)\n"
+        "line = head.split(b'\\r\\n')[0].decode()\n"
+        "body = ('{\"path\": \"' + line.split()[1] + '\"}').encode()\n"
+        "sys.stdout.buffer.write(b'HTTP/1.1 200 OK\\r\\nContent-Type: application/json\\r\\n'\n"
+        "    + b'Content-Length: ' + str(len(body)).encode() + b'\\r\\nConnection: close\\r\\n\\r\\n' + body)\n"
+        "sys.stdout.buffer.flush()\n")
+    pool = docker_over_ssh.DialStdioPool([sys.executable, str(server)], timeout=10)
+    response = pool.request("GET", "/v1.41/version")
+    assert response.status == 200 and response.json() == {"path": "/v1.41/version"}
+    pool.close()
 
 
 def test_tls_client_resolves_relative_files_and_fails_by_name(tmp_path: Path) -> None:

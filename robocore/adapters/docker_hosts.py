@@ -1,9 +1,10 @@
 """docker-py clients, one per host: the only place that opens a Docker connection.
 
 - ``local``: this machine's socket (``DOCKER_HOST`` honoured).
-- ``ssh`` (default for remote hosts): paramiko to ``user@ip:ssh_port``, then ``docker system
-  dial-stdio`` on the host, so the daemon never listens on the network. Keys and known hosts come
-  from the ssh_config file robocore uses (:mod:`robocore.adapters.ssh`).
+- ``ssh`` (default for remote hosts): the OpenSSH client to ``user@ip:ssh_port``, then ``docker
+  system dial-stdio`` on the host, as the docker CLI does, so the daemon never listens on the
+  network (:mod:`robocore.adapters.docker_over_ssh`). Keys, known hosts and every other setting
+  come from the ssh configuration robocore uses (:mod:`robocore.adapters.ssh`).
 - ``tls``: ``https://ip:docker_port`` (default 2376) with the host's client certificate; the
   daemon's certificate is verified against ``ca_cert``.
 - ``tcp``: plain ``tcp://ip:docker_port`` (default 2375), only with ``insecure: true``, and
@@ -15,11 +16,11 @@ host is down, so one dead robot never stalls work on the others.
 
 from __future__ import annotations
 
-import functools
+import subprocess
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from robocore.adapters.ssh import CONNECT_TIMEOUT, paramiko_settings
+from robocore.adapters.ssh import CONNECT_TIMEOUT
 from robocore.config.model import DockerAccess, Host
 from robocore.errors import DockerError, HostError
 
@@ -28,8 +29,6 @@ if TYPE_CHECKING:
 
 #: API version used before the real one is negotiated (Docker 20.10 speaks 1.41).
 _BOOTSTRAP_API = "1.41"
-#: Open ssh channels kept per host (sshd allows 10 sessions per connection by default).
-_SSH_POOL = 4
 
 
 def local_client(timeout: int = 120) -> docker.DockerClient:
@@ -91,33 +90,27 @@ def _unreachable(host: Host, exc: BaseException) -> HostError:
 
 def _ssh_client(host: Host, timeout: int, connect_timeout: int) -> docker.DockerClient:
     import docker
-    import paramiko
 
-    settings = paramiko_settings(host, connect_timeout=connect_timeout)
-    base_url = f"ssh://{host.user}@{host.ip}:{host.ssh_port}"
+    from robocore.adapters import docker_over_ssh, ssh
+
+    # One ssh session first: it opens the connection that the Docker requests then share, tells
+    # the API version, and, when something is wrong, says what in ssh's or docker's own words.
+    check = ["docker", "version", "--format", "{{.Server.APIVersion}}"]
     try:
-        ssh = paramiko.SSHClient()
-        ssh.load_system_host_keys()
-        for path in settings.known_hosts:
-            if Path(path).is_file():
-                ssh.load_host_keys(path)
-        ssh.set_missing_host_key_policy(paramiko.RejectPolicy() if settings.strict else paramiko.AutoAddPolicy())
-        ssh.connect(**settings.params)
-        transport = ssh.get_transport()
-        if transport is not None:
-            transport.set_keepalive(5)
-        # use_ssh_client=True only stops docker-py from opening its own paramiko connection (which
-        # has no timeouts); its adapter then gets ours before any request is made.
-        client = docker.DockerClient(base_url=base_url, version=_BOOTSTRAP_API, timeout=timeout,
-                                     use_ssh_client=True)
-        api: Any = client.api
-        adapter: Any = api._custom_adapter
-        adapter.ssh_client = ssh
-        adapter.ssh_params = settings.params
-        adapter.get_connection = functools.partial(_one_pool, adapter)
-        api._version = api._retrieve_server_version()
+        proc = ssh.run(host, check, timeout=2 * connect_timeout + 10, check=False, connect_timeout=connect_timeout)
+    except HostError as exc:
+        raise HostError(f"host {host.name}: cannot reach its Docker daemon at {describe(host)}: {exc.message}",
+                        hint=exc.hint) from None
+    if proc.returncode != 0:
+        raise _ssh_refused(host, proc, check)
+    version = proc.stdout.decode(errors="replace").strip() or _BOOTSTRAP_API
+    try:
+        client = docker.DockerClient(base_url=f"ssh://{host.user}@{host.ip}:{host.ssh_port}", version=version,
+                                     timeout=timeout, use_ssh_client=True)
+        docker_over_ssh.attach(client, ssh.ssh_argv(host, ["docker", "system", "dial-stdio"],
+                                                    connect_timeout=connect_timeout), timeout)
         client.ping()
-    except (OSError, paramiko.SSHException, docker.errors.DockerException) as exc:
+    except docker.errors.DockerException as exc:
         raise _unreachable(host, exc) from None
     except Exception as exc:  # requests/urllib3 wrap socket errors in their own types
         if type(exc).__module__.split(".")[0] in {"requests", "urllib3"}:
@@ -126,20 +119,21 @@ def _ssh_client(host: Host, timeout: int, connect_timeout: int) -> docker.Docker
     return client
 
 
-def _one_pool(adapter: Any, url: str, proxies: Any = None) -> Any:
-    """docker-py keeps one pool of open ssh channels per request URL, and sshd allows 10 sessions
-    per connection (MaxSessions): share one small pool instead."""
-    from docker.transport.sshconn import SSHConnectionPool
+def _ssh_refused(host: Host, proc: subprocess.CompletedProcess[bytes], remote: list[str]) -> HostError:
+    from robocore.adapters import ssh
 
-    with adapter.pools.lock:
-        pool = adapter.pools.get("ssh")
-        if pool is None:
-            if adapter.ssh_client.get_transport() is None:
-                adapter.ssh_client.connect(**adapter.ssh_params)
-            pool = SSHConnectionPool(ssh_client=adapter.ssh_client, timeout=adapter.timeout,
-                                     maxsize=_SSH_POOL, host=adapter.ssh_host)
-            adapter.pools["ssh"] = pool
-    return pool
+    text = proc.stderr.decode(errors="replace")
+    where = f"host {host.name}: cannot reach its Docker daemon at {describe(host)}"
+    if proc.returncode == 255:
+        return HostError(f"{where}: {ssh.describe_failure(proc, remote)}", hint=ssh.failure_hint(proc))
+    if proc.returncode == 127 or "command not found" in text or "docker: not found" in text:
+        return HostError(f"{where}: the docker command is not installed there",
+                         hint=f"install Docker on {host.name} (Debian: apt-get install docker.io)")
+    if "permission denied" in text.lower():
+        return HostError(f"{where}: user {host.user} may not use Docker there",
+                         hint=f"add {host.user} to the docker group on {host.name} (usermod -aG docker {host.user})")
+    return HostError(f"{where}: {ssh.describe_failure(proc, remote)}",
+                     hint=f"is the Docker daemon running on {host.name}? (systemctl status docker)")
 
 
 def _tls_client(host: Host, timeout: int, connect_timeout: int, root: Path) -> docker.DockerClient:

@@ -1,6 +1,6 @@
-"""SSH to robot hosts: the ``ssh`` binary for commands and rsync, paramiko for Docker.
+"""SSH to robot hosts: the OpenSSH client for commands, rsync and Docker connections.
 
-Both read the same OpenSSH client configuration: ``$ROBOCORE_SSH_CONFIG`` when set (an
+All of them read the same OpenSSH client configuration: ``$ROBOCORE_SSH_CONFIG`` when set (an
 ``ssh_config`` file; the test suites use it to point at a throw-away key and known_hosts),
 else the user's ``~/.ssh/config``. Authentication is key-based only (``BatchMode=yes``): robocore
 never asks for or stores a password.
@@ -18,9 +18,7 @@ import subprocess
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from robocore.config.model import Host
 from robocore.errors import HostError, RobocoreError, ToolMissing
@@ -90,17 +88,18 @@ def require_ssh() -> None:
 
 
 def run(host: Host, remote: Sequence[str], *, timeout: float = 120, stdin: bytes | None = None,
-        check: bool = True) -> subprocess.CompletedProcess[bytes]:
-    """Run ``remote`` on ``host`` over ssh; raise HostError naming the host on failure."""
+        check: bool = True, connect_timeout: int = CONNECT_TIMEOUT) -> subprocess.CompletedProcess[bytes]:
+    """Run ``remote`` on ``host`` over ssh; raise HostError naming the host on failure (``check``)
+    or when it does not finish within ``timeout`` seconds."""
     require_ssh()
-    argv = ssh_argv(host, remote)
+    argv = ssh_argv(host, remote, connect_timeout=connect_timeout)
     try:
         proc = subprocess.run(argv, input=stdin, capture_output=True, timeout=timeout, check=False)
     except subprocess.TimeoutExpired:
         raise HostError(f"host {host.name} ({host.ip}): `{shlex.join(remote)}` timed out after {timeout:.0f} s",
                         hint="is the host up and reachable over ssh?") from None
     if check and proc.returncode != 0:
-        raise HostError(f"host {host.name} ({host.ip}): {describe_failure(proc, remote)}", hint=_hint(proc))
+        raise HostError(f"host {host.name} ({host.ip}): {describe_failure(proc, remote)}", hint=failure_hint(proc))
     return proc
 
 
@@ -131,7 +130,7 @@ def hold(host: Host, remote: Sequence[str], *, ready: str, what: str, timeout: f
             error = refused(code, err) if refused else None
             done = subprocess.CompletedProcess(proc.args, code, b"", err.encode())
             raise error or HostError(f"host {host.name} ({host.ip}): {describe_failure(done, remote)}",
-                                     hint=_hint(done))
+                                     hint=failure_hint(done))
         yield
     finally:
         if proc.poll() is None:
@@ -154,7 +153,8 @@ def describe_failure(proc: subprocess.CompletedProcess[bytes], remote: Sequence[
     return f"`{shlex.join(remote)}` exited {proc.returncode}: {last}"
 
 
-def _hint(proc: subprocess.CompletedProcess[bytes]) -> str:
+def failure_hint(proc: subprocess.CompletedProcess[bytes]) -> str:
+    """What to check after a failed ssh command (authentication, host key, reachability)."""
     if proc.returncode != 255:
         return "run the command on the host by hand to see the full output"
     text = proc.stderr.decode(errors="replace")
@@ -164,40 +164,3 @@ def _hint(proc: subprocess.CompletedProcess[bytes]) -> str:
         return "add the host's key to known_hosts (ssh-keyscan HOST >> ~/.ssh/known_hosts) after checking it"
     config = config_file() or "~/.ssh/config"
     return f"check that the host is up and that `ssh -p PORT USER@HOST` works (config: {config})"
-
-
-@dataclass(frozen=True)
-class ParamikoSettings:
-    """Connection parameters for paramiko, resolved from the same ssh_config file."""
-
-    params: dict[str, Any]
-    known_hosts: list[str]
-    strict: bool
-
-
-def paramiko_settings(host: Host, *, connect_timeout: int = CONNECT_TIMEOUT) -> ParamikoSettings:
-    """paramiko ``connect`` keyword arguments for ``host`` (identity, port, known hosts, timeouts)."""
-    import paramiko
-
-    config_path = config_file() or Path("~/.ssh/config").expanduser()
-    found: dict[str, Any] = {}
-    if config_path.is_file():
-        conf = paramiko.SSHConfig.from_path(str(config_path))
-        found = dict(conf.lookup(host.ip))
-    params: dict[str, Any] = {
-        "hostname": found.get("hostname", host.ip),
-        "port": host.ssh_port,
-        "username": host.user,
-        "timeout": connect_timeout,
-        "banner_timeout": connect_timeout,
-        "auth_timeout": connect_timeout,
-        "allow_agent": True,
-        "look_for_keys": True,
-    }
-    if "identityfile" in found:
-        params["key_filename"] = [str(Path(p).expanduser()) for p in found["identityfile"]]
-    if "proxycommand" in found:
-        params["sock"] = paramiko.ProxyCommand(found["proxycommand"])
-    known = [str(Path(p).expanduser()) for p in str(found.get("userknownhostsfile", "")).split() if p]
-    strict = str(found.get("stricthostkeychecking", "ask")).lower() not in {"no", "off", "accept-new"}
-    return ParamikoSettings(params=params, known_hosts=known, strict=strict)
