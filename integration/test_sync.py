@@ -35,6 +35,7 @@ hosts:
   - name: talker
     runs_on: robot-a
     folder: components/talker
+    volumes: ["./config:/robocore-config:ro", "./data:/data"]
   - name: listener
     runs_on: robot-b
     folder: components/listener
@@ -61,6 +62,10 @@ def project(fleet: RobotFleet, tmp_path_factory: pytest.TempPathFactory) -> Path
         shutil.copytree(Path(rich.__file__).parent, install / f"demo_{comp}" / "lib" / "rich")
         module = install / f"demo_{comp}" / "lib" / f"{comp}.py"
         module.write_text("".join(f"LINE_{i} = {i * 7919 % 100003}\n" for i in range(20000)))
+    (root / "config" / "maps").mkdir(parents=True)
+    (root / "config" / "maps" / "params.yaml").write_text("rate: 2\n")
+    (root / "data").mkdir()  # writable: stays on the robot, never copied
+    (root / "data" / "local-only.txt").write_text("x\n")
     (root / ".robocore" / "dds").mkdir(parents=True)
     (root / ".robocore" / "dds" / "super_client.xml").write_text("<profiles/>\n")
     (root / ".robocore" / "compose").mkdir()
@@ -158,6 +163,28 @@ def test_sync_moves_trees_then_only_what_changed(fleet: RobotFleet, project: Pat
     assert "noise.bin" not in fleet.hosts[0].ssh(fleet, "ls", "/root/robocore/talker/current/install")
     releases = fleet.hosts[0].ssh(fleet, "ls", "/root/robocore/talker/releases").split()
     assert len(releases) == 3, releases  # older ones pruned
+
+
+def test_read_only_project_volumes_travel_with_the_release(fleet: RobotFleet, project: Path) -> None:
+    """./config:...:ro is copied into each release (where run mounts it from); ./data (writable) is not."""
+    sync_json(project)
+    files = "/root/robocore/talker/current/files"
+    assert fleet.hosts[0].ssh(fleet, "cat", f"{files}/config/maps/params.yaml") == "rate: 2\n"
+    assert "data" not in fleet.hosts[0].ssh(fleet, "ls", files).split()
+    assert "local-only.txt" not in fleet.hosts[0].ssh(fleet, "find", "/root/robocore")
+    params = project / "config" / "maps" / "params.yaml"
+    params.write_text("rate: 5\n")
+    again = sync_json(project)
+    assert again["robot-a"]["changed"], "an edited project file must make a new release"
+    assert fleet.hosts[0].ssh(fleet, "cat", f"{files}/config/maps/params.yaml") == "rate: 5\n"
+    config = project / "config"
+    config.rename(project / "config.moved")
+    try:
+        proc = robocore(project, "sync", check=False)
+        assert proc.returncode != 0 and "Traceback" not in proc.stderr
+        assert f"component talker: volumes[0]: {config} does not exist" in proc.stderr
+    finally:
+        (project / "config.moved").rename(config)
 
 
 def test_interrupted_sync_leaves_current_on_a_complete_release(fleet: RobotFleet, project: Path) -> None:

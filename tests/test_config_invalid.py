@@ -303,6 +303,13 @@ CASES = [
         "'/data:/data:rwx': mode must be ro or rw",
     ),
     Case(
+        "remote-read-only-volume-outside-the-project",
+        edit(after={15: "    volumes: ['../shared:/shared:ro', './ok:/ok:ro', '../data:/data']"}),
+        16,
+        "components[0].volumes[0]: '../shared' is not a folder inside the project; sync copies read-only project "
+        "paths to rpi5, so use one inside the project folder (or an absolute path on rpi5)",
+    ),
+    Case(
         "bad-env-name",
         edit(after={15: "    environment:\n      MY-VAR: 1"}),
         17,

@@ -101,6 +101,22 @@ def test_local_and_remote_mounts() -> None:
     ]
 
 
+def test_project_volumes_on_remote_hosts_come_with_the_release() -> None:
+    volumes = ["./config/params:/params:ro", "./data:/data", "/dev/shm:/dev/shm", "maps:/maps:ro"]
+    comps = project().robot.model_dump(mode="json", exclude_defaults=True)["components"]
+    comps[0]["volumes"] = comps[1]["volumes"] = volumes
+    p = project(components=comps)
+    remote = {m.target: m for m in component_spec(p, p.robot.component("cam")).mounts}
+    # read-only project files: synced with each release; writable: a folder of the robot sync never touches
+    assert (remote["/params"].source, remote["/params"].read_only) == (
+        "/home/pi/robocore/cam/current/files/config/params", True)
+    assert remote["/data"].source == "/home/pi/robocore/cam/data" and not remote["/data"].read_only
+    assert remote["/dev/shm"].source == "/dev/shm" and remote["/maps"].source == "maps"  # absolute, named
+    local = {m.target: m.source for m in component_spec(p, p.robot.component("talker")).mounts}
+    assert local["/params"] == str(ROOT / "config/params") and local["/data"] == str(ROOT / "data")
+    assert [containers.synced_volume(v) for v in volumes] == ["config/params", None, None, None]
+
+
 def test_user_settings_reach_the_container() -> None:
     spec = talker(environment={"ROS_DOMAIN_ID": "9", "LEVEL": 3}, devices=["/dev/ttyUSB0:/dev/ttyACM0:rw"],
                   volumes=["./maps:/maps:ro", "/data:/data", "cache:/cache"], privileged=True, nvidia=True,

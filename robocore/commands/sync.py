@@ -26,11 +26,12 @@ from typing import Any
 
 from robocore.adapters import rsync, ssh
 from robocore.commands.context import Options
-from robocore.config.model import Host
+from robocore.config.model import Component, Host
 from robocore.errors import GroupError, HostError, RobocoreError, UsageError
 from robocore.files import write_atomic
 from robocore.plan import layout
 from robocore.plan import sync as plan
+from robocore.plan.containers import synced_volume
 from robocore.project import Project
 
 
@@ -84,11 +85,46 @@ def plan_host(project: Project, host: Host) -> list[plan.ComponentSync]:
                              hint="run `stage` (or `stage --refresh`) first: it writes compose files and DDS profiles")
         sources.append(plan.Source(dds_dir, "dds"))
         sources.append(plan.Source(compose, compose.name))
+        files = _project_files(project, host, comp)
+        if files is not None:
+            sources.append(files)
         items.append(plan.ComponentSync(
             component=comp.name, host=host.name, root=layout.component_root(host, comp.name),
             sources=tuple(sources), compose_name=compose.name,
         ))
     return items
+
+
+def _project_files(project: Project, host: Host, comp: Component) -> plan.Source | None:
+    """The read-only project volumes of ``comp`` as one source: a folder of symlinks to them, kept in
+    ``.robocore/sync/files/<host>/<component>/files`` and made anew for every sync."""
+    import shutil
+
+    wanted = [(i, rel) for i, v in enumerate(comp.volumes) if (rel := synced_volume(v)) is not None]
+    farm = project.state_dir / "sync" / "files" / host.name / comp.name / layout.FILES
+    links: dict[str, Path] = {}
+    for index, rel in wanted:
+        real = (project.root / rel).resolve()
+        if not real.exists():
+            raise UsageError(f"component {comp.name}: volumes[{index}]: {project.root / rel} does not exist",
+                             hint=f"create it, or remove the volume: sync copies it to {host.name}")
+        links[rel] = real
+    if _farm_links(farm) != links:  # made anew only when it changes: its folders' times are in the digest
+        shutil.rmtree(farm, ignore_errors=True)
+        for rel, real in links.items():
+            (farm / rel).parent.mkdir(parents=True, exist_ok=True)
+            (farm / rel).symlink_to(real)
+    return plan.Source(farm, layout.FILES, follow=True) if links else None
+
+
+def _farm_links(farm: Path) -> dict[str, Path]:
+    found: dict[str, Path] = {}
+    for dirpath, dirnames, filenames in os.walk(farm):
+        for name in [*dirnames, *filenames]:
+            path = Path(dirpath) / name
+            if path.is_symlink():
+                found[path.relative_to(farm).as_posix()] = Path(os.readlink(path))
+    return found
 
 
 def sync(options: Options, *, host: str | None) -> None:
@@ -217,19 +253,19 @@ def _sync_locked(project: Project, host: Host, items: list[plan.ComponentSync]) 
 def _tree_digest(item: plan.ComponentSync) -> str:
     rows: list[tuple[str, int, int, int, str]] = []
     for source in item.sources:
-        for path in _walk(source.path):
-            st = path.lstat()
-            target = os.readlink(path) if path.is_symlink() else ""
+        for path in _walk(source.path, follow=source.follow):
+            st = path.stat() if source.follow else path.lstat()
+            target = os.readlink(path) if path.is_symlink() and not source.follow else ""
             rel = f"{source.name}/{path.relative_to(source.path)}" if path != source.path else source.name
             rows.append((rel, st.st_size, st.st_mtime_ns, st.st_mode, target))
     return plan.manifest_digest(rows)
 
 
-def _walk(root: Path) -> list[Path]:
-    if not root.is_dir() or root.is_symlink():
+def _walk(root: Path, *, follow: bool = False) -> list[Path]:
+    if not root.is_dir() or (root.is_symlink() and not follow):
         return [root]
     found = [root]
-    for dirpath, dirnames, filenames in os.walk(root):
+    for dirpath, dirnames, filenames in os.walk(root, followlinks=follow):
         base = Path(dirpath)
         found.extend(base / d for d in dirnames)
         found.extend(base / f for f in filenames)

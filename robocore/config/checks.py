@@ -131,6 +131,7 @@ def check_parts(parts: Parts, project: Path | None) -> list[Found]:
     found += _unique_names(parts)
     found += _references(parts)
     found += _discovery_reachable(parts)
+    found += _remote_project_volumes(parts)
     found += _hosts(parts)
     found += _components(parts)
     if project is not None:
@@ -186,6 +187,25 @@ def _references(parts: Parts) -> Iterator[Found]:
                    f"two discovery servers on {server.host}:{server.port} (also discovery.servers[{seen[endpoint]}])")
         else:
             seen[endpoint] = index
+
+
+def _remote_project_volumes(parts: Parts) -> Iterator[Found]:
+    """A read-only project volume of a remote component is synced with it: it must be inside the project."""
+    import posixpath
+
+    hosts = {h.name: h for _, h in parts.hosts}
+    for index, comp in parts.components:
+        host = hosts.get(comp.runs_on)
+        if host is None or host.is_local:
+            continue
+        for i, volume in enumerate(comp.volumes):
+            pieces = volume.split(":")
+            relative = pieces[0].startswith(("./", "../")) or pieces[0] in {".", ".."}
+            if len(pieces) == 3 and pieces[2] == "ro" and relative and (
+                    posixpath.normpath(pieces[0]).split("/")[0] == ".." or posixpath.normpath(pieces[0]) == "."):
+                yield (("components", index, "volumes", i),
+                       f"{pieces[0]!r} is not a folder inside the project; sync copies read-only project paths to "
+                       f"{host.name}, so use one inside the project folder (or an absolute path on {host.name})")
 
 
 def _discovery_reachable(parts: Parts) -> Iterator[Found]:

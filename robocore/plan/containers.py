@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import hashlib
 import json
+import posixpath
 import shlex
 from dataclasses import asdict, dataclass, field
 from pathlib import PurePosixPath
 from typing import Any
 
 from robocore.config.model import Component, Host, port_pattern
-from robocore.plan import dds, naming
+from robocore.plan import dds, layout, naming
 from robocore.plan.layout import host_paths
 from robocore.project import Project
 
@@ -218,12 +219,34 @@ def component_command(component: Component) -> tuple[str, ...] | None:
     return None if component.image else IDLE_COMMAND
 
 
-def _user_mount(text: str, base: PurePosixPath) -> Mount:
-    """A robot.yaml volume ``source:target[:ro|rw]``; relative sources are taken from ``base``."""
+def is_project_path(source: str) -> bool:
+    """Whether a volume source is a path relative to the project folder (else absolute, or a named volume)."""
+    return source.startswith(("./", "../")) or source in {".", ".."}
+
+
+def synced_volume(text: str) -> str | None:
+    """The project-relative path (``config/params``) of a read-only project volume, which sync copies
+    to remote hosts with every release; None for any other volume."""
+    parts = text.split(":")
+    if len(parts) < 3 or parts[2] != "ro" or not is_project_path(parts[0]):
+        return None
+    return posixpath.normpath(parts[0])
+
+
+def _user_mount(text: str, base: PurePosixPath, *, remote: bool = False) -> Mount:
+    """A robot.yaml volume ``source:target[:ro|rw]``; relative sources are taken from ``base``.
+
+    On a remote host (``base`` is ``<mount_root>/<component>``) a read-only project path comes
+    with each synced release (``current/files/<path>``); a writable one is a folder of that
+    host that robocore never overwrites.
+    """
     parts = text.split(":")
     source, target = parts[0], parts[1] if len(parts) > 1 else parts[0]
     read_only = len(parts) > 2 and parts[2] == "ro"
-    if source.startswith(("./", "../")) or source in {".", ".."}:
+    synced = synced_volume(text) if remote else None
+    if synced is not None:
+        source = str(base / layout.CURRENT / layout.FILES / synced)
+    elif is_project_path(source):
         source = str(base / source)
     return Mount(source=source, target=target, read_only=read_only)
 
@@ -253,7 +276,7 @@ def component_spec(project: Project, component: Component, *, tag: str | None = 
         env["DISPLAY"] = ":0"
         mounts.append(Mount(X11_SOCKET, X11_SOCKET, read_only=True))
     base = PurePosixPath(str(project.root)) if host.is_local else PurePosixPath(host.deploy_root) / component.name
-    mounts.extend(_user_mount(v, base) for v in component.volumes)
+    mounts.extend(_user_mount(v, base, remote=not host.is_local) for v in component.volumes)
     env.update(component.environment)
     if component.image:
         image = component.image

@@ -2,7 +2,8 @@
 
 Local hosts use the dev machine's build output directly; remote hosts use what ``sync``
 placed under ``<mount_root>/<component>/current`` (a symlink switched atomically to a
-complete release directory, so a container never starts on a half-copied tree).
+complete release directory, so a container never starts on a half-copied tree). Read-only
+project volumes come with the release too, under ``current/files/<project-relative path>``.
 """
 
 from __future__ import annotations
@@ -12,6 +13,10 @@ from pathlib import PurePosixPath
 
 from robocore.config.model import Host
 from robocore.project import Project
+
+#: The live release of a component on a remote host (a symlink), and the folder of project files in it.
+CURRENT = "current"
+FILES = "files"
 
 
 @dataclass(frozen=True)
@@ -34,5 +39,6 @@ def host_paths(project: Project, host: Host, component: str) -> HostPaths:
             install=str(project.build_dir(component) / "install"),
             dds=str(project.state_dir / "dds"),
         )
-    current = component_root(host, component) / "current"
+    current = component_root(host, component) / CURRENT
     return HostPaths(install=str(current / "install"), dds=str(current / "dds"))
+

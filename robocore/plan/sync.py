@@ -5,6 +5,7 @@ On a remote host every component gets ``<mount_root>/<component>/``::
     releases/<id>/install/      colcon install tree (built on the dev machine)
     releases/<id>/dds/          generated Fast DDS profiles
     releases/<id>/<host>.yaml   the host's compose file (also hard-linked as compose.yaml)
+    releases/<id>/files/<path>  read-only project volumes (``./config:/config:ro``), from the project
     staging/                    the release being copied (absent when idle)
     current -> releases/<id>    switched atomically once a release is complete
 
@@ -109,7 +110,9 @@ class Source:
     """One local file or folder to copy, and where it lands inside the release."""
 
     path: Path  # absolute local path
-    name: str  # name inside the release (install, dds, <host>.yaml)
+    name: str  # name inside the release (install, dds, <host>.yaml, files)
+    #: A folder of symlinks to what is really copied (the project files): rsync copies what they point to.
+    follow: bool = False
 
     @property
     def rsync_arg(self) -> str:
