@@ -222,6 +222,18 @@ def _tar_size(header: bytes) -> int:
     return int(text, 8)
 
 
+def _member(reader: _Reader, count: int) -> Iterator[bytes]:
+    """The next ``count`` bytes of a tar stream (a member and its padding), in chunks of at most 1 MiB;
+    fewer when the stream ends early."""
+    remaining = count
+    while remaining:
+        block = reader.read(min(remaining, 1 << 20))
+        if not block:
+            return
+        remaining -= len(block)
+        yield block
+
+
 def _without_layers(chunks: Iterable[bytes], skip: set[str]) -> Iterator[bytes]:
     """Re-stream a ``docker save`` tar, leaving out the layer tars whose diff ID is in ``skip``.
 
@@ -251,23 +263,12 @@ def _without_layers(chunks: Iterable[bytes], skip: set[str]) -> Iterator[bytes]:
             yield from pending
             pending.clear()
             yield header
-            remaining = padded
-            while remaining:
-                block = reader.read(min(remaining, 1 << 20))
-                if not block:
-                    return
-                remaining -= len(block)
-                yield block
+            yield from _member(reader, padded)
             continue
         digest = hashlib.sha256()
         with tempfile.SpooledTemporaryFile(max_size=_SPOOL_IN_MEMORY) as spool:
-            remaining = padded
             left_in_file = size
-            while remaining:
-                block = reader.read(min(remaining, 1 << 20))
-                if not block:
-                    break
-                remaining -= len(block)
+            for block in _member(reader, padded):
                 digest.update(block[:left_in_file])
                 left_in_file = max(0, left_in_file - len(block))
                 spool.write(block)
