@@ -247,6 +247,13 @@ def test_stage_build_sync_run_over_ssh_one_graph_across_hosts(fleet: RobotFleet,
     states = {row["component"]: (row["host"], row["state"]) for row in data["components"]}
     assert states["talker"] == ("robot-a", "running") and states["listener"] == ("robot-b", "running"), states
 
+    # through the same ssh connections: a command in the live talker container (its output and exit code
+    # come back over the Docker API's multiplexed stream) and `logs -f` (a live stream from robot-b)
+    graph = robocore(robot, "connect", "--component", "talker", "--cmd", "ros2 node list --no-daemon --spin-time 3")
+    assert "/talker" in graph.stdout and "/listener" in graph.stdout, graph.stdout
+    assert robocore(robot, "connect", "--component", "talker", "--cmd", "exit 3", check=False).returncode == 3
+    assert followed_lines(robot, "listener", count=3), "logs -f printed no new lines of the remote listener"
+
     # a second run changes nothing
     again = robocore(robot, "run", "--json")
     assert "create" not in again.stdout and "replace" not in again.stdout, again.stdout
@@ -260,6 +267,31 @@ def test_stage_build_sync_run_over_ssh_one_graph_across_hosts(fleet: RobotFleet,
     assert moved["talker"] < 50_000, moved
     robocore(robot, "run", "--quiet")
     assert wait_heard(fleet, 1, listener, "edited talker #"), "the edited talker was never heard on robot-b"
+
+
+def followed_lines(project: Path, component: str, count: int, timeout: float = 30) -> list[str]:
+    """``robocore logs -f --tail 1``: the first ``count`` distinct heard lines it prints live (empty if none)."""
+    import threading
+
+    proc = subprocess.Popen([sys.executable, "-m", "robocore", "-p", str(project), "logs", "-f", "--component",
+                             component, "--tail", "1"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    seen: list[str] = []
+    done = threading.Event()
+
+    def read() -> None:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            if line.startswith(component) and "I heard" in line and line not in seen:
+                seen.append(line)
+                if len(seen) >= count:
+                    break
+        done.set()
+
+    threading.Thread(target=read, daemon=True).start()
+    done.wait(timeout)
+    proc.terminate()
+    proc.wait(timeout=10)
+    return seen if len(seen) >= count else []
 
 
 def container_image(fleet: RobotFleet, index: int, name: str) -> str:
