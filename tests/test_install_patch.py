@@ -28,8 +28,9 @@ def test_a_copy_must_have_the_same_bytes_at_a_path_ending_with_the_source_path()
         f"{SITE}/other/node.py": "d1",  # same bytes and name, wrong folder
         f"{SITE}/pkg_talker/old/node.py": "d0",  # wrong bytes
         "install/pkg_talker/share/setup.py": "s",  # build descriptions are never patched
+        "install/pkg_other/lib/python3.11/site-packages/pkg_talker/node.py": "d1",  # another package's tree
     }
-    copies = verbatim_copies(sources, outputs)
+    copies = verbatim_copies("pkg_talker", sources, outputs)
     assert copies == {
         "pkg_talker/node.py": ["build/pkg_talker/build/lib/pkg_talker/node.py", f"{SITE}/pkg_talker/node.py"],
         "pkg_talker/__init__.py": [f"{SITE}/pkg_talker/__init__.py"],

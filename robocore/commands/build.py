@@ -327,7 +327,8 @@ def output_candidates(out: Path, files: WorkspaceFiles) -> dict[str, str]:
 def record_build(plan: BuildPlan) -> None:
     """Write the build state after a successful colcon run: package hashes, files and their copies."""
     outputs = output_candidates(plan.out, plan.files)
-    copies = {package: install_patch.verbatim_copies(members, outputs) for package, members in plan.files.items()}
+    copies = {package: install_patch.verbatim_copies(package, members, outputs)
+              for package, members in plan.files.items()}
     _write_state(plan, copies)
 
 

@@ -49,15 +49,18 @@ def is_build_description(rel: str) -> bool:
     return name in BUILD_DESCRIPTIONS or name.endswith(BUILD_SUFFIXES)
 
 
-def verbatim_copies(sources: PackageFiles, outputs: Mapping[str, str]) -> dict[str, list[str]]:
-    """Source path -> output paths that hold the same bytes at a path ending with ``/<source path>``.
+def verbatim_copies(package: str, sources: PackageFiles, outputs: Mapping[str, str]) -> dict[str, list[str]]:
+    """Source path -> output paths of ``package`` (under ``install/<package>/`` or ``build/<package>/``)
+    that hold the same bytes at a path ending with ``/<source path>``.
 
     ``outputs`` maps output paths (relative to the build output folder) to content digests; only
     candidates need to be in it (files whose name matches a source file's name).
     """
+    own = (f"install/{package}/", f"build/{package}/")
     by_name: dict[str, list[str]] = {}
     for out in sorted(outputs):
-        by_name.setdefault(out.rsplit("/", 1)[-1], []).append(out)
+        if out.startswith(own):
+            by_name.setdefault(out.rsplit("/", 1)[-1], []).append(out)
     copies: dict[str, list[str]] = {}
     for rel, (digest, _) in sorted(sources.items()):
         if is_build_description(rel):
