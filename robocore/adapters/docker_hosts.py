@@ -89,12 +89,26 @@ def _unreachable(host: Host, exc: BaseException) -> HostError:
 
 
 def _ssh_client(host: Host, timeout: int, connect_timeout: int) -> docker.DockerClient:
-    import docker
+    """A client whose requests run ``docker system dial-stdio`` on the host over ssh.
 
-    from robocore.adapters import docker_over_ssh, ssh
+    The first request asks for the daemon's API version. If it fails, ``docker version`` over ssh
+    says why in ssh's or docker's own words (or gives the version an older daemon needs).
+    """
+    import time
 
-    # One ssh session first: it opens the connection that the Docker requests then share, tells
-    # the API version, and, when something is wrong, says what in ssh's or docker's own words.
+    from robocore.adapters import ssh
+
+    started = time.monotonic()
+    try:
+        return _dial(host, timeout, connect_timeout, None)
+    except Exception as exc:
+        if not _is_connection_error(exc):
+            raise
+        first = exc
+    if time.monotonic() - started >= connect_timeout - 0.5:  # ssh gave up connecting: asking again would too
+        raise HostError(f"host {host.name}: cannot reach its Docker daemon at {describe(host)}: no answer within "
+                        f"{connect_timeout} s", hint="is the host up? `robocore doctor` checks ssh, Docker and disk "
+                        "on every host")
     check = ["docker", "version", "--format", "{{.Server.APIVersion}}"]
     try:
         proc = ssh.run(host, check, timeout=2 * connect_timeout + 10, check=False, connect_timeout=connect_timeout)
@@ -103,20 +117,32 @@ def _ssh_client(host: Host, timeout: int, connect_timeout: int) -> docker.Docker
                         hint=exc.hint) from None
     if proc.returncode != 0:
         raise _ssh_refused(host, proc, check)
-    version = proc.stdout.decode(errors="replace").strip() or _BOOTSTRAP_API
+    version = proc.stdout.decode(errors="replace").strip()
     try:
-        client = docker.DockerClient(base_url=f"ssh://{host.user}@{host.ip}:{host.ssh_port}", version=version,
-                                     timeout=timeout, use_ssh_client=True)
-        docker_over_ssh.attach(client, ssh.ssh_argv(host, ["docker", "system", "dial-stdio"],
-                                                    connect_timeout=connect_timeout), timeout)
-        client.ping()
-    except docker.errors.DockerException as exc:
-        raise _unreachable(host, exc) from None
-    except Exception as exc:  # requests/urllib3 wrap socket errors in their own types
-        if type(exc).__module__.split(".")[0] in {"requests", "urllib3"}:
-            raise _unreachable(host, exc) from None
+        return _dial(host, timeout, connect_timeout, version or None)
+    except Exception as exc:
+        if _is_connection_error(exc):
+            raise _unreachable(host, first) from None
         raise
+
+
+def _dial(host: Host, timeout: int, connect_timeout: int, version: str | None) -> docker.DockerClient:
+    import docker
+
+    from robocore.adapters import docker_over_ssh, ssh
+
+    client = docker.DockerClient(base_url=f"ssh://{host.user}@{host.ip}:{host.ssh_port}",
+                                 version=version or _BOOTSTRAP_API, timeout=timeout, use_ssh_client=True)
+    docker_over_ssh.attach(client, ssh.ssh_argv(host, ["docker", "system", "dial-stdio"],
+                                                connect_timeout=connect_timeout), timeout)
+    api: Any = client.api
+    if version is None:
+        api._version = api._retrieve_server_version()
     return client
+
+
+def _is_connection_error(exc: BaseException) -> bool:
+    return isinstance(exc, OSError) or type(exc).__module__.split(".")[0] in {"docker", "requests", "urllib3"}
 
 
 def _ssh_refused(host: Host, proc: subprocess.CompletedProcess[bytes], remote: list[str]) -> HostError:

@@ -87,6 +87,20 @@ def require_ssh() -> None:
         raise ToolMissing("ssh (OpenSSH client) is not installed", hint="apt-get install openssh-client")
 
 
+def warm(host: Host) -> None:
+    """Open the shared connection to ``host`` in the background (nothing is waited for or reported).
+
+    The commands that follow find it ready (``ControlMaster``) instead of each paying the handshake;
+    if the host is unreachable, they say so themselves.
+    """
+    from shutil import which
+
+    if which("ssh") is None:
+        return
+    subprocess.Popen(ssh_argv(host, ["true"]), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                     stderr=subprocess.DEVNULL, start_new_session=True)
+
+
 def run(host: Host, remote: Sequence[str], *, timeout: float = 120, stdin: bytes | None = None,
         check: bool = True, connect_timeout: int = CONNECT_TIMEOUT) -> subprocess.CompletedProcess[bytes]:
     """Run ``remote`` on ``host`` over ssh; raise HostError naming the host on failure (``check``)

@@ -9,7 +9,8 @@ for _robocore_underlay in /opt/robocore/common /opt/robocore/deps; do
     fi
 done
 unset _robocore_underlay
-if [ -z "${ROBOCORE_NO_INSTALL:-}" ] && [ -f /robocore/install/setup.bash ]; then
-    source /robocore/install/setup.bash
+# local_setup: the underlays it was built on are the ones sourced above
+if [ -z "${ROBOCORE_NO_INSTALL:-}" ] && [ -f /robocore/install/local_setup.bash ]; then
+    source /robocore/install/local_setup.bash
 fi
 exec "$@"
