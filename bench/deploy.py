@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -238,17 +239,21 @@ def main() -> int:
         shutil.rmtree(parent, ignore_errors=True)
         subprocess.run(["docker", "image", "rm", "-f", f"{PROJECT}-talker-naive:bench"], capture_output=True)
     print()
-    print(f"{'link':<22} {'path':<9} {'seconds':>8} {'bytes moved':>14}   steps (best of {args.rounds} rounds)")
+    print(f"{'link':<22} {'path':<9} {'best':>6} {'median':>7} {'bytes moved':>14}   steps of the best "
+          f"(of {args.rounds} rounds)")
     verdicts = []
     for mbit, (fast, naive) in results.items():
         best_fast = min(fast, key=lambda r: r[0])
         best_naive = min(naive, key=lambda r: r[0])
+        medians = {"robocore": statistics.median(r[0] for r in fast), "naive": statistics.median(r[0] for r in naive)}
         for label, (secs, moved, steps) in (("robocore", best_fast), ("naive", best_naive)):
             detail = ", ".join(f"{k} {v:.1f}s" for k, v in steps.items())
-            print(f"{describe_link(mbit):<22} {label:<9} {secs:>8.1f} {moved:>14,}   {detail}")
+            print(f"{describe_link(mbit):<22} {label:<9} {secs:>6.1f} {medians[label]:>7.1f} {moved:>14,}   {detail}")
         ratio = best_naive[0] / best_fast[0]
-        verdicts.append(f"{describe_link(mbit)}: ratio naive/robocore {ratio:.1f}x (goal >= 10x) -> "
-                        f"{'met' if ratio >= 10 else 'NOT met'}; sync moved {best_fast[1]:,} bytes (goal < 50 KB) -> "
+        median_ratio = medians["naive"] / medians["robocore"]
+        verdicts.append(f"{describe_link(mbit)}: ratio naive/robocore {ratio:.1f}x best to best, {median_ratio:.1f}x "
+                        f"median to median (goal >= 10x) -> {'met' if min(ratio, median_ratio) >= 10 else 'NOT met'}; "
+                        f"sync moved {best_fast[1]:,} bytes (goal < 50 KB) -> "
                         f"{'met' if best_fast[1] < 50_000 else 'NOT met'}")
     print()
     print("\n".join(verdicts))

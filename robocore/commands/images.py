@@ -144,6 +144,8 @@ class Reporter:
         if self.options.json:
             print(json.dumps({"results": [asdict(o) for o in outcomes]}, indent=2))
             return
+        if not self.human:
+            return
         for o in outcomes:
             mark = {"built": "[green]built[/]", "up-to-date": "[dim]up to date[/]",
                     "would-build": "[yellow]would build[/]", "failed": "[red]failed[/]"}.get(o.action, o.action)
