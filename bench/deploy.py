@@ -230,7 +230,8 @@ def main() -> int:
                     fast.append(robocore_path(project, client, f"robocore edit {n} {token}", separate=args.separate))
                     naive.append(naive_path(project, client, fleet, f"naive edit {n} {token}"))
                     robocore(project, "run", "--quiet")  # back to robocore's own container for the next round
-                    print(f"{describe_link(mbit)}, round {n + 1}: robocore {fast[-1][0]:.1f} s, "
+                    steps = ", ".join(f"{k} {v:.1f}" for k, v in fast[-1][2].items())
+                    print(f"{describe_link(mbit)}, round {n + 1}: robocore {fast[-1][0]:.1f} s ({steps}), "
                           f"naive {naive[-1][0]:.1f} s", flush=True)
                 results[mbit] = (fast, naive)
             shape_link(fleet, 0)
