@@ -159,3 +159,18 @@ def test_a_state_file_from_an_older_robocore_means_colcon(tmp_path: Path) -> Non
     source.write_text("GREETING = 'edited'\n")
     plan = build.plan_build(project, project.robot.component("talker"), "img1")
     assert plan.changed == ["pkg_talker"] and plan.patches == ()
+
+
+def test_a_source_edited_again_after_planning_writes_nothing(tmp_path: Path) -> None:
+    project, source, installed = _built(tmp_path)
+    comp = project.robot.component("talker")
+    init = source.parent / "__init__.py"
+    installed_init = installed.parent / "__init__.py"
+    source.write_text("GREETING = 'edited'\n")
+    init.write_text("VERSION = 2\n")
+    plan = build.plan_build(project, comp, "img1")
+    assert len(plan.patches) == 2
+    assert [p.source for p in plan.patches] == ["pkg_talker/__init__.py", "pkg_talker/node.py"]
+    source.write_text("GREETING = 'again'\n")  # the second one, after planning, before applying
+    assert build.apply_patches(plan) is None
+    assert installed.read_text() == "GREETING = 'hello'\n" and installed_init.read_text() == ""

@@ -15,7 +15,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -70,13 +69,13 @@ def workspace_packages(ws: Path) -> tuple[dict[str, str], WorkspaceFiles]:
 
 def package_hashes(ws: Path) -> dict[str, str]:
     """``{package name: content hash of its folder}`` for every package of a workspace."""
-    roots, files = workspace_packages(ws)
-    return {name: _package_hash(roots[name], members) for name, members in files.items()}
+    return _hashes(*workspace_packages(ws))
 
 
-def _package_hash(root: str, members: Mapping[str, tuple[str, bool]]) -> str:
-    return tree_hash(FileDigest(f"{root}/{rel}" if root else rel, executable, digest)
-                     for rel, (digest, executable) in members.items())
+def _hashes(roots: Mapping[str, str], files: WorkspaceFiles) -> dict[str, str]:
+    return {name: tree_hash(FileDigest(f"{roots[name]}/{rel}" if roots[name] else rel, executable, digest)
+                            for rel, (digest, executable) in members.items())
+            for name, members in files.items()}
 
 
 @dataclass(frozen=True)
@@ -132,7 +131,7 @@ def plan_build(project: Project, comp: Component, image_id: str, *, full: bool =
     ws = project.root / comp.folder
     out = project.build_dir(comp.name)
     roots, files = workspace_packages(ws)
-    packages = {name: _package_hash(roots[name], members) for name, members in files.items()}
+    packages = _hashes(roots, files)
     before = _previous(out)
     old: dict[str, str] = before.get("packages", {}) if isinstance(before.get("packages"), dict) else {}
     changed: list[str] | None
@@ -279,8 +278,8 @@ def build(options: Options, *, component: str | None, full: bool = False) -> Non
             if patched is not None:
                 outcomes.append(patched)
                 continue
-            plan = dataclasses.replace(plan, patches=(), reason=plan.reason.split(" (")[0]
-                                       + " (colcon: an output differs from what the last build wrote)")
+            plan = dataclasses.replace(plan, patches=(), reason=f"changed: {', '.join(plan.changed or [])} "
+                                       "(colcon: an output differs from what the last build wrote)")
         todo.append(plan)
     outcomes += _run_colcon(project, todo, report)
     report.done(outcomes)
@@ -346,10 +345,11 @@ def _write_state(plan: BuildPlan, copies: Mapping[str, Mapping[str, list[str]]])
 
 
 def apply_patches(plan: BuildPlan) -> Outcome | None:
-    """Write each patched source over its recorded copies; None (nothing written) if any copy was changed.
+    """Write each patched source over its recorded copies; None (nothing written) if any copy was changed
+    or a source was edited again since planning.
 
-    Every target is checked first (a regular file still holding the recorded content), then each is
-    replaced atomically with the new content and the target's permissions.
+    Every target and every source is checked first (a target must be a regular file still holding the
+    recorded content), then each target is replaced atomically with the new content, keeping its mode.
     """
     start = time.monotonic()
     for patch in plan.patches:
@@ -357,13 +357,13 @@ def apply_patches(plan: BuildPlan) -> Outcome | None:
             path = plan.out / target
             if path.is_symlink() or not path.is_file() or digest_bytes(path.read_bytes()) != patch.old_digest:
                 return None
-    for patch in plan.patches:
-        source = _source_path(plan, patch)
-        data = source.read_bytes()
-        if digest_bytes(data) != patch.digest:  # edited again since planning: let colcon do it
-            return None
+    contents = [_source_path(plan, patch).read_bytes() for patch in plan.patches]
+    if any(digest_bytes(data) != patch.digest for patch, data in zip(plan.patches, contents, strict=True)):
+        return None  # edited again since planning: let colcon do it
+    for patch, data in zip(plan.patches, contents, strict=True):
         for target in patch.targets:
-            _replace(plan.out / target, data)
+            path = plan.out / target
+            write_atomic(path, data, mode=path.stat().st_mode & 0o7777)
     assert plan.copies is not None
     _write_state(plan, plan.copies)
     return Outcome(what=plan.component.name, role="build", action="built", reason=plan.reason,
@@ -375,15 +375,3 @@ def _source_path(plan: BuildPlan, patch: install_patch.Patch) -> Path:
     root = plan.roots[patch.package]
     return plan.workspace / root / patch.source if root else plan.workspace / patch.source
 
-
-def _replace(path: Path, data: bytes) -> None:
-    mode = path.stat().st_mode & 0o7777
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-        os.chmod(tmp, mode)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
