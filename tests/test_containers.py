@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 from robocore.commands.run import Action, Existing, decide
-from robocore.config.model import Robot
+from robocore.config.model import Robot, read_only_project_path
 from robocore.plan import containers, dds, naming
 from robocore.plan.containers import ContainerSpec, component_spec, discovery_spec, docker_ports, host_specs
 
@@ -114,7 +114,7 @@ def test_project_volumes_on_remote_hosts_come_with_the_release() -> None:
     assert remote["/dev/shm"].source == "/dev/shm" and remote["/maps"].source == "maps"  # absolute, named
     local = {m.target: m.source for m in component_spec(p, p.robot.component("talker")).mounts}
     assert local["/params"] == str(ROOT / "config/params") and local["/data"] == str(ROOT / "data")
-    assert [containers.synced_volume(v) for v in volumes] == ["config/params", None, None, None]
+    assert [read_only_project_path(v) for v in volumes] == ["config/params", None, None, None]
 
 
 def test_user_settings_reach_the_container() -> None:

@@ -26,12 +26,11 @@ from typing import Any
 
 from robocore.adapters import rsync, ssh
 from robocore.commands.context import Options
-from robocore.config.model import Component, Host
+from robocore.config.model import Component, Host, read_only_project_path
 from robocore.errors import GroupError, HostError, RobocoreError, UsageError
 from robocore.files import write_atomic
 from robocore.plan import layout
 from robocore.plan import sync as plan
-from robocore.plan.containers import synced_volume
 from robocore.project import Project
 
 
@@ -97,10 +96,10 @@ def plan_host(project: Project, host: Host) -> list[plan.ComponentSync]:
 
 def _project_files(project: Project, host: Host, comp: Component) -> plan.Source | None:
     """The read-only project volumes of ``comp`` as one source: a folder of symlinks to them, kept in
-    ``.robocore/sync/files/<host>/<component>/files`` and made anew for every sync."""
+    ``.robocore/sync/files/<host>/<component>/files`` and made anew whenever the set of links changes."""
     import shutil
 
-    wanted = [(i, rel) for i, v in enumerate(comp.volumes) if (rel := synced_volume(v)) is not None]
+    wanted = [(i, rel) for i, v in enumerate(comp.volumes) if (rel := read_only_project_path(v)) is not None]
     farm = project.state_dir / "sync" / "files" / host.name / comp.name / layout.FILES
     links: dict[str, Path] = {}
     for index, rel in wanted:

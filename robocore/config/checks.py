@@ -26,6 +26,7 @@ from robocore.config.model import (
     Host,
     Robot,
     port_pattern,
+    read_only_project_path,
 )
 
 KeyPath = tuple[str | int, ...]
@@ -191,21 +192,18 @@ def _references(parts: Parts) -> Iterator[Found]:
 
 def _remote_project_volumes(parts: Parts) -> Iterator[Found]:
     """A read-only project volume of a remote component is synced with it: it must be inside the project."""
-    import posixpath
-
     hosts = {h.name: h for _, h in parts.hosts}
     for index, comp in parts.components:
         host = hosts.get(comp.runs_on)
         if host is None or host.is_local:
             continue
         for i, volume in enumerate(comp.volumes):
-            pieces = volume.split(":")
-            relative = pieces[0].startswith(("./", "../")) or pieces[0] in {".", ".."}
-            if len(pieces) == 3 and pieces[2] == "ro" and relative and (
-                    posixpath.normpath(pieces[0]).split("/")[0] == ".." or posixpath.normpath(pieces[0]) == "."):
+            relative = read_only_project_path(volume)
+            if relative is not None and (relative == "." or relative.split("/")[0] == ".."):
                 yield (("components", index, "volumes", i),
-                       f"{pieces[0]!r} is not a folder inside the project; sync copies read-only project paths to "
-                       f"{host.name}, so use one inside the project folder (or an absolute path on {host.name})")
+                       f"{volume.split(':')[0]!r} is not a folder inside the project; sync copies read-only project "
+                       f"paths to {host.name}, so use one inside the project folder (or an absolute path on "
+                       f"{host.name})")
 
 
 def _discovery_reachable(parts: Parts) -> Iterator[Found]:

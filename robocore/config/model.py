@@ -7,6 +7,7 @@ live in :mod:`robocore.config.checks` so that every problem carries its own key 
 from __future__ import annotations
 
 import ipaddress
+import posixpath
 import re
 from enum import Enum
 from typing import Annotated, Literal
@@ -348,6 +349,20 @@ def is_loopback_address(address: str) -> bool:
         return ipaddress.ip_address(address.strip("[]")).is_loopback
     except ValueError:
         return False
+
+
+def is_project_path(source: str) -> bool:
+    """Whether a volume source is relative to the project folder (else absolute, or a named volume)."""
+    return source.startswith(("./", "../")) or source in {".", ".."}
+
+
+def read_only_project_path(volume: str) -> str | None:
+    """The normalized project-relative path (``config/params``) of a read-only project volume
+    (``./config/params:/params:ro``), which sync copies to remote hosts; None for any other volume."""
+    parts = volume.split(":")
+    if len(parts) < 3 or parts[2] != "ro" or not is_project_path(parts[0]):
+        return None
+    return posixpath.normpath(parts[0])
 
 
 def port_pattern() -> re.Pattern[str]:

@@ -11,13 +11,12 @@ from __future__ import annotations
 
 import hashlib
 import json
-import posixpath
 import shlex
 from dataclasses import asdict, dataclass, field
 from pathlib import PurePosixPath
 from typing import Any
 
-from robocore.config.model import Component, Host, port_pattern
+from robocore.config.model import Component, Host, is_project_path, port_pattern, read_only_project_path
 from robocore.plan import dds, layout, naming
 from robocore.plan.layout import host_paths
 from robocore.project import Project
@@ -219,20 +218,6 @@ def component_command(component: Component) -> tuple[str, ...] | None:
     return None if component.image else IDLE_COMMAND
 
 
-def is_project_path(source: str) -> bool:
-    """Whether a volume source is a path relative to the project folder (else absolute, or a named volume)."""
-    return source.startswith(("./", "../")) or source in {".", ".."}
-
-
-def synced_volume(text: str) -> str | None:
-    """The project-relative path (``config/params``) of a read-only project volume, which sync copies
-    to remote hosts with every release; None for any other volume."""
-    parts = text.split(":")
-    if len(parts) < 3 or parts[2] != "ro" or not is_project_path(parts[0]):
-        return None
-    return posixpath.normpath(parts[0])
-
-
 def _user_mount(text: str, base: PurePosixPath, *, remote: bool = False) -> Mount:
     """A robot.yaml volume ``source:target[:ro|rw]``; relative sources are taken from ``base``.
 
@@ -243,7 +228,7 @@ def _user_mount(text: str, base: PurePosixPath, *, remote: bool = False) -> Moun
     parts = text.split(":")
     source, target = parts[0], parts[1] if len(parts) > 1 else parts[0]
     read_only = len(parts) > 2 and parts[2] == "ro"
-    synced = synced_volume(text) if remote else None
+    synced = read_only_project_path(text) if remote else None
     if synced is not None:
         source = str(base / layout.CURRENT / layout.FILES / synced)
     elif is_project_path(source):

@@ -41,4 +41,3 @@ def host_paths(project: Project, host: Host, component: str) -> HostPaths:
         )
     current = component_root(host, component) / CURRENT
     return HostPaths(install=str(current / "install"), dds=str(current / "dds"))
-
