@@ -76,16 +76,17 @@ def describe(host: Host) -> str:
     return f"tcp://{host.ip}:{host.docker_port or 2375} (insecure)"
 
 
+#: What to do when a host's daemon cannot be reached and nothing more specific is known.
+_CHECK_HOST = "is the host up? `robocore doctor` checks ssh, Docker and disk on every host"
+
+
+def _cannot_reach(host: Host, detail: str, hint: str | None = _CHECK_HOST) -> HostError:
+    return HostError(f"host {host.name}: cannot reach its Docker daemon at {describe(host)}: {detail}", hint=hint)
+
+
 def _unreachable(host: Host, exc: BaseException) -> HostError:
     detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-    hint = "is the host up? `robocore doctor` checks ssh, Docker and disk on every host"
-    if "known_hosts" in detail:
-        hint = f"check the host key, then add it: ssh-keyscan -p {host.ssh_port} {host.ip} >> ~/.ssh/known_hosts"
-    elif type(exc).__name__ == "AuthenticationException":
-        hint = f"robocore uses ssh keys only: ssh-copy-id -p {host.ssh_port} {host.user}@{host.ip}"
-    elif "dial-stdio" in detail or "docker: not found" in detail:
-        hint = f"install the docker CLI on {host.name} (Debian: apt-get install docker.io)"
-    return HostError(f"host {host.name}: cannot reach its Docker daemon at {describe(host)}: {detail}", hint=hint)
+    return _cannot_reach(host, detail)
 
 
 def _ssh_client(host: Host, timeout: int, connect_timeout: int) -> docker.DockerClient:
@@ -106,15 +107,12 @@ def _ssh_client(host: Host, timeout: int, connect_timeout: int) -> docker.Docker
             raise
         first = exc
     if time.monotonic() - started >= connect_timeout - 0.5:  # ssh gave up connecting: asking again would too
-        raise HostError(f"host {host.name}: cannot reach its Docker daemon at {describe(host)}: no answer within "
-                        f"{connect_timeout} s", hint="is the host up? `robocore doctor` checks ssh, Docker and disk "
-                        "on every host")
+        raise _cannot_reach(host, f"no answer within {connect_timeout} s")
     check = ["docker", "version", "--format", "{{.Server.APIVersion}}"]
     try:
         proc = ssh.run(host, check, timeout=2 * connect_timeout + 10, check=False, connect_timeout=connect_timeout)
     except HostError as exc:
-        raise HostError(f"host {host.name}: cannot reach its Docker daemon at {describe(host)}: {exc.message}",
-                        hint=exc.hint) from None
+        raise _cannot_reach(host, exc.message, exc.hint) from None
     if proc.returncode != 0:
         raise _ssh_refused(host, proc, check)
     version = proc.stdout.decode(errors="replace").strip()
@@ -149,17 +147,16 @@ def _ssh_refused(host: Host, proc: subprocess.CompletedProcess[bytes], remote: l
     from robocore.adapters import ssh
 
     text = proc.stderr.decode(errors="replace")
-    where = f"host {host.name}: cannot reach its Docker daemon at {describe(host)}"
     if proc.returncode == 255:
-        return HostError(f"{where}: {ssh.describe_failure(proc, remote)}", hint=ssh.failure_hint(proc))
+        return _cannot_reach(host, ssh.describe_failure(proc, remote), ssh.failure_hint(proc))
     if proc.returncode == 127 or "command not found" in text or "docker: not found" in text:
-        return HostError(f"{where}: the docker command is not installed there",
-                         hint=f"install Docker on {host.name} (Debian: apt-get install docker.io)")
+        return _cannot_reach(host, "the docker command is not installed there",
+                             f"install Docker on {host.name} (Debian: apt-get install docker.io)")
     if "permission denied" in text.lower():
-        return HostError(f"{where}: user {host.user} may not use Docker there",
-                         hint=f"add {host.user} to the docker group on {host.name} (usermod -aG docker {host.user})")
-    return HostError(f"{where}: {ssh.describe_failure(proc, remote)}",
-                     hint=f"is the Docker daemon running on {host.name}? (systemctl status docker)")
+        return _cannot_reach(host, f"user {host.user} may not use Docker there",
+                             f"add {host.user} to the docker group on {host.name} (usermod -aG docker {host.user})")
+    return _cannot_reach(host, ssh.describe_failure(proc, remote),
+                         f"is the Docker daemon running on {host.name}? (systemctl status docker)")
 
 
 def _tls_client(host: Host, timeout: int, connect_timeout: int, root: Path) -> docker.DockerClient:

@@ -124,8 +124,8 @@ def hold(host: Host, remote: Sequence[str], *, ready: str, what: str, timeout: f
 
     ``remote`` prints ``ready`` once it holds what it holds, and keeps it until its stdin closes,
     which happens when the block ends, or when robocore dies, however it dies. ``what`` names it in
-    messages. If it exits instead,
-    ``refused(exit code, stderr)`` may turn that into a specific error; otherwise a HostError.
+    messages. If it exits instead, ``refused(exit code, stderr)`` may turn that into a specific
+    error; otherwise a HostError.
     """
     require_ssh()
     proc = subprocess.Popen(ssh_argv(host, remote), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
