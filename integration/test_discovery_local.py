@@ -196,6 +196,13 @@ def test_restart_without_the_hold_never_recovers(deployment: Any) -> None:
         "recovered without the hold: the hold may no longer be needed (check dds.restart_hold_seconds)"
 
 
+def lose_server_0_and_restart_listener(dep: Any) -> int:
+    """Remove discovery server 0, restart the listener (it must discover again); return how much it had heard."""
+    dep.containers["discovery-0"].remove(force=True)
+    dep.containers["listener"].restart(timeout=2)
+    return len(dep.heard())
+
+
 def test_redundant_servers_survive_losing_one(deployment: Any) -> None:
     """Two servers: with server 0 gone, a restarted listener still finds the talker through server 1."""
     dep = deployment(servers=2)
@@ -204,10 +211,7 @@ def test_redundant_servers_survive_losing_one(deployment: Any) -> None:
     for spec in specs.values():
         dep.start(spec)
     assert wait_for(dep.heard, HEAR_WITHIN), "no messages with two servers"
-    dep.containers["discovery-0"].remove(force=True)
-    listener = dep.containers["listener"]
-    listener.restart(timeout=2)
-    before = len(dep.heard())
+    before = lose_server_0_and_restart_listener(dep)
     assert wait_for(lambda: len(dep.heard()) > before, HEAR_WITHIN), \
         "the restarted listener did not find the talker through the remaining server"
 
@@ -218,9 +222,6 @@ def test_single_server_lost_means_no_new_discovery(deployment: Any) -> None:
     for spec in dep.specs().values():
         dep.start(spec)
     assert wait_for(dep.heard, HEAR_WITHIN), "no messages before removing the server"
-    dep.containers["discovery-0"].remove(force=True)
-    listener = dep.containers["listener"]
-    listener.restart(timeout=2)
-    before = len(dep.heard())
+    before = lose_server_0_and_restart_listener(dep)
     time.sleep(SILENCE)
     assert len(dep.heard()) == before, "a restarted listener found the talker with no server running"

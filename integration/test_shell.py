@@ -132,6 +132,15 @@ def shell(project: Path, component: str, cmd: str, *extra: str, env: dict[str, s
     return robocore(project, "shell", "--component", component, "--cmd", cmd, *extra, env=env)
 
 
+def background_shell(project: Path, component: str, cmd: str) -> subprocess.Popen[str]:
+    """``robocore shell --cmd`` left running (no DISPLAY), for tests that join or change it meanwhile."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "robocore", "-p", str(project), "shell", "--component", component, "--cmd", cmd],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
+        env={k: v for k, v in os.environ.items() if k != "DISPLAY"},
+    )
+
+
 def ok(proc: subprocess.CompletedProcess[str]) -> str:
     assert proc.returncode == 0, f"exit {proc.returncode}\n--- stdout\n{proc.stdout}\n--- stderr\n{proc.stderr}"
     return proc.stdout
@@ -252,12 +261,8 @@ def test_image_without_sudo_still_gets_the_user(project: Path) -> None:
 
 def test_second_shell_joins_the_first_and_new_starts_another(project: Path, docker_client: Any) -> None:
     name = project.name
-    first = subprocess.Popen(
-        [sys.executable, "-m", "robocore", "-p", str(project), "shell", "--component", "ws", "--cmd",
-         "echo here > /tmp/first-was-here; while [ ! -e /tmp/stop ]; do sleep 0.1; done; echo first-done"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
-        env={k: v for k, v in os.environ.items() if k != "DISPLAY"},
-    )
+    first = background_shell(
+        project, "ws", "echo here > /tmp/first-was-here; while [ ! -e /tmp/stop ]; do sleep 0.1; done; echo first-done")
     try:
         container_name = naming.shell_container_name(name, "ws")
         _wait_for_file(docker_client, container_name, "/tmp/first-was-here", first)
@@ -286,12 +291,7 @@ def test_second_shell_joins_the_first_and_new_starts_another(project: Path, dock
 
 
 def test_spec_change_is_reported_when_joining(project: Path, docker_client: Any) -> None:
-    first = subprocess.Popen(
-        [sys.executable, "-m", "robocore", "-p", str(project), "shell", "--component", "ws", "--cmd",
-         "while [ ! -e /tmp/stop ]; do sleep 0.1; done"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
-        env={k: v for k, v in os.environ.items() if k != "DISPLAY"},
-    )
+    first = background_shell(project, "ws", "while [ ! -e /tmp/stop ]; do sleep 0.1; done")
     try:
         _wait_for_file(docker_client, naming.shell_container_name(project.name, "ws"), "/run/robocore/ready", first)
         same = shell(project, "ws", "true")
