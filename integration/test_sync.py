@@ -242,7 +242,7 @@ def test_a_second_sync_to_a_host_being_synced_is_refused_and_names_the_first(
     before = current_target(fleet, 0, "talker")
     holder = subprocess.Popen(
         ["ssh", "-F", str(fleet.ssh_config), f"root@{fleet.hosts[0].ip}", "--",
-         shlex.join(plan.lock_argv("/root/robocore", "alice@her-laptop (pid 4242)"))],
+         shlex.join(plan.session_argv("/root/robocore", "alice@her-laptop (pid 4242)", []))],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
         assert holder.stdout is not None and holder.stdout.readline().strip() == plan.LOCKED

@@ -3,7 +3,8 @@
 ``robocore [-p PROJECT] TASK [flags]``, ``robocore --project=PROJECT TASK`` and the seed's
 form ``robocore PROJECT TASK [flags]`` run the same invoke tasks a project's ``invoke``
 runs, from any folder. Start-up stays light: only invoke and the task surface are
-imported before a task runs (pydantic, docker-py and copier load inside the tasks).
+imported before a task runs (pydantic, docker-py and copier load inside the tasks), and a
+command with remote steps starts its ssh connections first (:mod:`robocore.commands.warmup`).
 """
 
 from __future__ import annotations
@@ -105,9 +106,13 @@ def _program(namespace: Any) -> Any:
 
 def main(argv: Sequence[str] | None = None) -> None:
     """Entry point of the ``robocore`` console script."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    if argv is None:  # a real command line: start the robot hosts' ssh handshakes while the rest loads
+        from robocore.commands.warmup import warm_recorded
+
+        warm_recorded(args)
     from robocore.tasks import PROJECT_ENV, cli_namespace
 
-    args = list(sys.argv[1:] if argv is None else argv)
     names = set(cli_namespace.task_names) | {n.replace("_", "-") for n in cli_namespace.task_names}
     try:
         project, rest = split_project(args, names)

@@ -1,4 +1,5 @@
-"""Loading a project opens the robot hosts' ssh connections early, only when a remote step follows."""
+"""Loading a project opens the robot hosts' ssh connections early, only when a remote step follows; the
+next command opens the recorded ones before loading anything."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from robocore.adapters import ssh
-from robocore.commands import context
+from robocore.commands import context, warmup
 from robocore.config.model import Host, Robot
 from robocore.project import Project
 
@@ -36,10 +37,43 @@ def test_ssh_hosts_are_warmed_only_before_remote_steps(tmp_path: Path, monkeypat
                                                        argv: list[str], warmed: list[str]) -> None:
     seen: list[str] = []
     monkeypatch.setattr(ssh, "warm", lambda host: seen.append(host.name))
+    monkeypatch.setattr(warmup, "_warmed", set())
+    (tmp_path / "robot.yaml").write_text("# the project's file\n")
     project = _project(tmp_path)
     context.warm_remote_hosts(project, argv)
     context.warm_remote_hosts(project, argv)  # once per process
     assert seen == warmed
+
+
+def test_the_next_command_warms_the_recorded_hosts_first_until_robot_yaml_changes(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    seen: list[tuple[str, str, int]] = []
+    monkeypatch.setattr(ssh, "warm", lambda host: seen.append((host.user, host.ip, host.ssh_port)))
+    monkeypatch.setattr(warmup, "_warmed", set())
+    robot_yaml = tmp_path / "robot.yaml"
+    robot_yaml.write_text("# the project's file\n")
+    context.warm_remote_hosts(_project(tmp_path), ["sync"])
+    assert seen == [("root", "10.0.0.5", 22)]
+    assert "10.0.0.5" in (tmp_path / ".robocore" / warmup.RECORD).read_text()
+
+    def next_command(argv: list[str], cwd: Path = tmp_path) -> list[tuple[str, str, int]]:
+        seen.clear()
+        monkeypatch.setattr(warmup, "_warmed", set())  # a new process
+        warmup.warm_recorded(argv, cwd=cwd)
+        return list(seen)
+
+    elsewhere = tmp_path.parent
+    assert next_command(["build", "sync", "run"]) == [("root", "10.0.0.5", 22)]
+    assert next_command(["-p", str(tmp_path), "status"], cwd=elsewhere) == [("root", "10.0.0.5", 22)]
+    assert next_command([f"--project={tmp_path}", "logs"], cwd=elsewhere) == [("root", "10.0.0.5", 22)]
+    assert next_command([str(tmp_path), "run"], cwd=elsewhere) == [("root", "10.0.0.5", 22)]
+    assert next_command(["build"]) == []  # nothing remote follows
+    assert next_command(["sync", "--dry-run"]) == []
+    assert next_command(["sync"], cwd=elsewhere) == []  # not the project folder: no record there
+    robot_yaml.write_text("# the project's file, edited: hosts may have moved\n")
+    assert next_command(["sync"]) == []
+    (tmp_path / ".robocore" / warmup.RECORD).write_text("{not json")
+    assert next_command(["sync"]) == []
 
 
 def test_warm_starts_ssh_in_the_background_and_does_not_wait(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import shlex
 import subprocess
 from datetime import datetime, timezone
@@ -40,14 +41,15 @@ def test_rsync_argv_links_against_current_and_writes_to_staging(tmp_path: Path) 
 def test_remote_steps_are_fixed_scripts_with_arguments_as_argv(tmp_path: Path) -> None:
     evil = plan.ComponentSync(component="x", host="h", root=PurePosixPath("/tmp/a b;touch /tmp/pwned"),
                               sources=(), compose_name="h.yaml")
-    argv = plan.prepare_argv([evil])
-    assert argv[:2] == ["sh", "-c"] and argv[2] == plan.PREPARE_SCRIPT
-    assert argv[3:] == ["sh", "/tmp/a b;touch /tmp/pwned"]
-    final = plan.finalize_argv([evil], "20260101T000000Z-abcdef", keep=2)
-    assert final[2] == plan.FINALIZE_SCRIPT and final[4:] == ["20260101T000000Z-abcdef", "2",
-                                                              "/tmp/a b;touch /tmp/pwned", "h.yaml"]
+    argv = plan.session_argv("/srv/$(id)", "me; rm -rf /", [evil], keep=2)
+    assert argv[:2] == ["sh", "-c"] and argv[2] == plan.SESSION_SCRIPT
+    assert argv[3:] == ["sh", "/srv/$(id)", "me; rm -rf /", "2", "/tmp/a b;touch /tmp/pwned", "h.yaml"]
+    assert plan.finish_line("20260101T000000Z-abcdef", [plan.RELEASE, plan.KEEP]) == (
+        "20260101T000000Z-abcdef release keep")
     with pytest.raises(ValueError):
-        plan.finalize_argv([evil], "../../etc")
+        plan.finish_line("../../etc", [plan.RELEASE])
+    with pytest.raises(ValueError):
+        plan.finish_line("20260101T000000Z-abcdef", ["release; rm -rf /"])
 
 
 def test_ssh_quotes_every_remote_argument() -> None:
@@ -58,36 +60,83 @@ def test_ssh_quotes_every_remote_argument() -> None:
     assert shlex.split(argv[-1]) == ["echo", "a b", "$(id)", "'q'"]
 
 
-def test_scripts_switch_current_atomically_and_prune(tmp_path: Path) -> None:
-    """Run the real scripts locally with sh: the layout they leave is the contract with run."""
+class LocalSession:
+    """The real session script, run locally with sh (the remote side of a sync, without ssh)."""
+
+    def __init__(self, mount_root: Path, items: list[plan.ComponentSync], holder: str = "test", keep: int = 3) -> None:
+        self.proc = subprocess.Popen(plan.session_argv(str(mount_root), holder, items, keep=keep),
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.greeting = self.read_until(plan.LOCKED)
+
+    def read_until(self, marker: str) -> list[str]:
+        assert self.proc.stdout is not None
+        lines = []
+        while (line := self.proc.stdout.readline()) and line.strip() != marker:
+            lines.append(line.strip())
+        assert line, f"the session ended before {marker}: {lines} {self.proc.stderr.read() if self.proc.stderr else ''}"
+        return lines
+
+    def finish(self, line: str) -> int:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(line + "\n")
+        self.proc.stdin.flush()
+        self.read_until(plan.DONE)
+        self.proc.stdin.close()
+        return self.proc.wait(timeout=10)
+
+    def hang_up(self) -> int:
+        assert self.proc.stdin is not None
+        self.proc.stdin.close()
+        return self.proc.wait(timeout=10)
+
+
+def test_the_session_switches_current_atomically_and_prunes(tmp_path: Path) -> None:
+    """Run the real script locally with sh: the layout it leaves is the contract with run."""
     roots = [tmp_path / "robot" / "talker", tmp_path / "robot" / "odd name;x"]
     items = [plan.ComponentSync(component=r.name, host="h", root=PurePosixPath(str(r)), sources=(),
                                 compose_name="h.yaml") for r in roots]
     ids: list[str] = []
     for n in range(5):
-        out = subprocess.run(plan.prepare_argv(items), capture_output=True, text=True, check=True).stdout
-        for keys in plan.parse_prepare(out, len(items)):
+        session = LocalSession(tmp_path / "robot", items)
+        for keys in plan.parse_prepare(session.greeting, len(items)):
             assert keys["staging"] == "0"
             assert keys["current"] == ("" if n == 0 else f"releases/{ids[-1]}")
         for root in roots:
-            (root / "staging" / "install").mkdir(parents=True)
+            (root / "staging" / "install").mkdir(parents=True)  # what rsync writes
             (root / "staging" / "install" / "v").write_text(str(n))
             (root / "staging" / "h.yaml").write_text("services: {}\n")
         rid = plan.new_release_id(datetime(2026, 1, 1, 0, 0, n, tzinfo=timezone.utc), nonce=bytes([n]))
         ids.append(rid)
-        subprocess.run(plan.finalize_argv(items, rid, keep=3), check=True, capture_output=True)
+        assert session.finish(plan.finish_line(rid, [plan.RELEASE, plan.RELEASE])) == 0
         for root in roots:
             assert (root / "current").is_symlink() and (root / "current" / "install" / "v").read_text() == str(n)
             assert (root / "current" / "compose.yaml").read_text() == "services: {}\n"
             assert not (root / "staging").exists()
     for root in roots:
         assert sorted(p.name for p in (root / "releases").iterdir()) == ids[-3:]
-    # an interrupted copy: staging is reported and current is untouched
+    # robocore went away mid-copy: nothing is switched, and the next session reports the copy
     (roots[0] / "staging").mkdir()
-    out = subprocess.run(plan.prepare_argv(items[:1]), capture_output=True, text=True).stdout
-    assert plan.parse_prepare(out, 1) == [{"staging": "1", "current": f"releases/{ids[-1]}"}]
-    subprocess.run(plan.discard_argv(items[:1]), check=True)
+    assert LocalSession(tmp_path / "robot", items).hang_up() == 0
+    session = LocalSession(tmp_path / "robot", items[:1])
+    assert plan.parse_prepare(session.greeting, 1) == [{"staging": "1", "current": f"releases/{ids[-1]}"}]
+    # an unchanged copy is discarded, a kept component is left as it is
+    assert session.finish(plan.finish_line(plan.new_release_id(), [plan.DISCARD])) == 0
     assert not (roots[0] / "staging").exists() and (roots[0] / "current" / "install" / "v").read_text() == "4"
+    (roots[1] / "staging").mkdir()
+    assert LocalSession(tmp_path / "robot", items).finish(plan.finish_line(plan.new_release_id(),
+                                                                           [plan.KEEP, plan.KEEP])) == 0
+    assert (roots[1] / "staging").is_dir() and os.readlink(roots[1] / "current") == f"releases/{ids[-1]}"
+
+
+def test_the_session_refuses_an_unknown_step(tmp_path: Path) -> None:
+    item = plan.ComponentSync(component="a", host="h", root=PurePosixPath(str(tmp_path / "a")), sources=(),
+                              compose_name="")
+    session = LocalSession(tmp_path, [item])
+    assert session.proc.stdin is not None and session.proc.stderr is not None
+    session.proc.stdin.write("20260101T000000Z-abcdef rm\n")
+    session.proc.stdin.close()
+    assert session.proc.wait(timeout=10) == 64 and "unknown step" in session.proc.stderr.read()
+    assert not (tmp_path / "a" / "current").exists()
 
 
 def test_parse_stats_reads_rsync_3_output() -> None:
@@ -124,19 +173,14 @@ def test_manifest_digest_sees_size_time_and_deletions() -> None:
 
 
 def test_the_sync_lock_admits_one_holder_and_names_it_to_the_next(tmp_path: Path) -> None:
-    """The real lock script, run locally with sh: a second taker is refused at once with the first's line."""
-    root = str(tmp_path / "robot root;$(touch pwned)")
-    first = subprocess.Popen(plan.lock_argv(root, "alice@laptop (pid 1)"), stdin=subprocess.PIPE,
-                             stdout=subprocess.PIPE, text=True)
-    assert first.stdout is not None and first.stdin is not None
-    assert first.stdout.readline().strip() == plan.LOCKED
-    second = subprocess.run(plan.lock_argv(root, "bob"), stdin=subprocess.DEVNULL, capture_output=True, text=True,
-                            timeout=10)
+    """The real session script, run locally with sh: a second taker is refused at once with the first's line."""
+    root = tmp_path / "robot root;$(touch pwned)"
+    first = LocalSession(root, [], holder="alice@laptop (pid 1)")
+    second = subprocess.run(plan.session_argv(str(root), "bob", []), stdin=subprocess.DEVNULL, capture_output=True,
+                            text=True, timeout=10)
     assert second.returncode == plan.LOCK_BUSY and second.stdout == ""
     assert second.stderr.strip() == "alice@laptop (pid 1)"
-    first.stdin.close()
-    assert first.wait(timeout=10) == 0
-    third = subprocess.run(plan.lock_argv(root, "bob"), stdin=subprocess.DEVNULL, capture_output=True, text=True,
-                           timeout=10)
-    assert third.returncode == 0 and third.stdout.strip() == plan.LOCKED
+    assert first.hang_up() == 0
+    third = LocalSession(root, [], holder="bob")
+    assert third.greeting == [] and third.hang_up() == 0
     assert not (tmp_path / "pwned").exists() and not Path("pwned").exists()

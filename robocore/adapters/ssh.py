@@ -19,9 +19,12 @@ import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
 
-from robocore.config.model import Host
 from robocore.errors import HostError, RobocoreError, ToolMissing
+
+if TYPE_CHECKING:
+    from robocore.config.model import Host
 
 CONFIG_ENV = "ROBOCORE_SSH_CONFIG"
 #: Seconds to wait for a TCP connection and for the SSH handshake before calling a host unreachable.
@@ -36,12 +39,31 @@ def config_file() -> Path | None:
     return Path(configured).expanduser() if configured else None
 
 
-def destination(host: Host) -> str:
+class Target(Protocol):
+    """What ssh needs of a host: a robot.yaml :class:`~robocore.config.model.Host` or a recorded one.
+
+    (This module imports no config model, so that a command can open connections before loading one.)
+    """
+
+    @property
+    def user(self) -> str:
+        """The ssh user."""
+
+    @property
+    def ip(self) -> str:
+        """Address or name ssh connects to."""
+
+    @property
+    def ssh_port(self) -> int:
+        """Port of the host's sshd."""
+
+
+def destination(host: Target) -> str:
     """``user@ip`` of a host."""
     return f"{host.user}@{host.ip}"
 
 
-def ssh_options(host: Host, *, connect_timeout: int = CONNECT_TIMEOUT) -> list[str]:
+def ssh_options(host: Target, *, connect_timeout: int = CONNECT_TIMEOUT) -> list[str]:
     """The ssh options (no command) robocore uses for ``host``: config file, port, timeouts, batch mode."""
     argv: list[str] = []
     config = config_file()
@@ -69,7 +91,7 @@ def control_dir() -> Path:
     return path
 
 
-def ssh_argv(host: Host, remote: Sequence[str], *, connect_timeout: int = CONNECT_TIMEOUT) -> list[str]:
+def ssh_argv(host: Target, remote: Sequence[str], *, connect_timeout: int = CONNECT_TIMEOUT) -> list[str]:
     """The local argv that runs ``remote`` (an argv list) on ``host``, each argument quoted."""
     return ["ssh", *ssh_options(host, connect_timeout=connect_timeout), "--", destination(host), shlex.join(remote)]
 
@@ -87,7 +109,7 @@ def require_ssh() -> None:
         raise ToolMissing("ssh (OpenSSH client) is not installed", hint="apt-get install openssh-client")
 
 
-def warm(host: Host) -> None:
+def warm(host: Target) -> None:
     """Open the shared connection to ``host`` in the background (nothing is waited for or reported).
 
     The commands that follow find it ready (``ControlMaster``) instead of each paying the handshake;
@@ -117,35 +139,101 @@ def run(host: Host, remote: Sequence[str], *, timeout: float = 120, stdin: bytes
     return proc
 
 
+class Session:
+    """A remote command kept running by :func:`hold`: the lines it printed before it was ready, and
+    :meth:`finish` to hand it its last instruction."""
+
+    def __init__(self, host: Host, remote: Sequence[str], proc: subprocess.Popen[bytes]) -> None:
+        self._host = host
+        self._remote = list(remote)
+        self._proc = proc
+        self._buffer = b""
+        #: True once the command's output has ended (it exited, or its connection dropped).
+        self.ended = False
+        #: What the command printed before its ``ready`` line.
+        self.greeting: list[str] = []
+
+    def read_until(self, marker: str, timeout: float) -> list[str] | None:
+        """The lines printed before ``marker`` (which is consumed); None if the command ended first or
+        printed nothing for ``timeout`` seconds."""
+        assert self._proc.stdout is not None
+        fd = self._proc.stdout.fileno()
+        lines: list[str] = []
+        with selectors.DefaultSelector() as selector:
+            selector.register(fd, selectors.EVENT_READ)
+            while True:
+                while b"\n" in self._buffer:
+                    raw, self._buffer = self._buffer.split(b"\n", 1)
+                    line = raw.decode(errors="replace").rstrip("\r")
+                    if line.strip() == marker:
+                        return lines
+                    lines.append(line)
+                if not selector.select(timeout):
+                    return None
+                chunk = os.read(fd, 65536)
+                if not chunk:
+                    self.ended = True
+                    return None
+                self._buffer += chunk
+
+    def finish(self, line: str, *, done: str, what: str, timeout: float = 120) -> list[str]:
+        """Send ``line`` to the command and wait for it to print ``done``; return the lines before it.
+
+        Raises HostError (with the command's last error line) if it ends or goes quiet first.
+        """
+        assert self._proc.stdin is not None
+        try:
+            self._proc.stdin.write(line.encode() + b"\n")
+            self._proc.stdin.flush()
+        except OSError:
+            pass  # it ended already: read_until finds out and says why
+        out = self.read_until(done, timeout)
+        if out is None:
+            raise self.failure(what, timeout)
+        return out
+
+    def failure(self, what: str, timeout: float, refused: Callable[[int, str], RobocoreError | None] | None = None,
+                ) -> RobocoreError:
+        """The error to raise when the command ended, or stopped answering for ``timeout`` seconds, before
+        it should have; ``refused(exit code, stderr)`` may name a specific reason for an exit."""
+        host = self._host
+        assert self._proc.stderr is not None
+        try:
+            if not self.ended:
+                raise subprocess.TimeoutExpired(self._proc.args, timeout)
+            code = self._proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return HostError(f"host {host.name} ({host.ip}): {what}: no answer within {timeout:.0f} s",
+                             hint="is the host up and reachable over ssh?")
+        err = self._proc.stderr.read().decode(errors="replace")
+        error = refused(code, err) if refused else None
+        ended = subprocess.CompletedProcess(self._proc.args, code, b"", err.encode())
+        return error or HostError(f"host {host.name} ({host.ip}): {what}: {describe_failure(ended, self._remote)}",
+                                  hint=failure_hint(ended))
+
+
 @contextmanager
 def hold(host: Host, remote: Sequence[str], *, ready: str, what: str, timeout: float = 3 * CONNECT_TIMEOUT,
-         refused: Callable[[int, str], RobocoreError | None] | None = None) -> Iterator[None]:
+         refused: Callable[[int, str], RobocoreError | None] | None = None) -> Iterator[Session]:
     """Keep ``remote`` running on ``host`` for the duration of the block (a lock held over ssh).
 
-    ``remote`` prints ``ready`` once it holds what it holds, and keeps it until its stdin closes,
-    which happens when the block ends, or when robocore dies, however it dies. ``what`` names it in
-    messages. If it exits instead, ``refused(exit code, stderr)`` may turn that into a specific
-    error; otherwise a HostError.
+    ``remote`` prints ``ready`` once it holds what it holds (the lines before it are the session's
+    ``greeting``), and keeps it until its stdin closes, which happens when the block ends, or when
+    robocore dies, however it dies; :meth:`Session.finish` may hand it a last instruction first.
+    ``what`` names it in messages. If it exits before ``ready``, ``refused(exit code, stderr)`` may
+    turn that into a specific error; otherwise a HostError.
     """
     require_ssh()
     proc = subprocess.Popen(ssh_argv(host, remote), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE)
     assert proc.stdin is not None and proc.stdout is not None and proc.stderr is not None
+    session = Session(host, remote, proc)
     try:
-        with selectors.DefaultSelector() as selector:
-            selector.register(proc.stdout, selectors.EVENT_READ)
-            line = proc.stdout.readline().decode(errors="replace").strip() if selector.select(timeout) else None
-        if line is None:
-            raise HostError(f"host {host.name} ({host.ip}): {what}: no answer within "
-                            f"{timeout:.0f} s", hint="is the host up and reachable over ssh?")
-        if line != ready:
-            code = proc.wait(timeout=timeout)
-            err = proc.stderr.read().decode(errors="replace")
-            error = refused(code, err) if refused else None
-            done = subprocess.CompletedProcess(proc.args, code, b"", err.encode())
-            raise error or HostError(f"host {host.name} ({host.ip}): {describe_failure(done, remote)}",
-                                     hint=failure_hint(done))
-        yield
+        greeting = session.read_until(ready, timeout)
+        if greeting is None:
+            raise session.failure(what, timeout, refused)
+        session.greeting = greeting
+        yield session
     finally:
         if proc.poll() is None:
             proc.stdin.close()

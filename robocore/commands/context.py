@@ -8,12 +8,6 @@ from pathlib import Path
 
 from robocore.project import Project
 
-#: Steps that talk to the robot hosts over ssh. When the command line names one (``build sync run``),
-#: loading the project opens those connections in the background, so the handshake overlaps with the
-#: steps before it.
-REMOTE_STEPS = frozenset({"sync", "run", "status", "logs", "connect", "doctor", "down", "rollback"})
-_warmed: set[Path] = set()
-
 
 @dataclass(frozen=True)
 class Options:
@@ -33,15 +27,13 @@ class Options:
 
 
 def warm_remote_hosts(project: Project, argv: list[str]) -> None:
-    """Open ssh connections to the hosts that run something, once per process, when ``argv`` names a
-    step that will use them (and is not a dry run)."""
-    if project.root in _warmed or not REMOTE_STEPS & set(argv) or "--dry-run" in argv:
-        return
-    _warmed.add(project.root)
-    from robocore.adapters import ssh
+    """When ``argv`` names a step that uses the robot hosts (and is not a dry run): open the ssh
+    connections to the hosts that run something, once per process, and record them for the next
+    command (see :mod:`robocore.commands.warmup`)."""
+    from robocore.commands import warmup
     from robocore.config.model import DockerAccess
 
     used = {c.runs_on for c in project.robot.components} | {s.host for s in project.robot.discovery_servers}
-    for host in project.robot.hosts:
-        if host.access is DockerAccess.ssh and host.name in used:
-            ssh.warm(host)
+    endpoints = [warmup.Endpoint(h.name, h.user, h.ip, h.ssh_port) for h in project.robot.hosts
+                 if h.access is DockerAccess.ssh and h.name in used]
+    warmup.warm_loaded(project.root, endpoints, argv)

@@ -2,7 +2,8 @@
 
 For every component on a remote host: its colcon install tree, the DDS profiles and the host's
 compose file go to ``<mount_root>/<component>/releases/<id>/`` and ``current`` is switched to
-it only once the copy is complete (see :mod:`robocore.plan.sync`). Hosts are synced in
+it only once the copy is complete (see :mod:`robocore.plan.sync`), all under the host's sync
+lock, in one ssh session per host plus one rsync per changed component. Hosts are synced in
 parallel; a host that fails is named and the others still get their files. Components on this
 machine use the build output in place: nothing is copied.
 
@@ -167,15 +168,15 @@ def sync(options: Options, *, host: str | None) -> None:
 
 
 def sync_host(project: Project, host: Host, items: list[plan.ComponentSync]) -> list[ComponentResult]:
-    """Sync every item of one host, one release id for all, under the host's sync lock; record what
-    the host now runs.
+    """Sync every item of one host, one release id for all, and record what the host now runs.
 
-    Three kinds of remote steps: one ``prepare`` for all components, one rsync per component
-    whose tree may differ, one ``finalize`` (and one ``discard``) for all components.
+    The host's side is one ssh session (:data:`robocore.plan.sync.SESSION_SCRIPT`): it takes the
+    host's sync lock and reports each component's state, waits while rsync copies the components
+    whose tree may differ (one rsync each), then releases, discards or keeps each copy.
     """
-    with ssh.hold(host, plan.lock_argv(host.deploy_root, _holder()), ready=plan.LOCKED,
-                  what="taking the sync lock", refused=functools.partial(_lock_refused, host)):
-        return _sync_locked(project, host, items)
+    with ssh.hold(host, plan.session_argv(host.deploy_root, _holder(), items), ready=plan.LOCKED,
+                  what="taking the sync lock", refused=functools.partial(_lock_refused, host)) as session:
+        return _sync_locked(project, host, items, session)
 
 
 def _holder() -> str:
@@ -201,15 +202,19 @@ def _lock_refused(host: Host, code: int, stderr: str) -> RobocoreError | None:
     return None
 
 
-def _sync_locked(project: Project, host: Host, items: list[plan.ComponentSync]) -> list[ComponentResult]:
+def _sync_locked(project: Project, host: Host, items: list[plan.ComponentSync],
+                 session: ssh.Session) -> list[ComponentResult]:
     release_id = plan.new_release_id()
     rsh = ssh.rsh_command(host)
     recorded = _read_state(project, host.name)
     start = time.monotonic()
     digests = [_tree_digest(item) for item in items]
-    preps = plan.parse_prepare(ssh.run(host, plan.prepare_argv(items), timeout=60).stdout.decode(), len(items))
-    changed: list[plan.ComponentSync] = []
-    unchanged: list[plan.ComponentSync] = []
+    try:
+        preps = plan.parse_prepare(session.greeting, len(items))
+    except ValueError as exc:
+        raise HostError(f"host {host.name} ({host.ip}): the sync session answered unexpectedly: {exc}",
+                        hint="is a POSIX sh the login shell's sh there?") from None
+    steps: list[str] = []
     stats: dict[str, plan.RsyncStats] = {}
     seconds: dict[str, float] = {}
     for item, digest, prep in zip(items, digests, preps, strict=True):
@@ -219,22 +224,17 @@ def _sync_locked(project: Project, host: Host, items: list[plan.ComponentSync]) 
         resuming = prep.get("staging") == "1"  # an interrupted copy: its content is unknown
         if same_release and not resuming and digest == previous.get("digest"):
             stats[item.component] = plan.RsyncStats()  # quick check: nothing to send
-            unchanged.append(item)
+            steps.append(plan.KEEP)
             continue
         t = time.monotonic()
         stats[item.component] = rsync.run(host, plan.rsync_argv(item, host, rsh))
         seconds[item.component] = time.monotonic() - t
-        if stats[item.component].changed or resuming or not same_release or digest != previous.get("digest"):
-            changed.append(item)
-        else:
-            unchanged.append(item)
-    if changed:
-        ssh.run(host, plan.finalize_argv(changed, release_id), timeout=120)
-    if unchanged:
-        ssh.run(host, plan.discard_argv(unchanged), timeout=120)
+        changed = stats[item.component].changed or resuming or not same_release or digest != previous.get("digest")
+        steps.append(plan.RELEASE if changed else plan.DISCARD)
+    session.finish(plan.finish_line(release_id, steps), done=plan.DONE, what="switching to the new release")
     results = []
-    for item, digest, prep in zip(items, digests, preps, strict=True):
-        is_new = item in changed
+    for item, digest, prep, step in zip(items, digests, preps, steps, strict=True):
+        is_new = step == plan.RELEASE
         release = release_id if is_new else prep.get("current", "").removeprefix(f"{plan.RELEASES}/")
         recorded[item.component] = {"release": release, "digest": digest}
         st = stats[item.component]
@@ -297,12 +297,14 @@ def _print_dry_run(project: Project, hosts: list[Host], plans: dict[str, list[pl
         if not items:
             continue
         out.print(f"# {h.name}: " + ", ".join(f"{i.component} -> {i.root}" for i in items), markup=False)
-        out.print(f"# all of it while holding flock on {h.deploy_root}/{plan.LOCK_FILE} there", markup=False)
-        out.print(shlex.join(ssh.ssh_argv(h, plan.prepare_argv(items))), markup=False, soft_wrap=True)
+        out.print(f"# one session (holding flock on {h.deploy_root}/{plan.LOCK_FILE} there) prepares, waits "
+                  f"for the rsyncs, then releases each changed copy", markup=False)
+        out.print(shlex.join(ssh.ssh_argv(h, plan.session_argv(h.deploy_root, _holder(), items))), markup=False,
+                  soft_wrap=True)
         for item in items:
             out.print(shlex.join(plan.rsync_argv(item, h, rsh)), markup=False, soft_wrap=True)
-        out.print(shlex.join(ssh.ssh_argv(h, plan.finalize_argv(items, plan.new_release_id()))),
-                  markup=False, soft_wrap=True)
+        steps = " ".join(plan.RELEASE for _ in items)
+        out.print(f"# then, on that session's stdin: {plan.new_release_id()} {steps}", markup=False)
 
 
 def _print_table(rows: list[ComponentResult]) -> None:

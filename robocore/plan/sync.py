@@ -9,20 +9,21 @@ On a remote host every component gets ``<mount_root>/<component>/``::
     staging/                    the release being copied (absent when idle)
     current -> releases/<id>    switched atomically once a release is complete
 
-A sync (1) creates ``staging`` (``prepare``, one ssh call per host), (2) rsyncs into it with ``--link-dest`` against
-``current`` so unchanged files become hard links and changed ones move as rsync deltas, then
-(3) renames it to ``releases/<id>`` and switches ``current`` with ``ln -s`` to a temp name and
-``mv -T`` (a rename(2), atomic), and prunes old releases (``finalize``, one ssh call per host). If anything stops
-before (3), ``current`` still names the previous complete release; the next sync reuses the
-partial ``staging``. If nothing changed, ``staging`` is dropped and ``current`` is kept; a
-component whose local tree has the same quick-check digest (paths, sizes, mtimes, modes) as
-the release ``current`` names is not rsynced at all.
+A sync's remote side is one ssh session per host (:data:`SESSION_SCRIPT`), plus one rsync per
+component whose tree may differ. The session (1) takes the host's sync lock and reports, per
+component, whether an interrupted ``staging`` is there and where ``current`` points; then robocore
+(2) rsyncs into ``staging`` with ``--link-dest`` against ``current``, so unchanged files become
+hard links and changed ones move as rsync deltas; then the session (3) renames ``staging`` to
+``releases/<id>``, switches ``current`` with ``ln -s`` to a temp name and ``mv -T`` (a rename(2),
+atomic), and prunes old releases. If anything stops before (3), ``current`` still names the
+previous complete release and the next sync reuses the partial ``staging``. A copy that turns out
+unchanged is dropped and ``current`` kept; a component whose local tree has the same quick-check
+digest (paths, sizes, mtimes, modes) as the release ``current`` names is not rsynced at all.
 
-One sync at a time per host: the whole sequence runs while robocore holds ``flock`` on
-``<mount_root>/.robocore-sync.lock`` there (:func:`lock_argv`), so two developers syncing to
-one robot never write into the same ``staging``; the second is told who holds it and stops.
-The lock lives as long as the ssh session that holds it: it is released when robocore ends,
-however it ends.
+One sync at a time per host: the session holds ``flock`` on ``<mount_root>/.robocore-sync.lock``
+there from (1) to (3), so two developers syncing to one robot never write into the same
+``staging``; the second is told who holds it and stops. The lock lives as long as the ssh session
+that holds it: it is released when robocore ends, however it ends.
 
 Remote steps are argv lists: a fixed POSIX sh script run with ``sh -c SCRIPT sh ARG...``, its
 arguments passed as positional parameters, never interpolated into the script.
@@ -48,60 +49,76 @@ CURRENT = "current"
 COMPOSE_NAME = "compose.yaml"
 _RELEASE_RE = re.compile(r"^\d{8}T\d{6}Z-[0-9a-f]{6}$")
 
-# Arguments: component roots. For each, in order, prints "staging=<0|1>" then "current=<target>".
-PREPARE_SCRIPT = """\
-set -eu
-for root in "$@"; do
-    mkdir -p -- "$root/releases"
-    if [ -d "$root/staging" ]; then echo staging=1; else echo staging=0; mkdir -p -- "$root/staging"; fi
-    if [ -L "$root/current" ]; then echo "current=$(readlink -- "$root/current")"; else echo current=; fi
-done
-"""
-
-# Arguments: release id, releases to keep, then (component root, compose file name or "") pairs.
-FINALIZE_SCRIPT = """\
-set -eu
-id=$1; keep=$2; shift 2
-while [ "$#" -ge 2 ]; do
-    root=$1; compose=$2; shift 2
-    cd -- "$root"
-    if [ -n "$compose" ] && [ -f "staging/$compose" ]; then ln -f -- "staging/$compose" staging/compose.yaml; fi
-    mv -T -- staging "releases/$id"
-    rm -f -- .current.tmp
-    ln -s -- "releases/$id" .current.tmp
-    mv -T -- .current.tmp current
-    live=$(readlink -- current)
-    ls -1 releases | sort -r | tail -n "+$((keep + 1))" | while IFS= read -r old; do
-        [ "releases/$old" = "$live" ] || rm -rf -- "releases/$old"
-    done
-    echo "current=$live"
-done
-"""
-
-#: Exit code of :data:`LOCK_SCRIPT` when another sync holds the lock.
+#: Exit code of :data:`SESSION_SCRIPT` when another sync holds the host's lock.
 LOCK_BUSY = 75
 LOCK_FILE = ".robocore-sync.lock"
+#: Printed by :data:`SESSION_SCRIPT` once it holds the lock (after the prepare lines).
 LOCKED = "robocore-sync-locked"
+#: Printed by :data:`SESSION_SCRIPT` once it carried out the last instruction.
+DONE = "robocore-sync-done"
+#: What the last instruction may ask of each component, in the order of the session's arguments.
+RELEASE, DISCARD, KEEP = "release", "discard", "keep"
 
-# Arguments: the host's mount root, a line saying who syncs. Holds an exclusive flock on the lock
-# file until stdin closes, with the holder line beside it; prints LOCKED once it holds it. If another
-# process holds it: prints that holder's line on stderr and exits LOCK_BUSY at once.
-LOCK_SCRIPT = f"""\
+# A whole sync's remote side in one ssh session. Arguments: the host's mount root, a line saying
+# who syncs, the releases to keep, then (component root, compose file name or "") pairs.
+#  1. lock: an exclusive flock on <mount root>/.robocore-sync.lock, held until the script ends, the
+#     holder line written beside it. If another process holds it: that holder's line on stderr, exit
+#     LOCK_BUSY at once.
+#  2. prepare: for each component, creates its releases/ folder and prints "staging=<0|1>" (an
+#     interrupted copy is there) and "current=<target of current>"; then prints LOCKED.
+#  3. waits for one line on stdin: a release id, then RELEASE, DISCARD or KEEP for each component.
+#     RELEASE renames staging to releases/<id>, switches current to it with a rename, prunes old
+#     releases; DISCARD removes staging (an unchanged copy); KEEP leaves the component alone. Prints
+#     DONE. If stdin ends first (robocore died), nothing is switched: staging is resumed next time.
+SESSION_SCRIPT = f"""\
 set -eu
-mkdir -p -- "$1"
-lock="$1/{LOCK_FILE}"
+mount_root=$1; holder=$2; keep=$3; shift 3
+case $keep in ''|*[!0-9]*) echo "releases to keep: not a number: $keep" >&2; exit 64;; esac
+mkdir -p -- "$mount_root"
+lock="$mount_root/{LOCK_FILE}"
+exec 9>>"$lock"
 code=0
-flock -n -E {LOCK_BUSY} -- "$lock" sh -c 'printf "%s\\n" "$1" > "$2.holder"; echo {LOCKED}; exec cat >/dev/null' \\
-    sh "$2" "$lock" || code=$?
-if [ "$code" -eq {LOCK_BUSY} ]; then cat -- "$lock.holder" >&2 2>/dev/null || true; fi
-exit "$code"
-"""
-
-
-# Arguments: component roots: drop their unchanged staging copies.
-DISCARD_SCRIPT = """\
-set -eu
-for root in "$@"; do rm -rf -- "$root/staging"; done
+flock -n -E {LOCK_BUSY} 9 || code=$?
+if [ "$code" -ne 0 ]; then
+    if [ "$code" -eq {LOCK_BUSY} ]; then cat -- "$lock.holder" >&2 2>/dev/null || true; fi
+    exit "$code"
+fi
+printf '%s\\n' "$holder" > "$lock.holder"
+root=
+for arg in "$@"; do
+    if [ -z "$root" ]; then root=$arg; continue; fi
+    mkdir -p -- "$root/releases"
+    if [ -d "$root/staging" ]; then echo staging=1; else echo staging=0; fi
+    if [ -L "$root/current" ]; then echo "current=$(readlink -- "$root/current")"; else echo current=; fi
+    root=
+done
+echo {LOCKED}
+IFS=' ' read -r id steps || exit 0
+case $id in ''|*[!0-9A-Za-z-]*) echo "not a release id: $id" >&2; exit 64;; esac
+root=
+for arg in "$@"; do
+    if [ -z "$root" ]; then root=$arg; continue; fi
+    compose=$arg; dir=$root; root=
+    step=${{steps%% *}}; steps=${{steps#"$step"}}; steps=${{steps# }}
+    case $step in
+    {KEEP}) ;;
+    {DISCARD}) rm -rf -- "$dir/staging" ;;
+    {RELEASE}) (
+        cd -- "$dir"
+        if [ -n "$compose" ] && [ -f "staging/$compose" ]; then ln -f -- "staging/$compose" staging/compose.yaml; fi
+        mv -T -- staging "releases/$id"
+        rm -f -- .current.tmp
+        ln -s -- "releases/$id" .current.tmp
+        mv -T -- .current.tmp current
+        live=$(readlink -- current)
+        ls -1 releases | sort -r | tail -n "+$((keep + 1))" | while IFS= read -r old; do
+            [ "releases/$old" = "$live" ] || rm -rf -- "releases/$old"
+        done
+    ) ;;
+    *) echo "unknown step for $dir: '$step'" >&2; exit 64 ;;
+    esac
+done
+echo {DONE}
 """
 
 
@@ -158,38 +175,30 @@ def remote_sh(script: str, *args: str) -> list[str]:
     return ["sh", "-c", script, "sh", *args]
 
 
-def lock_argv(mount_root: str, holder: str) -> list[str]:
-    """Remote argv holding the host's sync lock until its stdin closes (see :data:`LOCK_SCRIPT`).
-
-    ``holder`` (who, from where, when) is left beside the lock for whoever finds it taken.
-    """
-    return remote_sh(LOCK_SCRIPT, mount_root, holder)
-
-
-def prepare_argv(items: Sequence[ComponentSync]) -> list[str]:
-    """Remote argv creating each item's ``staging`` and reporting whether it existed and where current points."""
-    return remote_sh(PREPARE_SCRIPT, *(str(i.root) for i in items))
+def session_argv(mount_root: str, holder: str, items: Sequence[ComponentSync], keep: int = KEEP_RELEASES) -> list[str]:
+    """Remote argv of a whole sync's remote side (see :data:`SESSION_SCRIPT`): lock, prepare ``items``,
+    then wait for :func:`finish_line`. ``holder`` (who, from where, when) is left beside the lock for
+    whoever finds it taken."""
+    pairs = [arg for i in items for arg in (str(i.root), i.compose_name)]
+    return remote_sh(SESSION_SCRIPT, mount_root, holder, str(max(1, keep)), *pairs)
 
 
-def parse_prepare(output: str, count: int) -> list[dict[str, str]]:
-    """The ``staging``/``current`` pairs printed by :data:`PREPARE_SCRIPT`, one dict per item."""
-    rows = [plain for plain in output.splitlines() if "=" in plain]
+def parse_prepare(lines: Sequence[str], count: int) -> list[dict[str, str]]:
+    """The ``staging``/``current`` pairs the session printed before it was locked, one dict per item."""
+    rows = [plain for plain in lines if "=" in plain]
     if len(rows) != 2 * count:
         raise ValueError(f"expected {2 * count} lines from the prepare step, got {len(rows)}")
     return [parse_keyvals("\n".join(rows[2 * i: 2 * i + 2])) for i in range(count)]
 
 
-def finalize_argv(items: Sequence[ComponentSync], release_id: str, keep: int = KEEP_RELEASES) -> list[str]:
-    """Remote argv turning each item's ``staging`` into ``releases/<id>``, switching ``current``, pruning."""
+def finish_line(release_id: str, steps: Sequence[str]) -> str:
+    """The session's last instruction: ``release_id``, then RELEASE, DISCARD or KEEP per item, in order."""
     if not is_release_id(release_id):
         raise ValueError(f"not a release id: {release_id!r}")
-    pairs = [arg for i in items for arg in (str(i.root), i.compose_name)]
-    return remote_sh(FINALIZE_SCRIPT, release_id, str(max(1, keep)), *pairs)
-
-
-def discard_argv(items: Sequence[ComponentSync]) -> list[str]:
-    """Remote argv removing the ``staging`` copies of unchanged items."""
-    return remote_sh(DISCARD_SCRIPT, *(str(i.root) for i in items))
+    unknown = set(steps) - {RELEASE, DISCARD, KEEP}
+    if unknown:
+        raise ValueError(f"unknown sync steps: {sorted(unknown)}")
+    return " ".join([release_id, *steps])
 
 
 def rsync_argv(item: ComponentSync, host: Host, rsh: str, *, io_timeout: int = 60) -> list[str]:

@@ -1,0 +1,118 @@
+"""Opening the robot hosts' ssh connections before a command needs them.
+
+A command line such as ``robocore build --component talker sync run`` spends its first few tenths of
+a second importing its libraries and validating robot.yaml, and its remote steps then wait for
+the ssh handshake with each robot host (about 0.2 s on a LAN). Both can happen at once:
+
+- once a project is loaded, :func:`warm_loaded` starts the handshakes in the background (ssh
+  ``ControlMaster``: the steps that follow share the connection) and records the hosts it warmed
+  in ``.robocore/ssh-hosts.json``, beside the size and modification time of robot.yaml;
+- the next command calls :func:`warm_recorded` first thing, before anything heavy is imported: if
+  robot.yaml is unchanged, the recorded hosts are warmed at once.
+
+Only command lines naming a remote step, and not ``--dry-run``, warm anything. Warming never
+waits and never reports: a host that cannot be reached is named by the step that needs it. The
+record holds host names, users, addresses and ports, nothing secret. This module imports no
+config model (pydantic), so that the CLI can call it before loading one.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+#: Steps that talk to the robot hosts over ssh.
+REMOTE_STEPS = frozenset({"sync", "run", "status", "logs", "connect", "doctor", "down", "rollback"})
+#: The record, inside the project's ``.robocore`` folder.
+RECORD = "ssh-hosts.json"
+ROBOT_FILE = "robot.yaml"
+STATE_DIR = ".robocore"
+PROJECT_ENV = "ROBOCORE_PROJECT"
+
+_warmed: set[tuple[str, str, int]] = set()  # (user, ip, port) already warmed by this process
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """A robot host as ssh sees it (satisfies :class:`robocore.adapters.ssh.Target`)."""
+
+    name: str
+    user: str
+    ip: str
+    ssh_port: int
+
+
+def wants_remote(argv: Sequence[str]) -> bool:
+    """True when ``argv`` names a step that will use the robot hosts, and is not a dry run."""
+    return bool(REMOTE_STEPS & set(argv)) and "--dry-run" not in argv
+
+
+def warm(endpoints: Iterable[Endpoint]) -> None:
+    """Start the ssh connections to ``endpoints`` not yet warmed by this process."""
+    from robocore.adapters import ssh
+
+    for endpoint in endpoints:
+        key = (endpoint.user, endpoint.ip, endpoint.ssh_port)
+        if key not in _warmed:
+            _warmed.add(key)
+            ssh.warm(endpoint)
+
+
+def warm_loaded(root: Path, endpoints: Sequence[Endpoint], argv: Sequence[str]) -> None:
+    """After loading the project in ``root``: warm ``endpoints`` (the ssh hosts that run something)
+    when ``argv`` names a remote step, and record them for the next command's :func:`warm_recorded`."""
+    if not wants_remote(argv):
+        return
+    warm(endpoints)
+    _record(root, endpoints)
+
+
+def warm_recorded(argv: Sequence[str], cwd: Path | None = None) -> None:
+    """First thing in the CLI: warm the hosts recorded for the project ``argv`` points at, when robot.yaml
+    has not changed since they were recorded. Any doubt (no record, a changed file, a guess at the
+    project folder that is wrong) warms nothing; nothing here raises."""
+    if not wants_remote(argv):
+        return
+    try:
+        root = _guess_project(argv, cwd or Path.cwd())
+        data = json.loads((root / STATE_DIR / RECORD).read_text())
+        if data.get("robot_yaml") != _fingerprint(root):
+            return
+        endpoints = [Endpoint(str(e["name"]), str(e["user"]), str(e["ip"]), int(e["ssh_port"]))
+                     for e in data["hosts"]]
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return
+    warm(endpoints)
+
+
+def _guess_project(argv: Sequence[str], cwd: Path) -> Path:
+    """The project folder of a command line, without knowing the task names: ``-p DIR``, ``--project=DIR``,
+    ``$ROBOCORE_PROJECT``, a leading ``DIR`` holding a record, else ``cwd``."""
+    for i, arg in enumerate(argv):
+        if arg in ("-p", "--project") and i + 1 < len(argv):
+            return Path(argv[i + 1])
+        if arg.startswith("--project="):
+            return Path(arg.split("=", 1)[1])
+    if os.environ.get(PROJECT_ENV):
+        return Path(os.environ[PROJECT_ENV])
+    if argv and not argv[0].startswith("-") and (Path(argv[0]) / STATE_DIR / RECORD).is_file():
+        return Path(argv[0])
+    return cwd
+
+
+def _fingerprint(root: Path) -> list[int]:
+    st = (root / ROBOT_FILE).stat()
+    return [st.st_size, st.st_mtime_ns]
+
+
+def _record(root: Path, endpoints: Sequence[Endpoint]) -> None:
+    from robocore.files import write_atomic
+
+    try:
+        text = json.dumps({"robot_yaml": _fingerprint(root), "hosts": [asdict(e) for e in endpoints]}) + "\n"
+        write_atomic(root / STATE_DIR / RECORD, text)  # rewritten only when it changes
+    except OSError:
+        pass  # a read-only project: the next command warms its hosts once it has loaded them
