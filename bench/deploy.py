@@ -5,9 +5,10 @@ reached over ssh://, the template project (wheels base) with talker, listener an
 server on that host, taken through prepare-base, stage, build, sync and run.
 
 Timed, side by side in the same run, each until the listener ON THE REMOTE HOST prints the
-edited text:
+edited text (the end is the Docker log timestamp of that line, so the polling interval does not count):
   robocore: edit -> `robocore build --component talker sync run` (one command, as in the README;
-            --separate: three commands, each step timed)
+            --separate: three commands, each step timed), started when no ssh connection to the
+            host is open (as after a pause: the handshake is part of the time)
   naive:    edit -> `docker build` of an image with the workspace inside (colcon build in a RUN
             step, FROM the same staged image) -> `docker save | ssh host docker load` -> replace
             the talker container on the host with one from that image
@@ -29,6 +30,7 @@ import sys
 import tempfile
 import time
 import uuid
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +38,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "integration"))
 
 from robot_host.hosts import RobotFleet  # noqa: E402
+
+from robocore.adapters.ssh import MULTIPLEX_SECONDS  # noqa: E402
 
 PROJECT = "robocore-it-demo"  # shares the cached images of the integration suites
 
@@ -82,40 +86,52 @@ def set_greeting(project: Path, text: str) -> None:
 
 
 def wait_heard(client: Any, container: str, needle: str, timeout: float = 120) -> float:
+    """The wall-clock time at which ``container`` logged "I heard: <needle>", read from the Docker log's own
+    timestamp (so how often this polls does not count)."""
     deadline = time.monotonic() + timeout
+    logs = ""
     while time.monotonic() < deadline:
         try:
-            logs = client.containers.get(container).logs(tail=50).decode(errors="replace")
+            logs = client.containers.get(container).logs(tail=50, timestamps=True).decode(errors="replace")
         except Exception:
             logs = ""
-        if f"I heard: {needle}" in logs:
-            return time.monotonic()
+        for line in logs.splitlines():
+            stamp, _, text = line.partition(" ")
+            if text.startswith(f"I heard: {needle}"):
+                return log_time(stamp)
         time.sleep(0.2)
     talker = client.containers.get(container.replace("listener", "talker"))
     raise SystemExit(f"the listener never heard {needle!r} within {timeout:.0f} s\n--- listener\n{logs[-1500:]}\n"
                      f"--- talker ({talker.status}, {talker.labels})\n{talker.logs(tail=20).decode(errors='replace')}")
 
 
+def log_time(stamp: str) -> float:
+    """Seconds since the epoch of a Docker log timestamp (RFC 3339, nanoseconds, UTC)."""
+    whole, _, frac = stamp.rstrip("Z").partition(".")
+    seconds = datetime.strptime(whole, "%Y-%m-%dT%H:%M:%S").replace(tzinfo=timezone.utc).timestamp()
+    return seconds + float(f"0.{frac or 0}")
+
+
 def robocore_path(project: Path, client: Any, text: str, *, separate: bool) -> tuple[float, int, dict[str, float]]:
     steps: dict[str, float] = {}
-    start = time.monotonic()
+    start = time.time()
     set_greeting(project, text)
-    t = time.monotonic()
+    t = time.time()
     if separate:  # three processes, each step timed
         robocore(project, "build", "--component", "talker", "--quiet")
-        steps["build"] = time.monotonic() - t
-        t = time.monotonic()
+        steps["build"] = time.time() - t
+        t = time.time()
         out = robocore(project, "sync", "--json").stdout
-        steps["sync"] = time.monotonic() - t
-        t = time.monotonic()
+        steps["sync"] = time.time() - t
+        t = time.time()
         robocore(project, "run", "--quiet")
-        steps["run"] = time.monotonic() - t
+        steps["run"] = time.time() - t
     else:  # the documented loop: one command, one process
         out = robocore(project, "build", "--component", "talker", "--quiet", "sync", "--json", "run", "--quiet").stdout
-        steps["build sync run"] = time.monotonic() - t
+        steps["build sync run"] = time.time() - t
     rows = json.loads(out)["results"]  # sync's --json is the only output on stdout
     sent = sum(int(r["sent"]) for r in rows if r["component"] == "talker")
-    t = time.monotonic()
+    t = time.time()
     end = wait_heard(client, f"{PROJECT}-listener", text)
     steps["until heard"] = end - t
     return end - start, sent, steps
@@ -133,15 +149,15 @@ def naive_path(project: Path, client: Any, fleet: RobotFleet, text: str) -> tupl
     steps: dict[str, float] = {}
     host = fleet.hosts[0]
     image = f"{PROJECT}-talker-naive:bench"
-    start = time.monotonic()
+    start = time.time()
     set_greeting(project, text)
-    t = time.monotonic()
+    t = time.time()
     with tempfile.TemporaryDirectory(prefix="robocore-bench-naive-") as ctx:
         shutil.copytree(project / "components" / "talker" / "src", Path(ctx) / "src")
         Path(ctx, "Dockerfile").write_text(NAIVE_DOCKERFILE.format(image=f"{PROJECT}-talker:latest"))
         subprocess.run(["docker", "build", "-q", "-t", image, ctx], check=True, capture_output=True)
-    steps["docker build"] = time.monotonic() - t
-    t = time.monotonic()
+    steps["docker build"] = time.time() - t
+    t = time.time()
     save = subprocess.Popen(["docker", "save", image], stdout=subprocess.PIPE)
     load = subprocess.Popen(["ssh", "-F", str(fleet.ssh_config), f"root@{host.ip}", "--", "docker load -q"],
                             stdin=subprocess.PIPE, stdout=subprocess.DEVNULL)
@@ -153,8 +169,8 @@ def naive_path(project: Path, client: Any, fleet: RobotFleet, text: str) -> tupl
     load.stdin.close()
     if save.wait() != 0 or load.wait() != 0:
         raise SystemExit("docker save | docker load failed")
-    steps["save | load"] = time.monotonic() - t
-    t = time.monotonic()
+    steps["save | load"] = time.time() - t
+    t = time.time()
     old = client.containers.get(f"{PROJECT}-talker")
     attrs = old.attrs
     mounts = [m for m in attrs["Mounts"] if m["Destination"] != "/robocore/install"]
@@ -166,8 +182,8 @@ def naive_path(project: Path, client: Any, fleet: RobotFleet, text: str) -> tupl
         volumes=[f"{m['Source']}:{m['Destination']}:ro" for m in mounts],
         labels={"dev.robocore.bench": "naive"},
     )
-    steps["replace container"] = time.monotonic() - t
-    t = time.monotonic()
+    steps["replace container"] = time.time() - t
+    t = time.time()
     end = wait_heard(client, f"{PROJECT}-listener", text)
     steps["until heard"] = end - t
     return end - start, moved, steps
@@ -225,7 +241,9 @@ def main() -> int:
                 fast: list[Result] = []
                 naive: list[Result] = []
                 for n in range(args.rounds):
-                    # robocore first: it starts from the container run created (install tree mounted)
+                    # robocore first: it starts from the container run created (install tree mounted), with no
+                    # ssh connection open, as after a developer's pause (the last run's master has gone)
+                    time.sleep(MULTIPLEX_SECONDS + 1)
                     token = uuid.uuid4().hex[:8]  # unique text: no build cache can serve an earlier round
                     fast.append(robocore_path(project, client, f"robocore edit {n} {token}", separate=args.separate))
                     naive.append(naive_path(project, client, fleet, f"naive edit {n} {token}"))

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from robocore.adapters import ssh
-from robocore.commands import context, warmup
+from robocore.adapters import docker_hosts, ssh
+from robocore.commands import context, run, warmup
 from robocore.config.model import Host, Robot
 from robocore.project import Project
 
@@ -27,22 +27,31 @@ def _project(root: Path) -> Project:
     return Project(root=root, robot=robot)
 
 
-@pytest.mark.parametrize(("argv", "warmed"), [
-    (["build", "--component", "a", "sync", "run"], ["main"]),  # ssh hosts that run something; not spare
-    (["-p", "x", "status"], ["main"]),
-    (["build"], []),  # nothing remote follows
-    (["sync", "--dry-run"], []),  # a dry run contacts nobody
+@pytest.mark.parametrize(("argv", "warmed", "fetched"), [
+    # ssh hosts that run something (not spare); run's Docker connections are opened too
+    (["build", "--component", "a", "sync", "run"], ["main"], ["main"]),
+    (["-p", "x", "status"], ["main"], []),  # status connects with settings of its own
+    (["down"], ["main"], ["main"]),
+    (["build"], [], []),  # nothing remote follows
+    (["sync", "--dry-run"], [], []),  # a dry run contacts nobody
+    (["run", "--dry-run"], [], []),
 ])
 def test_ssh_hosts_are_warmed_only_before_remote_steps(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                                                       argv: list[str], warmed: list[str]) -> None:
+                                                       argv: list[str], warmed: list[str], fetched: list[str]) -> None:
     seen: list[str] = []
+    prefetched: list[tuple[str, int, int]] = []
     monkeypatch.setattr(ssh, "warm", lambda host: seen.append(host.name))
     monkeypatch.setattr(warmup, "_warmed", set())
+    monkeypatch.setattr(docker_hosts, "prefetch", lambda host, timeout, *, connect_timeout: prefetched.append(
+        (host.name, timeout, connect_timeout)))
     (tmp_path / "robot.yaml").write_text("# the project's file\n")
     project = _project(tmp_path)
     context.warm_remote_hosts(project, argv)
-    context.warm_remote_hosts(project, argv)  # once per process
+    context.warm_remote_hosts(project, argv)  # warmed once per process
     assert seen == warmed
+    # (tls and local hosts are passed too: prefetch leaves all but ssh alone)
+    assert sorted({name for name, _, _ in prefetched}) == (["dev", "main", "tls"] if fetched else [])
+    assert all((t, c) == (run.CONNECT_API_TIMEOUT, run.HOST_CONNECT_TIMEOUT) for _, t, c in prefetched)
 
 
 def test_the_next_command_warms_the_recorded_hosts_first_until_robot_yaml_changes(

@@ -80,6 +80,10 @@ def test_docker_requests_go_through_the_ssh_child(tmp_path: Path) -> None:
     response = pool.request("GET", "/v1.41/version")
     assert response.status == 200 and response.json() == {"path": "/v1.41/version"}
     pool.close()
+    # the same through a docker-py client: it never opens its placeholder Unix socket
+    client = docker_over_ssh.client([sys.executable, str(server)], timeout=10, version="1.41")
+    assert client.api.version() == {"path": "/v1.41/version"}
+    client.close()
 
 
 def test_tls_client_resolves_relative_files_and_fails_by_name(tmp_path: Path) -> None:
@@ -126,3 +130,33 @@ def test_layer_filter_drops_only_layers_the_host_has_and_keeps_the_rest_byte_for
         assert tar.extractfile(long_name).read() == top  # type: ignore[union-attr]
     assert names == [long_name, "manifest.json", "a/VERSION"]
     assert len(out) < 20_000
+
+
+def test_a_prefetched_connection_is_taken_once_with_its_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    import threading
+
+    calls: list[tuple[str, int, int]] = []
+    release = threading.Event()
+
+    def fake_ssh_client(host: Host, timeout: int, connect_timeout: int) -> object:
+        calls.append((threading.current_thread().name, timeout, connect_timeout))
+        release.wait(5)
+        if host.name == "down":
+            raise HostError(f"host {host.name}: cannot reach its Docker daemon")
+        return f"client of {host.name}"
+
+    monkeypatch.setattr(docker_hosts, "_ssh_client", fake_ssh_client)
+    up, down = Host(name="up", ip="10.9.0.1"), Host(name="down", ip="10.9.0.2")
+    docker_hosts.prefetch(up, 300, connect_timeout=8)
+    docker_hosts.prefetch(up, 300, connect_timeout=8)  # already under way: not twice
+    docker_hosts.prefetch(down, 300, connect_timeout=8)
+    docker_hosts.prefetch(Host(name="here", ip="127.0.0.1"), 300, connect_timeout=8)  # local: nothing to fetch
+    release.set()
+    assert docker_hosts.client_for(up, 300, connect_timeout=8) == "client of up"  # type: ignore[comparison-overlap]
+    with pytest.raises(HostError, match="host down: cannot reach"):
+        docker_hosts.client_for(down, 300, connect_timeout=8)
+    assert sorted(name for name, _, _ in calls) == ["robocore-prefetch-down", "robocore-prefetch-up"]
+    # taken once; other settings connect anew
+    docker_hosts.client_for(up, 300, connect_timeout=8)
+    docker_hosts.client_for(up, 60, connect_timeout=8)
+    assert [name for name, _, _ in calls[2:]] == ["MainThread", "MainThread"]

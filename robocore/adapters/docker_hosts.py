@@ -12,11 +12,16 @@
 
 Connecting fails with a HostError naming the host within about ``CONNECT_TIMEOUT`` seconds when the
 host is down, so one dead robot never stalls work on the others.
+
+An ssh connection can be opened ahead of time (:func:`prefetch`): ``build sync run`` starts run's
+connections while it builds and syncs, and :func:`client_for` then takes the open one.
 """
 
 from __future__ import annotations
 
 import subprocess
+import threading
+from concurrent.futures import Future
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -53,15 +58,51 @@ def client_for(host: Host, timeout: int = 120, *, project_root: Path | None = No
 
     ``timeout`` bounds each API call; ``connect_timeout`` bounds reaching the host.
     ``project_root`` resolves relative TLS file paths (default: the current folder).
+    A connection :func:`prefetch` opened with the same settings is taken (or its error raised).
     """
     access = host.access
     if access is DockerAccess.local:
         return local_client(timeout)
     if access is DockerAccess.ssh:
+        with _prefetch_lock:
+            pending = _prefetched.pop(_prefetch_key(host, timeout, connect_timeout), None)
+        if pending is not None:
+            return pending.result()
         return _ssh_client(host, timeout, connect_timeout)
     if access is DockerAccess.tls:
         return _tls_client(host, timeout, connect_timeout, project_root or Path.cwd())
     return _tcp_client(host, timeout, connect_timeout)
+
+
+_prefetched: dict[tuple[str, str, int, int, int], Future[docker.DockerClient]] = {}
+_prefetch_lock = threading.Lock()
+
+
+def _prefetch_key(host: Host, timeout: int, connect_timeout: int) -> tuple[str, str, int, int, int]:
+    return (host.user, host.ip, host.ssh_port, timeout, connect_timeout)
+
+
+def prefetch(host: Host, timeout: int = 120, *, connect_timeout: int = CONNECT_TIMEOUT) -> None:
+    """Start connecting to an ssh host's daemon in the background, for a later :func:`client_for` with the
+    same settings. Nothing is reported here: the error, if any, is raised by that call. Other kinds of
+    access, and a host already being fetched, are left alone."""
+    if host.access is not DockerAccess.ssh:
+        return
+    key = _prefetch_key(host, timeout, connect_timeout)
+    with _prefetch_lock:
+        if key in _prefetched:
+            return
+        pending: Future[docker.DockerClient] = Future()
+        _prefetched[key] = pending
+
+    def work() -> None:
+        try:
+            pending.set_result(_ssh_client(host, timeout, connect_timeout))
+        except BaseException as exc:  # handed to whoever takes the connection
+            pending.set_exception(exc)
+
+    # a daemon thread: a command that ends early (a failed build) does not wait for a connection it never used
+    threading.Thread(target=work, name=f"robocore-prefetch-{host.name}", daemon=True).start()
 
 
 def describe(host: Host) -> str:
@@ -125,14 +166,11 @@ def _ssh_client(host: Host, timeout: int, connect_timeout: int) -> docker.Docker
 
 
 def _dial(host: Host, timeout: int, connect_timeout: int, version: str | None) -> docker.DockerClient:
-    import docker
-
     from robocore.adapters import docker_over_ssh, ssh
 
-    client = docker.DockerClient(base_url=f"ssh://{host.user}@{host.ip}:{host.ssh_port}",
-                                 version=version or _BOOTSTRAP_API, timeout=timeout, use_ssh_client=True)
-    docker_over_ssh.attach(client, ssh.ssh_argv(host, ["docker", "system", "dial-stdio"],
-                                                connect_timeout=connect_timeout), timeout)
+    client = docker_over_ssh.client(ssh.ssh_argv(host, ["docker", "system", "dial-stdio"],
+                                                 connect_timeout=connect_timeout),
+                                    timeout=timeout, version=version or _BOOTSTRAP_API)
     api: Any = client.api
     if version is None:
         api._version = api._retrieve_server_version()

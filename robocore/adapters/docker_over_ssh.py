@@ -7,38 +7,27 @@ and shares one multiplexed connection per host with sync and connect (``ControlM
 session, not a new handshake.
 
 The ssh child talks through one end of a ``socketpair``; urllib3 gets the other end, a real
-socket, so request timeouts, ``select`` and docker-py's raw streams (logs ``-f``) work unchanged.
+socket, so request timeouts, ``select`` and docker-py's raw streams (logs ``-f``) work as they do
+on the local Unix socket. docker-py's own ``ssh://`` transport is not used, so paramiko (which
+it would import) is not needed.
 """
 
 from __future__ import annotations
 
-import functools
 import socket
 import subprocess
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+import requests.adapters
 import urllib3.connection
 import urllib3.connectionpool
 
+if TYPE_CHECKING:
+    import docker
+
 #: Open connections kept per host (sshd allows 10 sessions per connection by default).
 POOL_SIZE = 4
-
-
-class _DialSocket:
-    """Our end of the socketpair; ``makefile`` marks its files with ``channel`` as docker-py expects
-    of ssh connections when it takes over a response's raw stream."""
-
-    def __init__(self, sock: socket.socket) -> None:
-        self._sock = sock
-
-    def makefile(self, *args: Any, **kwargs: Any) -> Any:
-        handle = self._sock.makefile(*args, **kwargs)
-        handle.channel = self._sock
-        return handle
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._sock, name)
 
 
 class DialStdioConnection(urllib3.connection.HTTPConnection):
@@ -64,7 +53,7 @@ class DialStdioConnection(urllib3.connection.HTTPConnection):
         finally:
             theirs.close()
         ours.settimeout(self._timeout)
-        self.sock = _DialSocket(ours)
+        self.sock = ours
 
     def close(self) -> None:
         """Close the socket; the ssh child sees end-of-file and exits (or is stopped)."""
@@ -95,22 +84,44 @@ class DialStdioPool(urllib3.connectionpool.HTTPConnectionPool):
         return DialStdioConnection(self._argv, self._timeout)
 
 
-def attach(client: Any, argv: Sequence[str], timeout: float) -> None:
-    """Route every request of a docker-py client made for an ``ssh://`` URL through ``argv``.
+class DialStdioAdapter(requests.adapters.HTTPAdapter):
+    """The requests adapter of a docker-py client: every request goes to one :class:`DialStdioPool`."""
 
-    The client must have been created with ``use_ssh_client=True`` (so that docker-py opens no
-    connection of its own); its adapter's pools are replaced by one :class:`DialStdioPool`.
+    def __init__(self, pool: DialStdioPool) -> None:
+        super().__init__()
+        self._pool = pool
+
+    def get_connection(self, url: str, proxies: Any = None) -> DialStdioPool:  # type: ignore[override]
+        """The pool, whatever the URL (requests < 2.32.2)."""
+        return self._pool
+
+    def get_connection_with_tls_context(self, request: Any, verify: Any, proxies: Any = None,
+                                        cert: Any = None) -> DialStdioPool:
+        """The pool, whatever the request (requests >= 2.32.2)."""
+        return self._pool
+
+    def request_url(self, request: Any, proxies: Any) -> str:
+        """Only the path: the pool knows where it goes (and proxies do not apply)."""
+        return str(request.path_url)
+
+    def close(self) -> None:
+        """Close the pool's connections: their ssh children exit."""
+        super().close()
+        self._pool.close()
+
+
+def client(argv: Sequence[str], *, timeout: float, version: str) -> docker.DockerClient:
+    """A docker-py client whose requests all go through ``argv`` (``ssh ... docker system dial-stdio``).
+
+    It is made as a client of a local Unix socket that is never opened: that adapter is replaced
+    by a :class:`DialStdioAdapter` before any request, and docker-py reads raw streams from our
+    socket as it does from a Unix socket.
     """
-    adapter = client.api._custom_adapter
-    pool = DialStdioPool(argv, timeout)
-    adapter.get_connection = functools.partial(_the_pool, pool)
-    adapter.close = functools.partial(_close_pool, pool, adapter.close)
+    import docker
 
-
-def _the_pool(pool: DialStdioPool, *args: Any, **kwargs: Any) -> DialStdioPool:
-    return pool
-
-
-def _close_pool(pool: DialStdioPool, close: Any) -> None:
-    pool.close()
-    close()
+    made = docker.DockerClient(base_url="unix:///robocore-dial-stdio.sock", version=version, timeout=int(timeout))
+    adapter = DialStdioAdapter(DialStdioPool(argv, timeout))
+    api: Any = made.api
+    api.mount("http+docker://", adapter)
+    api._custom_adapter = adapter  # docker-py's fallback for URLs no mount matches
+    return made

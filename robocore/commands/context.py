@@ -29,7 +29,8 @@ class Options:
 def warm_remote_hosts(project: Project, argv: list[str]) -> None:
     """When ``argv`` names a step that uses the robot hosts (and is not a dry run): open the ssh
     connections to the hosts that run something, once per process, and record them for the next
-    command (see :mod:`robocore.commands.warmup`)."""
+    command (see :mod:`robocore.commands.warmup`); when it names a step that uses their Docker
+    daemons, open those connections too, for the step to take."""
     from robocore.commands import warmup
     from robocore.config.model import DockerAccess
 
@@ -37,3 +38,7 @@ def warm_remote_hosts(project: Project, argv: list[str]) -> None:
     endpoints = [warmup.Endpoint(h.name, h.user, h.ip, h.ssh_port) for h in project.robot.hosts
                  if h.access is DockerAccess.ssh and h.name in used]
     warmup.warm_loaded(project.root, endpoints, argv)
+    if warmup.wants_docker(argv):
+        from robocore.commands.run import prefetch_connections
+
+        prefetch_connections(project)

@@ -106,7 +106,7 @@ def release(options: Options, *, tag: str | None) -> None:
         if not options.quiet:
             console().print(f"pushed {target}:{v}", markup=False)
     if options.json:
-        stdout().print_json(json.dumps({"tag": version, "pushed": pushed}))
+        print(json.dumps({"tag": version, "pushed": pushed}, indent=2), flush=True)
     elif not options.quiet:
         console().print(f"released {version}: deploy it with `run --tag {version}`", markup=False)
 

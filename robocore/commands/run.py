@@ -44,6 +44,8 @@ MANAGED_ROLES = (ROLE_COMPONENT, ROLE_DISCOVERY)
 NOT_CONTACTED = "nothing planned, never deployed here: not contacted"
 #: Seconds a host gets to answer before it is reported unreachable.
 HOST_CONNECT_TIMEOUT = 8
+#: Seconds each Docker API call to a host may take.
+CONNECT_API_TIMEOUT = 300
 
 
 # --------------------------------------------------------------------------- hosts in parallel
@@ -54,11 +56,21 @@ def select_hosts(project: Project, host: str | None) -> list[Host]:
     return [project.host(host)] if host else list(project.robot.hosts)
 
 
-def connect(project: Project, host: Host, *, timeout: int = 300) -> docker.DockerClient:
+def connect(project: Project, host: Host, *, timeout: int = CONNECT_API_TIMEOUT) -> docker.DockerClient:
     """The Docker client of ``host`` (HostError naming the host when it cannot be reached)."""
     from robocore.adapters.docker_hosts import client_for
 
     return client_for(host, timeout, project_root=project.root, connect_timeout=HOST_CONNECT_TIMEOUT)
+
+
+def prefetch_connections(project: Project) -> None:
+    """Start :func:`connect`'s connection to every ssh host that runs something, in the background."""
+    from robocore.adapters.docker_hosts import prefetch
+
+    used = {c.runs_on for c in project.robot.components} | {s.host for s in project.robot.discovery_servers}
+    for host in project.robot.hosts:
+        if host.name in used:
+            prefetch(host, CONNECT_API_TIMEOUT, connect_timeout=HOST_CONNECT_TIMEOUT)
 
 
 def for_each_host(hosts: Sequence[Host], work: Callable[[Host], T]) -> tuple[dict[str, T], dict[str, RobocoreError]]:
@@ -93,7 +105,7 @@ def _is_outside_error(exc: BaseException) -> bool:
     if isinstance(exc, OSError):
         return True
     module = type(exc).__module__.split(".")[0]
-    return module in {"docker", "requests", "urllib3", "paramiko"}
+    return module in {"docker", "requests", "urllib3"}
 
 
 def _short(exc: BaseException) -> str:

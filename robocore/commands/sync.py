@@ -129,21 +129,20 @@ def _farm_links(farm: Path) -> dict[str, Path]:
 
 def sync(options: Options, *, host: str | None) -> None:
     """Copy install trees and runtime files to remote hosts; only what changed; atomic per component."""
-    from robocore.ui import console, stdout
+    from robocore.ui import console
 
     project = options.load()
     hosts = [project.host(host)] if host else list(project.robot.hosts)
     plans = {h.name: plan_host(project, h) for h in hosts}
-    out = console()
     if options.dry_run:
         _print_dry_run(project, hosts, plans)
         return
     remote = [h for h in hosts if plans[h.name]]
     for h in hosts:
         if h.is_local and not options.quiet:
-            out.print(f"{h.name}: this machine, components use the build output in place (nothing to copy)")
+            console().print(f"{h.name}: this machine, components use the build output in place (nothing to copy)")
         elif not plans[h.name] and not options.quiet:
-            out.print(f"{h.name}: no components")
+            console().print(f"{h.name}: no components")
     if not remote:
         return
     rsync.require_rsync()
@@ -159,8 +158,8 @@ def sync(options: Options, *, host: str | None) -> None:
                 failures[name] = exc
     rows = [r for name in sorted(results) for r in results[name]]
     if options.json:
-        stdout().print_json(json.dumps({"results": [asdict(r) for r in rows],
-                                        "failed": {k: v.lines() for k, v in failures.items()}}))
+        print(json.dumps({"results": [asdict(r) for r in rows],
+                          "failed": {k: v.lines() for k, v in failures.items()}}, indent=2), flush=True)
     elif not options.quiet:
         _print_table(rows)
     if failures:

@@ -26,6 +26,9 @@ from pathlib import Path
 
 #: Steps that talk to the robot hosts over ssh.
 REMOTE_STEPS = frozenset({"sync", "run", "status", "logs", "connect", "doctor", "down", "rollback"})
+#: Steps that connect to the robot hosts' Docker daemons with :func:`robocore.commands.run.connect`'s
+#: settings (status and logs use others).
+DOCKER_STEPS = frozenset({"run", "down", "rollback"})
 #: The record, inside the project's ``.robocore`` folder.
 RECORD = "ssh-hosts.json"
 ROBOT_FILE = "robot.yaml"
@@ -48,6 +51,11 @@ class Endpoint:
 def wants_remote(argv: Sequence[str]) -> bool:
     """True when ``argv`` names a step that will use the robot hosts, and is not a dry run."""
     return bool(REMOTE_STEPS & set(argv)) and "--dry-run" not in argv
+
+
+def wants_docker(argv: Sequence[str]) -> bool:
+    """True when ``argv`` names a step that will use the robot hosts' Docker daemons, and is not a dry run."""
+    return bool(DOCKER_STEPS & set(argv)) and "--dry-run" not in argv
 
 
 def warm(endpoints: Iterable[Endpoint]) -> None:
