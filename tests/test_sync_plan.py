@@ -184,3 +184,11 @@ def test_the_sync_lock_admits_one_holder_and_names_it_to_the_next(tmp_path: Path
     third = LocalSession(root, [], holder="bob")
     assert third.greeting == [] and third.hang_up() == 0
     assert not (tmp_path / "pwned").exists() and not Path("pwned").exists()
+
+
+def test_a_failed_remote_script_is_named_in_one_short_line() -> None:
+    failed = subprocess.CompletedProcess(["ssh"], 1, b"", b"some noise\nmv: cannot move 'staging': Permission denied\n")
+    line = ssh.describe_failure(failed, plan.session_argv("/srv/robocore", "me", []))
+    assert "\n" not in line and len(line) < 160
+    assert line.endswith("exited 1: mv: cannot move 'staging': Permission denied")
+    assert ssh.describe_failure(failed, ["docker", "version"]).startswith("`docker version` exited 1")

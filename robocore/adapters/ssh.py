@@ -132,7 +132,7 @@ def run(host: Host, remote: Sequence[str], *, timeout: float = 120, stdin: bytes
     try:
         proc = subprocess.run(argv, input=stdin, capture_output=True, timeout=timeout, check=False)
     except subprocess.TimeoutExpired:
-        raise HostError(f"host {host.name} ({host.ip}): `{shlex.join(remote)}` timed out after {timeout:.0f} s",
+        raise HostError(f"host {host.name} ({host.ip}): `{brief(remote)}` timed out after {timeout:.0f} s",
                         hint="is the host up and reachable over ssh?") from None
     if check and proc.returncode != 0:
         raise HostError(f"host {host.name} ({host.ip}): {describe_failure(proc, remote)}", hint=failure_hint(proc))
@@ -198,13 +198,14 @@ class Session:
         it should have; ``refused(exit code, stderr)`` may name a specific reason for an exit."""
         host = self._host
         assert self._proc.stderr is not None
+        no_answer = HostError(f"host {host.name} ({host.ip}): {what}: no answer within {timeout:.0f} s",
+                              hint="is the host up and reachable over ssh?")
+        if not self.ended:
+            return no_answer
         try:
-            if not self.ended:
-                raise subprocess.TimeoutExpired(self._proc.args, timeout)
             code = self._proc.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
-            return HostError(f"host {host.name} ({host.ip}): {what}: no answer within {timeout:.0f} s",
-                             hint="is the host up and reachable over ssh?")
+            return no_answer
         err = self._proc.stderr.read().decode(errors="replace")
         error = refused(code, err) if refused else None
         ended = subprocess.CompletedProcess(self._proc.args, code, b"", err.encode())
@@ -252,7 +253,15 @@ def describe_failure(proc: subprocess.CompletedProcess[bytes], remote: Sequence[
     last = err[-1] if err else "no output"
     if proc.returncode == 255:
         return f"ssh failed: {last}"
-    return f"`{shlex.join(remote)}` exited {proc.returncode}: {last}"
+    return f"`{brief(remote)}` exited {proc.returncode}: {last}"
+
+
+def brief(remote: Sequence[str], width: int = 80) -> str:
+    """A remote command for a one-line message: its first line, at most ``width`` characters (a
+    robocore script would otherwise fill the screen)."""
+    text = shlex.join(remote)
+    first = text.splitlines()[0] if text else ""
+    return first if first == text and len(first) <= width else first[: width - 3] + "..."
 
 
 def failure_hint(proc: subprocess.CompletedProcess[bytes]) -> str:
