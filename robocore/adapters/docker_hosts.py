@@ -144,7 +144,7 @@ def _ssh_client(host: Host, timeout: int, connect_timeout: int) -> docker.Docker
     try:
         return _dial(host, timeout, connect_timeout, None)
     except Exception as exc:
-        if not _is_connection_error(exc):
+        if not is_connection_error(exc):
             raise
         first = exc
     if time.monotonic() - started >= connect_timeout - 0.5:  # ssh gave up connecting: asking again would too
@@ -160,7 +160,7 @@ def _ssh_client(host: Host, timeout: int, connect_timeout: int) -> docker.Docker
     try:
         return _dial(host, timeout, connect_timeout, version or None)
     except Exception as exc:
-        if _is_connection_error(exc):
+        if is_connection_error(exc):
             raise _unreachable(host, first) from None
         raise
 
@@ -177,7 +177,8 @@ def _dial(host: Host, timeout: int, connect_timeout: int, version: str | None) -
     return client
 
 
-def _is_connection_error(exc: BaseException) -> bool:
+def is_connection_error(exc: BaseException) -> bool:
+    """True for errors of the connection to a daemon (socket, docker-py, requests, urllib3), as opposed to bugs."""
     return isinstance(exc, OSError) or type(exc).__module__.split(".")[0] in {"docker", "requests", "urllib3"}
 
 

@@ -34,9 +34,10 @@ def warm_remote_hosts(project: Project, argv: list[str]) -> None:
     from robocore.commands import warmup
     from robocore.config.model import DockerAccess
 
-    used = {c.runs_on for c in project.robot.components} | {s.host for s in project.robot.discovery_servers}
-    endpoints = [warmup.Endpoint(h.name, h.user, h.ip, h.ssh_port) for h in project.robot.hosts
-                 if h.access is DockerAccess.ssh and h.name in used]
+    if not warmup.wants_remote(argv):
+        return
+    endpoints = [warmup.Endpoint(h.name, h.user, h.ip, h.ssh_port) for h in project.robot.hosts_in_use()
+                 if h.access is DockerAccess.ssh]
     warmup.warm_loaded(project.root, endpoints, argv)
     if warmup.wants_docker(argv):
         from robocore.commands.run import prefetch_connections

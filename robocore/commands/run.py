@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from robocore.adapters.docker_hosts import is_connection_error
 from robocore.commands.context import Options
 from robocore.config.model import Host
 from robocore.errors import DockerError, GroupError, HostError, RobocoreError, UsageError
@@ -67,10 +68,8 @@ def prefetch_connections(project: Project) -> None:
     """Start :func:`connect`'s connection to every ssh host that runs something, in the background."""
     from robocore.adapters.docker_hosts import prefetch
 
-    used = {c.runs_on for c in project.robot.components} | {s.host for s in project.robot.discovery_servers}
-    for host in project.robot.hosts:
-        if host.name in used:
-            prefetch(host, CONNECT_API_TIMEOUT, connect_timeout=HOST_CONNECT_TIMEOUT)
+    for host in project.robot.hosts_in_use():
+        prefetch(host, CONNECT_API_TIMEOUT, connect_timeout=HOST_CONNECT_TIMEOUT)
 
 
 def for_each_host(hosts: Sequence[Host], work: Callable[[Host], T]) -> tuple[dict[str, T], dict[str, RobocoreError]]:
@@ -92,20 +91,13 @@ def for_each_host(hosts: Sequence[Host], work: Callable[[Host], T]) -> tuple[dic
             except RobocoreError as error:
                 failures[name] = error
             except Exception as exc:
-                if _is_outside_error(exc):
+                if is_connection_error(exc):
                     failures[name] = HostError(f"host {name}: {_short(exc)}")
                 else:
                     bugs.append(exc)
     if bugs:
         raise bugs[0]
     return results, failures
-
-
-def _is_outside_error(exc: BaseException) -> bool:
-    if isinstance(exc, OSError):
-        return True
-    module = type(exc).__module__.split(".")[0]
-    return module in {"docker", "requests", "urllib3"}
 
 
 def _short(exc: BaseException) -> str:

@@ -330,6 +330,11 @@ class Robot(Strict):
         """Components that run on ``host``, in file order."""
         return [c for c in self.components if c.runs_on == host]
 
+    def hosts_in_use(self) -> list[Host]:
+        """Hosts that run a component or a discovery server, in file order (a spare machine is not one)."""
+        used = {c.runs_on for c in self.components} | {s.host for s in self.discovery_servers}
+        return [h for h in self.hosts if h.name in used]
+
     @property
     def discovery_servers(self) -> list[DiscoveryServer]:
         """Configured discovery servers, or one on the first host."""
