@@ -61,7 +61,7 @@ def _require(component: str, task_name: str) -> None:
 def _options(c: Context, **flags: Any) -> Any:
     from robocore.commands.context import Options
 
-    return Options(project_dir=project_dir(c), **flags)
+    return Options(project_dir=project_dir(c), argv=tuple(sys.argv[1:]), **flags)
 
 
 @task(help={"dry_run": "Only print what would be checked."})

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,12 +16,14 @@ class Options:
     dry_run: bool = False
     quiet: bool = False
     json: bool = False
+    #: The whole command line, when a CLI runs the task: it says which remote steps follow (ssh warm-up).
+    argv: tuple[str, ...] = ()
 
     def load(self) -> Project:
         """Load the project (raises ConfigError with every problem)."""
         project = Project.load(self.project_dir)
         if not self.dry_run:
-            warm_remote_hosts(project, sys.argv[1:])
+            warm_remote_hosts(project, list(self.argv))
         return project
 
 

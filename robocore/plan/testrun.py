@@ -1,0 +1,175 @@
+"""A robot brought up for tests on one Docker daemon, as data.
+
+A test run starts the project's own images with the project's own discovery configuration,
+but isolated from the robot and from other runs: every robot host becomes one network
+namespace (a small "host" container on the run's private network, whose network and IPC
+the host's components and discovery servers join, as host networking and ``ipc: host`` give
+on the robot), the hosts' addresses become those containers' addresses, and the run has its
+own ROS domain. Everything the run creates carries :data:`LABEL_RUN` and :data:`LABEL_OWNER`,
+so that the next run can remove what a killed one left behind.
+
+Pure functions: the Docker work is in :mod:`robocore.testing.bringup`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from robocore.config.model import DockerAccess, Robot
+from robocore.plan import containers, dds, naming
+from robocore.plan.containers import ContainerSpec, Mount
+from robocore.project import Project
+
+LABEL_RUN = "dev.robocore.testrun"
+#: ``<hostname>|<boot id>|<pid>|<process start ticks>`` of the pytest process that owns the run.
+LABEL_OWNER = "dev.robocore.testrun.owner"
+ROLE_HOST = "testhost"
+#: Where a run's generated files live (DDS profiles): ``.robocore/test-runs/<run id>/``.
+RUNS_DIR = "test-runs"
+#: The command of a host container: hold the namespaces, nothing else.
+HOST_COMMAND = ("sleep", "infinity")
+
+
+@dataclass(frozen=True)
+class TestRun:
+    """The identity of one test run of one project."""
+
+    __test__ = False  # not a pytest test class
+
+    project: str  # the project's name (folder slug)
+    run_id: str  # short random hex
+    domain_id: int
+    owner: str  # LABEL_OWNER value
+
+    @property
+    def prefix(self) -> str:
+        """The prefix of every container, network and volume name of the run."""
+        return f"{self.project}-t{self.run_id}"
+
+    @property
+    def network(self) -> str:
+        """The run's private network, which the host containers join."""
+        return f"{self.prefix}-net"
+
+    @property
+    def labels(self) -> dict[str, str]:
+        """Labels of everything the run creates."""
+        return {LABEL_RUN: self.run_id, LABEL_OWNER: self.owner}
+
+    @property
+    def label_project(self) -> str:
+        """The project label of the run's containers: never the robot's own, so ``down`` and ``status`` skip them."""
+        return f"{self.project}-test-{self.run_id}"
+
+    def host_container(self, host: str) -> str:
+        """The container that is robot host ``host`` for this run."""
+        return f"{self.prefix}-host-{host}"
+
+    def component_container(self, component: str) -> str:
+        """The container of ``component`` in this run."""
+        return f"{self.prefix}-{component}"
+
+    def server_container(self, index: int) -> str:
+        """The container of discovery server ``index`` in this run."""
+        return f"{self.prefix}-discovery-{index}"
+
+    def server_volume(self, index: int) -> str:
+        """The state volume of discovery server ``index`` in this run (a restart within the run holds, as deployed)."""
+        return f"{self.prefix}-discovery-{index}-state"
+
+
+def hosts_to_start(robot: Robot) -> list[str]:
+    """Robot hosts that run a component or a discovery server, in file order."""
+    return [h.name for h in robot.hosts_in_use()]
+
+
+def isolated_robot(robot: Robot, addresses: Mapping[str, str], domain_id: int) -> Robot:
+    """``robot`` with each started host at its run address, reached through the local daemon, in ``domain_id``."""
+    hosts = [
+        h.model_copy(update={"ip": addresses[h.name], "docker": DockerAccess.local}) if h.name in addresses else h
+        for h in robot.hosts
+    ]
+    return robot.model_copy(update={"hosts": hosts, "ros_domain_id": domain_id})
+
+
+def probe_robot(robot: Robot) -> Robot:
+    """The robot as the test process sees it: UDP only (it cannot share the containers' memory)."""
+    discovery = robot.discovery.model_copy(update={"transport": "udp"})
+    return robot.model_copy(update={"discovery": discovery})
+
+
+def probe_environment(robot: Robot, profile_path: str) -> dict[str, str]:
+    """Environment of the test process's super client; its profile is the file at ``profile_path``."""
+    env = dds.client_environment(probe_robot(robot), super_client=True)
+    for key in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"):
+        if key in env:
+            env[key] = profile_path
+    return env
+
+
+def probe_profile(robot: Robot) -> str:
+    """The XML profile of the test process's super client."""
+    return dds.super_client_xml(probe_robot(robot))
+
+
+def host_spec(run: TestRun, project: Project, host: str) -> ContainerSpec:
+    """The container that holds robot host ``host``'s network and IPC namespaces."""
+    return ContainerSpec(
+        name=run.host_container(host),
+        service=f"host-{host}",
+        host=host,
+        role=ROLE_HOST,
+        project=run.label_project,
+        image=containers.image_ref(project, naming.base_image(project.robot, project.name), None),
+        entrypoint=HOST_COMMAND[:1],
+        command=HOST_COMMAND[1:],
+        environment=(),
+        network_mode=run.network,
+        ipc_mode="shareable",
+        restart="no",
+        extra_labels=tuple(sorted(run.labels.items())),
+    )
+
+
+def _in_host(run: TestRun, spec: ContainerSpec, *, name: str, dds_dir: str, share_ipc: bool) -> ContainerSpec:
+    """``spec`` moved into its host container's namespaces, with the run's name, labels and DDS profiles."""
+    namespace = f"container:{run.host_container(spec.host)}"
+    mounts = tuple(
+        dataclasses.replace(m, source=dds_dir) if m.target == naming.CONTAINER_DDS else m for m in spec.mounts
+    )
+    return dataclasses.replace(
+        spec,
+        name=name,
+        project=run.label_project,
+        network_mode=namespace,
+        ipc_mode=namespace if share_ipc else None,
+        ports=(),
+        mounts=mounts,
+        restart="no",
+        depends_on=(),
+        extra_labels=(*spec.extra_labels, *sorted(run.labels.items())),
+    )
+
+
+def component_specs(run: TestRun, project: Project, dds_dir: str) -> dict[str, ContainerSpec]:
+    """Component name -> its container in the run (``project`` is the isolated one)."""
+    share = containers.ipc_mode(project) == "host"
+    out = {}
+    for component in project.robot.components:
+        spec = containers.component_spec(project, component)
+        out[component.name] = _in_host(run, spec, name=run.component_container(component.name), dds_dir=dds_dir,
+                                       share_ipc=share)
+    return out
+
+
+def server_specs(run: TestRun, project: Project, dds_dir: str) -> list[ContainerSpec]:
+    """The run's discovery servers, in id order, each with its own state volume."""
+    share = containers.ipc_mode(project) == "host"
+    out = []
+    for server in dds.servers(project.robot):
+        spec = containers.discovery_spec(project, server.index)
+        spec = dataclasses.replace(spec, mounts=(Mount(run.server_volume(server.index), containers.DISCOVERY_STATE),))
+        out.append(_in_host(run, spec, name=run.server_container(server.index), dds_dir=dds_dir, share_ipc=share))
+    return out
