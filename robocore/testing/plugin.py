@@ -32,6 +32,9 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def pytest_configure(config: pytest.Config) -> None:
     """Register the ``robot`` marker's description."""
     config.addinivalue_line("markers", "robot: the test uses a robot project brought up by robocore")
+    # rclpy's message parser (lark) imports modules Python 3.11 deprecates: noise in every robot test's summary
+    for module in ("sre_parse", "sre_constants"):
+        config.addinivalue_line("filterwarnings", f"ignore:module '{module}' is deprecated:DeprecationWarning")
 
 
 def find_project(start: Path) -> Path | None:
@@ -87,10 +90,6 @@ def robot(request: pytest.FixtureRequest) -> Generator[Any, None, None]:
             request.session.shouldstop = "robocore: the robot could not be brought up"
             pytest.fail("robocore: " + "\n".join(error.lines()), pytrace=False)
         config.stash[_RUN] = run
-        reporter = config.pluginmanager.get_plugin("terminalreporter")
-        if reporter is not None:
-            for note in run.notes:
-                reporter.write_line(f"robocore: {note}")
         try:
             yield run
         finally:
@@ -100,8 +99,12 @@ def robot(request: pytest.FixtureRequest) -> Generator[Any, None, None]:
 @pytest.fixture(autouse=True)
 def _robot_components_running(request: pytest.FixtureRequest) -> None:
     """Before each test that uses ``robot``: start again whatever an earlier test stopped."""
-    if "robot" in request.fixturenames:
-        run = request.getfixturevalue("robot")
+    if "robot" not in request.fixturenames:
+        return
+    from robocore.testing.bringup import RobotUnderTest
+
+    run = request.getfixturevalue("robot")
+    if isinstance(run, RobotUnderTest):  # not a project's own fixture of that name
         run.ensure_running()
 
 
@@ -117,6 +120,20 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) ->
         return
     with contextlib.suppress(Exception):
         report.sections.append(("robocore: components and graph", run.report()))
+
+
+def pytest_terminal_summary(terminalreporter: Any, config: pytest.Config) -> None:
+    """How long the robot took to come up, and what the run noticed (leftovers removed, packages not loadable)."""
+    run = config.stash.get(_RUN, None)
+    if run is None:
+        return
+    timings = run.timings
+    if timings:
+        terminalreporter.write_line(
+            f"robocore: robot up in {timings['total']:.1f} s (builds checked in {timings['build']:.1f} s, "
+            f"containers and graph {timings['start']:.1f} s)")
+    for note in run.notes:
+        terminalreporter.write_line(f"robocore: {note}")
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
