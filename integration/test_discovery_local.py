@@ -3,8 +3,9 @@
 Every positive test has a negative control that would pass by accident if the path under test
 were not the one carrying the messages:
 
-- talker and listener from the generated config exchange messages through the discovery server;
-  the same two containers with no server running never hear each other;
+- talker and listener from the generated config exchange messages through the discovery server, and
+  the test process's probe (robocore's pytest plugin) sees both nodes and the talker's messages; the
+  same containers and probe with no server running see and hear nothing;
 - with the generated shared-memory settings (host network + ipc host) data flows between
   containers of one host; the same pair with private IPC namespaces discovers the topic and
   receives nothing; the generated UDP-only settings work with private IPC;
@@ -103,31 +104,44 @@ def deployment(demo_project: Path, tmp_path: Path, docker_client: Any, request: 
         remove_project_containers(docker_client, dep.project.name)
 
 
-def test_messages_flow_through_the_discovery_server(deployment: Any) -> None:
-    dep = deployment()
-    specs = dep.specs()
-    assert list(specs) == ["discovery-0", "talker", "listener"]
-    for spec in specs.values():
-        dep.start(spec)
-    heard = wait_for(dep.heard, HEAR_WITHIN)
-    assert heard, f"listener heard nothing in {HEAR_WITHIN} s; listener log:\n" + \
-        dep.containers["listener"].logs(tail=20).decode()
-    # The graph is known to the server: a super client asking it sees both nodes.
-    nodes = dep.graph("node")
-    assert "/talker" in nodes and "/listener" in nodes, nodes
+@pytest.fixture
+def robot_run(demo_project: Path, tmp_path: Path) -> Iterator[Any]:
+    """``start(servers=True)``: a copy of the demo project brought up by robocore's pytest plugin machinery."""
+    from robocore.testing import bring_up
+
+    runs: list[Any] = []
+
+    def start(servers: bool = True) -> Any:
+        root = copy_project(demo_project, tmp_path, f"robocore-it-probe-{len(runs)}")
+        runs.append(bring_up(root, servers=servers))
+        return runs[-1]
+
+    yield start
+    for run in runs:
+        run.close()
 
 
-def test_without_a_discovery_server_nothing_is_heard(deployment: Any) -> None:
-    """Negative control: the same generated talker and listener, no server running."""
-    dep = deployment()
-    specs = dep.specs()
-    dep.start(specs["talker"])
-    dep.start(specs["listener"])
-    talker = dep.containers["talker"]
-    assert wait_for(lambda: log_lines(talker, PUBLISHED), HEAR_WITHIN), "the talker never published"
-    time.sleep(SILENCE)
-    assert log_lines(talker, PUBLISHED), "talker stopped publishing"
-    assert dep.heard() == [], "listener heard the talker without a discovery server: discovery is not via the server"
+def test_messages_flow_through_the_discovery_server(robot_run: Any) -> None:
+    """The plugin's probe (a super client in the test process, over UDP) sees the graph the server relays."""
+    from std_msgs.msg import String
+
+    robot = robot_run()
+    robot.graph.wait_for_node("/talker", timeout=HEAR_WITHIN)
+    robot.graph.wait_for_node("/listener", timeout=HEAR_WITHIN)
+    msg = robot.graph.wait_for_message("/chatter", String, timeout=HEAR_WITHIN)
+    assert msg.data.startswith("hello from talker #")
+    robot.wait_for_log("listener", "I heard: hello from talker #", timeout=HEAR_WITHIN)
+
+
+def test_without_a_discovery_server_nothing_is_heard(robot_run: Any) -> None:
+    """Negative control: the same generated talker, listener and probe, no server running."""
+    robot = robot_run(servers=False)
+    robot.wait_for_log("talker", PUBLISHED, timeout=HEAR_WITHIN)
+    robot.graph.spin(SILENCE)
+    assert "Publishing" in robot.logs("talker").splitlines()[-1], "talker stopped publishing"
+    assert robot.graph.node_names() == set(), "the probe saw nodes without a discovery server"
+    assert HEARD not in robot.logs("listener"), \
+        "listener heard the talker without a discovery server: discovery is not via the server"
 
 
 def test_same_host_private_ipc_discovers_but_receives_nothing(deployment: Any) -> None:
