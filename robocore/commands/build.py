@@ -175,12 +175,7 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callabl
     for sub in ("build", "install", "log"):
         (plan.out / sub).mkdir(parents=True, exist_ok=True)
     uid, gid = os.getuid(), os.getgid()
-    volumes = {
-        str(plan.workspace): naming.CONTAINER_WS,
-        str(plan.out / "build"): colcon.CONTAINER_BUILD,
-        str(plan.out / "install"): naming.CONTAINER_INSTALL,
-        str(plan.out / "log"): colcon.CONTAINER_LOG,
-    }
+    volumes = colcon.workspace_mounts(plan.workspace, plan.out)
     events: list[colcon.PackageEvent] = []
     other: list[str] = []
     start = time.monotonic()
@@ -207,7 +202,7 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callabl
         for argv in attempts:
             code = run_streaming(
                 client, plan.image, argv, user=f"{uid}:{gid}", volumes=volumes,
-                environment={"HOME": "/tmp", "ROBOCORE_NO_INSTALL": "1", "PYTHONDONTWRITEBYTECODE": "1"},
+                environment=colcon.CONTAINER_ENV,
                 labels={naming.LABEL_PROJECT: project.name, naming.LABEL_COMPONENT: name,
                         naming.LABEL_ROLE: "build"},
                 platform=dockerfiles.platform(plan.arch) if plan.arch != native else None, on_line=on_line,
