@@ -148,10 +148,11 @@ def check_current(project: Project, plan: ComponentTests, image_id: str) -> None
 
 
 def result_files(package_build: Path) -> list[Path]:
-    """The JUnit files colcon's test steps left in one package's build folder (regular files only)."""
+    """The JUnit files colcon's test steps left in one package's build folder (regular files, no symlinks)."""
     found = [package_build / name for name in RESULT_FILES]
     for folder in RESULT_FOLDERS:
-        found += sorted((package_build / folder).rglob("*.xml"))
+        if not (package_build / folder).is_symlink():
+            found += sorted((package_build / folder).rglob("*.xml"))
     return [p for p in found if p.is_file() and not p.is_symlink()]
 
 

@@ -36,7 +36,7 @@ def selected_components(project: Project, component: str | None) -> list[Compone
         comp = project.component(component)
         if comp.image is not None:
             raise UsageError(f"component {component!r} uses the pre-built image {comp.image}; "
-                             "nothing to stage or build")
+                             "nothing to stage, build or test")
         return [comp]
     return [c for c in project.robot.components if c.image is None]
 
