@@ -395,3 +395,15 @@ def test_the_project_collection_has_the_task() -> None:
 
     assert "test" in namespace.task_names
 
+
+
+def test_dry_run_json_is_one_document(project: Project, monkeypatch: pytest.MonkeyPatch,
+                                      capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setattr(package_tests, "local_docker", lambda: pytest.fail("the dry run contacted Docker"))
+    package_tests.test(Options(project_dir=project.root, dry_run=True, json=True), component="listener")
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["dry_run"] is True
+    [listener] = doc["components"]
+    assert listener["argv"] == colcon.workspace_test_argv()
+    assert listener["mounts"][str(project.root / "ws/listener")] == "/robocore/ws"
+    assert (listener["packages"], listener["built"]) == (["demo_listener"], False)
