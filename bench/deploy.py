@@ -76,12 +76,12 @@ def set_greeting(project: Path, text: str) -> None:
     path = talker_file(project)
     lines = path.read_text().splitlines(keepends=True)
     for i, line in enumerate(lines):
-        if "msg.data = f\"" in line:
+        if line.lstrip().startswith('return f"') and "#{count}" in line:  # the body of greeting(count)
             indent = line[: len(line) - len(line.lstrip())]
-            lines[i] = f'{indent}msg.data = f"{text} #{{self.count}}"\n'
+            lines[i] = f'{indent}return f"{text} #{{count}}"\n'
             break
     else:
-        raise SystemExit("talker.py has no `msg.data = f\"...\"` line to edit")
+        raise SystemExit("talker.py has no `return f\"... #{count}\"` line (greeting) to edit")
     path.write_text("".join(lines))
 
 

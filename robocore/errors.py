@@ -113,3 +113,10 @@ class GroupError(RobocoreError):
         if self.succeeded:
             out.append("succeeded: " + ", ".join(sorted(self.succeeded)))
         return out
+
+
+class TestFailure(RobocoreError):
+    """Package tests failed or errored, their results could not be read, or colcon test could not run."""
+
+    __test__ = False  # not a pytest test class, whatever imports it
+    exit_code = 9

@@ -137,6 +137,20 @@ def build(c: Context, component: str = "", full: bool = False, dry_run: bool = F
     command.build(_options(c, dry_run=dry_run, quiet=quiet, json=json), component=component or None, full=full)
 
 
+@task(help={"component": "Test only this component.",
+            "packages_select": "Test only this package (repeat for more).", "dry_run": "Print the plan only.",
+            "quiet": "Only errors.", "json": "Machine-readable result on stdout."},
+      iterable=["packages_select"])
+@reported
+def test(c: Context, component: str = "", packages_select: list[str] | None = None, dry_run: bool = False,
+         quiet: bool = False, json: bool = False) -> None:
+    """colcon-test each component's packages inside its staged image; one result per package (exit 9 on failure)."""
+    from robocore.commands import package_tests
+
+    package_tests.test(_options(c, dry_run=dry_run, quiet=quiet, json=json), component=component or None,
+                       packages=packages_select or [])
+
+
 @task(help={"host": "Sync only this host.", "dry_run": "Print the rsync commands only.", "quiet": "Only errors.",
             "json": "Machine-readable result on stdout."})
 @reported
@@ -245,7 +259,7 @@ def doctor(c: Context, host: str = "") -> None:
     command.doctor(_options(c), host=host or None)
 
 
-PROJECT_TASKS = (validate, prepare_base, stage, build, sync, run, down, status, logs, shell, connect,
+PROJECT_TASKS = (validate, prepare_base, stage, build, test, sync, run, down, status, logs, shell, connect,
                  release, rollback, doctor)
 
 #: The collection a project's tasks.py re-exports (``from robocore.tasks import namespace``).

@@ -27,12 +27,10 @@ from robocore.commands.images import (
     MAX_PARALLEL,
     Outcome,
     Reporter,
-    _client,
-    _selected,
-    _workspace_files,
     check_emulation,
     native_arch,
 )
+from robocore.commands.workspace import local_docker, selected_components, workspace_files
 from robocore.config.model import Component
 from robocore.errors import BuildError, UsageError
 from robocore.files import write_atomic
@@ -50,7 +48,7 @@ WorkspaceFiles = dict[str, dict[str, tuple[str, bool]]]
 
 def workspace_packages(ws: Path) -> tuple[dict[str, str], WorkspaceFiles]:
     """Every package of a workspace: ``({name: workspace-relative folder}, {name: its files})``."""
-    files = list(_workspace_files(ws))
+    files = list(workspace_files(ws))
     roots = sorted((rel.rsplit("/", 1)[0] if "/" in rel else "" for rel, _ in files
                     if rel.rsplit("/", 1)[-1] == "package.xml"), key=len, reverse=True)
     names = {root: colcon.package_name((ws / root / "package.xml").read_text(errors="replace")) or root or ws.name
@@ -177,18 +175,13 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callabl
     for sub in ("build", "install", "log"):
         (plan.out / sub).mkdir(parents=True, exist_ok=True)
     uid, gid = os.getuid(), os.getgid()
-    volumes = {
-        str(plan.workspace): naming.CONTAINER_WS,
-        str(plan.out / "build"): colcon.CONTAINER_BUILD,
-        str(plan.out / "install"): naming.CONTAINER_INSTALL,
-        str(plan.out / "log"): colcon.CONTAINER_LOG,
-    }
+    volumes = colcon.workspace_mounts(plan.workspace, plan.out)
     events: list[colcon.PackageEvent] = []
     other: list[str] = []
     start = time.monotonic()
     name = plan.component.name
     native = native_arch()
-    client = _client()
+    client = local_docker()
     try:
         update(name, "colcon build")
 
@@ -209,7 +202,7 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callabl
         for argv in attempts:
             code = run_streaming(
                 client, plan.image, argv, user=f"{uid}:{gid}", volumes=volumes,
-                environment={"HOME": "/tmp", "ROBOCORE_NO_INSTALL": "1", "PYTHONDONTWRITEBYTECODE": "1"},
+                environment=colcon.CONTAINER_ENV,
                 labels={naming.LABEL_PROJECT: project.name, naming.LABEL_COMPONENT: name,
                         naming.LABEL_ROLE: "build"},
                 platform=dockerfiles.platform(plan.arch) if plan.arch != native else None, on_line=on_line,
@@ -239,12 +232,12 @@ def build(options: Options, *, component: str | None, full: bool = False) -> Non
     """colcon-build component workspaces inside their staged images (incremental; plain copies patched)."""
     project = options.load()
     report = Reporter(options)
-    comps = [c for c in _selected(project, component) if c.folder is not None]
+    comps = [c for c in selected_components(project, component) if c.folder is not None]
     if component and not comps:
         raise UsageError(f"component {component!r} has no folder: nothing to build")
     from robocore.adapters.image_builder import image_state
 
-    client = _client()
+    client = local_docker()
     plans: list[BuildPlan] = []
     for comp in comps:
         ref = f"{naming.component_image(project.robot, project.name, comp.name)}:latest"

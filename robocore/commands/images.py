@@ -21,9 +21,10 @@ from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any
 
 from robocore.commands.context import Options
+from robocore.commands.workspace import local_docker, selected_components, workspace_files
 from robocore.config.loader import ROBOT_FILE
 from robocore.config.model import BaseKind, Component, docker_arch
-from robocore.errors import BuildError, ConfigError, DockerError, Problem, ToolMissing, UsageError
+from robocore.errors import BuildError, ConfigError, DockerError, Problem, ToolMissing
 from robocore.plan import dockerfiles, naming
 from robocore.plan.dockerfiles import ContextEntry, ImagePlan
 from robocore.plan.inputs import inputs_hash
@@ -36,7 +37,6 @@ if TYPE_CHECKING:
 
 QEMU_NAME = {"arm64": "aarch64", "amd64": "x86_64"}
 BINFMT_DIR = Path("/proc/sys/fs/binfmt_misc")
-SKIP_WS_DIRS = frozenset({"build", "install", "log"})
 MAX_PARALLEL = 4
 
 
@@ -283,25 +283,9 @@ def plan_base(project: Project, client: docker.DockerClient, arch: str, *, dry_r
     return _planned(project, plan, root_id)
 
 
-def _workspace_files(ws: Path) -> Iterator[tuple[str, Path]]:
-    """Files of a workspace, without build outputs, VCS data, caches and COLCON_IGNOREd folders."""
-    from robocore.adapters.image_builder import SKIP_DIRS
-
-    for dirpath, dirnames, filenames in os.walk(ws):
-        here = Path(dirpath)
-        if "COLCON_IGNORE" in filenames:
-            dirnames[:] = []
-            continue
-        dirnames[:] = sorted(d for d in dirnames if d not in SKIP_DIRS and not (here == ws and d in SKIP_WS_DIRS)
-                             and not d.startswith("."))
-        for name in sorted(filenames):
-            if not name.endswith((".pyc", ".pyo")):
-                yield (here / name).relative_to(ws).as_posix(), here / name
-
-
 def package_xmls(ws: Path) -> list[str]:
     """Workspace-relative paths of every package.xml of a component's workspace."""
-    return [rel for rel, _ in _workspace_files(ws) if rel.rsplit("/", 1)[-1] == "package.xml"]
+    return [rel for rel, _ in workspace_files(ws) if rel.rsplit("/", 1)[-1] == "package.xml"]
 
 
 @dataclass(frozen=True)
@@ -356,16 +340,10 @@ def decide(state: ImageState | None, planned: Planned, *, force: bool) -> str | 
 # ---------------------------------------------------------------------------------------------- execution
 
 
-def _client() -> docker.DockerClient:
-    from robocore.adapters.docker_hosts import local_client
-
-    return local_client(timeout=3600)
-
-
 def _build_one(planned: Planned, reason: str, update: Callable[[str, str], None]) -> Outcome:
     from robocore.adapters.image_builder import build_image
 
-    client = _client()
+    client = local_docker()
     start = time.monotonic()
     key = planned.plan.ref
     update(key, f"building ({reason})")
@@ -415,7 +393,7 @@ def prepare_base(options: Options, *, force: bool) -> None:
     project = options.load()
     report = Reporter(options)
     _config_problems(project, dockerfiles.wheels_problems(project.robot))
-    client = _client()
+    client = local_docker()
     from robocore.adapters.image_builder import image_state
 
     outcomes: list[Outcome] = []
@@ -439,16 +417,6 @@ def _triage(planned: Planned, reason: str | None, dry_run: bool,
         outcomes.append(Outcome(what=planned.plan.ref, role=planned.plan.role, action="would-build", reason=reason))
     else:
         work.append((planned, reason))
-
-
-def _selected(project: Project, component: str | None) -> list[Component]:
-    if component:
-        comp = project.component(component)
-        if comp.image is not None:
-            raise UsageError(f"component {component!r} uses the pre-built image {comp.image}; "
-                             "nothing to stage or build")
-        return [comp]
-    return [c for c in project.robot.components if c.image is None]
 
 
 def _existing_base(project: Project, client: docker.DockerClient, arch: str, *, dry_run: bool = False) -> BaseRef:
@@ -489,9 +457,9 @@ def stage(options: Options, *, refresh: bool, component: str | None, force: bool
         for path in write_compose_files(project):
             report.info(f"wrote {path.relative_to(project.root)}")
         return
-    comps = _selected(project, component)
+    comps = selected_components(project, component)
     _config_problems(project, dockerfiles.wheels_problems(project.robot))
-    client = _client()
+    client = local_docker()
     from robocore.adapters.image_builder import image_state
 
     bases = {arch: _existing_base(project, client, arch, dry_run=options.dry_run) for arch in _arches(project, comps)}

@@ -5,7 +5,9 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
+from robocore.errors import UsageError
 from robocore.plan import naming
 
 CONTAINER_BUILD = "/robocore/build"
@@ -17,6 +19,22 @@ EVENT_HANDLERS = ("console_start_end+", "console_direct-")
 
 _EVENT_RE = re.compile(r"^(?P<what>Starting|Finished|Failed|Aborted)\s+(?:>>>|<<<)\s+(?P<pkg>\S+)"
                        r"(?:\s+\[(?P<secs>[0-9.]+)s[],])?")
+
+
+#: The environment of colcon's build and test containers: no install tree sourced by the entrypoint
+#: (colcon sets up each package's environment itself), no bytecode written into the mounted sources.
+CONTAINER_ENV = {"HOME": "/tmp", "ROBOCORE_NO_INSTALL": "1", "PYTHONDONTWRITEBYTECODE": "1"}
+
+
+def workspace_mounts(workspace: Path, out: Path) -> dict[str, str]:
+    """``{host path: container path}`` of colcon's build and test containers: the component's workspace
+    and its output folders ``out``/{build,install,log}."""
+    return {
+        str(workspace): naming.CONTAINER_WS,
+        str(out / "build"): CONTAINER_BUILD,
+        str(out / "install"): naming.CONTAINER_INSTALL,
+        str(out / "log"): CONTAINER_LOG,
+    }
 
 
 def workspace_build_argv(packages_above: Sequence[str] = ()) -> list[str]:
@@ -34,6 +52,28 @@ def workspace_build_argv(packages_above: Sequence[str] = ()) -> list[str]:
     ]
     if packages_above:
         argv += ["--packages-above", *packages_above]
+    return [*argv, "--event-handlers", *EVENT_HANDLERS]
+
+
+def workspace_test_argv(packages: Sequence[str] = ()) -> list[str]:
+    """``colcon test`` of the workspace that :func:`workspace_build_argv` built, with the same folders.
+
+    Results stay where colcon puts them, under each package's build folder (``pytest.xml`` of
+    ``ament_python`` packages, ``test_results/`` of ``ament_cmake`` ones). colcon's exit code says
+    whether the tests could run, not whether they passed (no ``--return-code-on-test-failure``):
+    the results say that. ``packages``: test only these (``--packages-select``); all when empty.
+    """
+    argv = [
+        "colcon", "--log-base", CONTAINER_LOG, "test",
+        "--base-paths", naming.CONTAINER_WS,
+        "--build-base", CONTAINER_BUILD,
+        "--install-base", naming.CONTAINER_INSTALL,
+    ]
+    if packages:
+        odd = [p for p in packages if not _PACKAGE_RE.match(p)]
+        if odd:
+            raise UsageError(f"not a package name: {odd[0]!r}")
+        argv += ["--packages-select", *packages]
     return [*argv, "--event-handlers", *EVENT_HANDLERS]
 
 
@@ -66,6 +106,8 @@ def parse_event(line: str) -> PackageEvent | None:
 
 
 _NAME_RE = re.compile(r"<name>\s*([A-Za-z0-9_\-]+)\s*</name>")
+#: A package name that can stand on a colcon command line (never an option).
+_PACKAGE_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_\-]*$")
 
 
 def package_name(package_xml: str) -> str | None:

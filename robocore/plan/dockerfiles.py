@@ -29,11 +29,14 @@ WHEELS: dict[str, tuple[str, ...]] = {
     "jazzy": ("ros-rclpy==7.1.6", "ros-std-msgs==5.3.6", "ros-rmw-fastrtps-cpp==8.4.3"),
     "kilted": ("ros-rclpy==9.1.2", "ros-std-msgs==5.5.1", "ros-rmw-fastrtps-cpp==9.3.3"),
 }
-#: colcon for ament_python packages, and psutil for ``fastdds discovery``.
+#: colcon for ament_python packages, pytest for their tests (``robocore test``), and psutil for
+#: ``fastdds discovery``. colcon-core requires pytest today; it is named because ``test`` needs it.
 WHEELS_TOOLS: tuple[str, ...] = (
     "colcon-core", "colcon-ros", "colcon-python-setup-py", "colcon-library-path", "colcon-bash",
-    "colcon-package-selection", "colcon-parallel-executor", "colcon-output", "psutil",
+    "colcon-package-selection", "colcon-parallel-executor", "colcon-output", "pytest", "psutil",
 )
+#: Debian packages the official base adds to ``ros:<distro>-ros-base`` (pytest: ``robocore test``).
+OFFICIAL_APT: tuple[str, ...] = ("procps", "python3-pip", "python3-pytest")
 #: Debian packages the wheels base needs from its root image (installed only if missing).
 WHEELS_APT: tuple[str, ...] = ("python3", "python3-venv", "procps", "ca-certificates")
 
@@ -172,7 +175,7 @@ def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequ
     else:
         lines.append(_env_lines([("ROS_DISTRO", distro), ("PIP_DISABLE_PIP_VERSION_CHECK", "1"),
                                  ("PIP_NO_CACHE_DIR", "1"), ("PIP_BREAK_SYSTEM_PACKAGES", "1")]))
-        lines.append(f"RUN {_apt_install(('procps', 'python3-pip'))} && rosdep update --rosdistro \"$ROS_DISTRO\"")
+        lines.append(f"RUN {_apt_install(OFFICIAL_APT)} && rosdep update --rosdistro \"$ROS_DISTRO\"")
     lines.append(f"COPY entrypoint.sh {naming.ENTRYPOINT}")
     if common:
         lines.append(f"COPY common {STAGING}/common")

@@ -12,7 +12,7 @@ ENV ROS_DISTRO=jazzy \
     PIP_DISABLE_PIP_VERSION_CHECK=1 \
     PIP_NO_CACHE_DIR=1 \
     PIP_BREAK_SYSTEM_PACKAGES=1
-RUN apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends procps python3-pip && rm -rf /var/lib/apt/lists/* && rosdep update --rosdistro "$ROS_DISTRO"
+RUN apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends procps python3-pip python3-pytest && rm -rf /var/lib/apt/lists/* && rosdep update --rosdistro "$ROS_DISTRO"
 COPY entrypoint.sh /robocore/entrypoint.sh
 COPY common /tmp/robocore/common
 RUN apt-get update && /robocore/entrypoint.sh rosdep install --rosdistro "$ROS_DISTRO" --ignore-src -r -y --from-paths /tmp/robocore/common && rm -rf /var/lib/apt/lists/*

@@ -12,6 +12,7 @@ setup(
     ],
     install_requires=["setuptools"],
     zip_safe=True,
+    tests_require=["pytest"],
     maintainer="robot developer",
     maintainer_email="dev@example.com",
     description="Example component: publishes a counting greeting on /chatter every 0.5 s.",

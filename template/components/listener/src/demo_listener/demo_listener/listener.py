@@ -6,6 +6,11 @@ from rclpy.node import Node
 from std_msgs.msg import String
 
 
+def heard_line(msg: String) -> str:
+    """The line printed for a message heard on /chatter."""
+    return f"I heard: {msg.data}"
+
+
 class Listener(Node):
     """A node that prints what it hears."""
 
@@ -15,7 +20,7 @@ class Listener(Node):
 
     def heard(self, msg: String) -> None:
         """Print one message; flushed so that it shows in `docker logs` at once."""
-        print(f"I heard: {msg.data}", flush=True)
+        print(heard_line(msg), flush=True)
 
 
 def main(args: list[str] | None = None) -> None:

@@ -6,6 +6,11 @@ from rclpy.node import Node
 from std_msgs.msg import String
 
 
+def greeting(count: int) -> str:
+    """The text of the ``count``-th message."""
+    return f"hello from talker #{count}"
+
+
 class Talker(Node):
     """A node that counts and publishes a greeting."""
 
@@ -19,7 +24,7 @@ class Talker(Node):
         """Publish the next greeting."""
         self.count += 1
         msg = String()
-        msg.data = f"hello from talker #{self.count}"
+        msg.data = greeting(self.count)
         self.publisher.publish(msg)
         print(f"Publishing: {msg.data}", flush=True)
 

@@ -1,0 +1,388 @@
+"""test: ``colcon test`` of each component's workspace inside its staged image, with a result per package.
+
+The container is the one ``build`` uses: the component's staged image, run as the invoking
+UID:GID, with the workspace and ``.robocore/build/<c>/{build,install,log}`` bind-mounted at the
+same paths and the same environment. The tests run against the install tree of the last build,
+so that build must be current: a component that was never built, or whose sources or image
+changed since its last build, is refused with the hint to run ``build`` first (``invoke build
+test`` does both). Building here instead would hide a build's output inside a test run.
+
+colcon leaves JUnit XML in each package's build folder (``pytest.xml`` of ``ament_python``
+packages, ``test_results/**.xml`` of ``ament_cmake`` ones). Those files are removed before the
+run, so a package's results are this run's or none, then read (:mod:`robocore.plan.junit`) and
+merged into ``.robocore/test-results/<component>/<package>.xml``; that folder holds the results of
+the last run only. Any failed or errored test, unreadable result file or failed colcon run is a
+:class:`~robocore.errors.TestFailure` (exit code 9) after every component was tried.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import shutil
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from robocore.commands.build import plan_build, workspace_packages
+from robocore.commands.context import Options
+from robocore.commands.images import MAX_PARALLEL, Reporter, check_emulation, native_arch
+from robocore.commands.workspace import local_docker, selected_components
+from robocore.config.model import Component
+from robocore.errors import BuildError, TestFailure, UsageError
+from robocore.files import write_atomic
+from robocore.plan import colcon, dockerfiles, junit, naming
+from robocore.project import Project
+
+#: Under the project's state folder: the merged JUnit XML of the last run, one file per package.
+RESULTS_DIR = "test-results"
+#: JUnit files colcon's test steps leave in a package's build folder, and folders searched for more.
+RESULT_FILES = ("pytest.xml",)
+RESULT_FOLDERS = ("test_results",)
+#: A result file larger than this is reported, not read.
+MAX_RESULT_BYTES = 64 * 1024 * 1024
+#: Lines of colcon's own output shown when it fails.
+OUTPUT_TAIL = 20
+
+
+@dataclass(frozen=True)
+class ComponentTests:
+    """What ``test`` runs for one component."""
+
+    component: Component
+    image: str
+    arch: str
+    workspace: Path
+    out: Path  # .robocore/build/<component>
+    packages: tuple[str, ...]  # the packages tested, sorted
+    select: tuple[str, ...] = ()  # --packages-select; empty: the whole workspace
+
+    @property
+    def argv(self) -> list[str]:
+        """The colcon command line."""
+        return colcon.workspace_test_argv(self.select)
+
+    @property
+    def mounts(self) -> dict[str, str]:
+        """``{host path: container path}``, the same as the component's build."""
+        return colcon.workspace_mounts(self.workspace, self.out)
+
+
+@dataclass
+class ComponentOutcome:
+    """How one component's test run ended: colcon's exit code and each package's results."""
+
+    component: str
+    exit_code: int
+    packages: list[junit.PackageResults] = field(default_factory=list)
+    output: list[str] = field(default_factory=list)  # colcon's last lines when it failed
+    result_files: dict[str, str] = field(default_factory=dict)  # package -> project-relative merged file
+
+    @property
+    def ok(self) -> bool:
+        """colcon ran and every package passed."""
+        return self.exit_code == 0 and all(p.ok for p in self.packages)
+
+
+def plan_tests(project: Project, components: Sequence[Component], select: Sequence[str]) -> list[ComponentTests]:
+    """One plan per component with a package to test; every name in ``select`` must be a package of them.
+
+    Without ``select`` every component with a workspace is tested, whole.
+    """
+    found: dict[str, tuple[str, ...]] = {}
+    for comp in components:
+        assert comp.folder is not None
+        roots, _ = workspace_packages(project.root / comp.folder)
+        found[comp.name] = tuple(sorted(roots))
+    known = sorted({p for names in found.values() for p in names})
+    unknown = [name for name in dict.fromkeys(select) if name not in known]
+    if unknown:
+        where = f" of component {components[0].name}" if len(components) == 1 else ""
+        raise UsageError(f"unknown package{'s' if len(unknown) > 1 else ''} "
+                         f"{', '.join(repr(n) for n in unknown)}{where} (known: {', '.join(known) or 'none'})")
+    plans = []
+    for comp in components:
+        packages = found[comp.name]
+        chosen = tuple(p for p in packages if p in select) if select else packages
+        if not chosen:
+            continue
+        plans.append(ComponentTests(
+            component=comp, image=f"{naming.component_image(project.robot, project.name, comp.name)}:latest",
+            arch=project.robot.host(comp.runs_on).arch.value, workspace=project.root / str(comp.folder),
+            out=project.build_dir(comp.name), packages=chosen,
+            select=chosen if select and chosen != packages else ()))
+    return plans
+
+
+def _rel(project: Project, path: Path) -> str:
+    try:
+        return path.relative_to(project.root).as_posix()
+    except ValueError:
+        return str(path)
+
+
+def _not_built(project: Project, plan: ComponentTests) -> BuildError:
+    return BuildError(f"component {plan.component.name}: not built yet "
+                      f"(no {_rel(project, plan.out / 'install')}); the tests run against the build's install tree",
+                      hint=f"run `robocore build --component {plan.component.name}` first (or `invoke build test`)")
+
+
+def check_current(project: Project, plan: ComponentTests, image_id: str) -> None:
+    """Raise BuildError unless the last build of the component is of its current sources and image."""
+    if not (plan.out / "install").is_dir():
+        raise _not_built(project, plan)
+    built = plan_build(project, plan.component, image_id)
+    if built.changed == []:
+        return
+    if built.changed is None and built.reason == "first build":
+        raise _not_built(project, plan)
+    why = built.reason if built.changed is None else f"changed: {', '.join(built.changed)}"
+    raise BuildError(f"component {plan.component.name}: the build is out of date ({why}); "
+                     "the tests would run the old code",
+                     hint=f"run `robocore build --component {plan.component.name}` first (or `invoke build test`)")
+
+
+# ---------------------------------------------------------------------------------------------- results
+
+
+def result_files(package_build: Path) -> list[Path]:
+    """The JUnit files colcon's test steps left in one package's build folder (regular files, no symlinks)."""
+    found = [package_build / name for name in RESULT_FILES]
+    for folder in RESULT_FOLDERS:
+        if not (package_build / folder).is_symlink():
+            found += sorted((package_build / folder).rglob("*.xml"))
+    return [p for p in found if p.is_file() and not p.is_symlink()]
+
+
+def clear_results(plan: ComponentTests) -> None:
+    """Remove the result files of the packages about to be tested, so stale ones are never counted."""
+    for package in plan.packages:
+        build = plan.out / "build" / package
+        for name in RESULT_FILES:
+            (build / name).unlink(missing_ok=True)
+        for folder in RESULT_FOLDERS:
+            if (build / folder).is_dir() and not (build / folder).is_symlink():
+                shutil.rmtree(build / folder)
+
+
+def read_results(project: Project, plan: ComponentTests, outcome: ComponentOutcome,
+                 failed: Sequence[str]) -> None:
+    """Read each tested package's result files into ``outcome`` and write its merged file under
+    ``.robocore/test-results/<component>/``. ``failed``: packages colcon reported as failed."""
+    folder = project.state_dir / RESULTS_DIR / plan.component.name
+    for package in plan.packages:
+        files: list[tuple[str, bytes]] = []
+        too_large: list[str] = []
+        for path in result_files(plan.out / "build" / package):
+            if path.stat().st_size > MAX_RESULT_BYTES:
+                too_large.append(f"{_rel(project, path)}: larger than {MAX_RESULT_BYTES // 2**20} MiB, not read")
+                continue
+            files.append((_rel(project, path), path.read_bytes()))
+        results = junit.package_results(package, files)
+        extra = tuple(too_large)
+        if package in failed and results.ok:
+            log = _rel(project, plan.out / "log" / "latest_test" / package)
+            extra += (f"colcon test failed for {package} (log: {log})",)
+        if extra:
+            results = dataclasses.replace(results, problems=results.problems + extra)
+        target = folder / f"{package}.xml"
+        write_atomic(target, junit.merged(results, files))
+        outcome.packages.append(results)
+        outcome.result_files[package] = _rel(project, target)
+
+
+# ---------------------------------------------------------------------------------------------- running
+
+
+def _run(project: Project, plan: ComponentTests, report: Reporter,
+         update: Callable[[str, str], None]) -> ComponentOutcome:
+    """colcon test of one component in a throw-away container of its staged image."""
+    from robocore.adapters.image_builder import run_streaming
+
+    name = plan.component.name
+    for sub in ("build", "install", "log"):
+        (plan.out / sub).mkdir(parents=True, exist_ok=True)
+    clear_results(plan)
+    events: list[colcon.PackageEvent] = []
+    other: list[str] = []
+
+    def on_line(line: str) -> None:
+        event = colcon.parse_event(line)
+        if event is None:
+            if line.strip():
+                other.append(line)
+            return
+        events.append(event)
+        if event.state == "started":
+            update(name, f"testing {event.package}")
+        else:
+            secs = f" {event.seconds:.1f}s" if event.seconds is not None else ""
+            report.info(f"{name}: {event.package} tests {event.state}{secs}")
+
+    update(name, "colcon test")
+    client = local_docker()
+    try:
+        code = run_streaming(
+            client, plan.image, plan.argv, user=f"{os.getuid()}:{os.getgid()}", volumes=plan.mounts,
+            environment=colcon.CONTAINER_ENV,
+            labels={naming.LABEL_PROJECT: project.name, naming.LABEL_COMPONENT: name, naming.LABEL_ROLE: "test"},
+            platform=dockerfiles.platform(plan.arch) if plan.arch != native_arch() else None, on_line=on_line,
+        )
+    finally:
+        client.close()
+    outcome = ComponentOutcome(component=name, exit_code=code, output=other[-OUTPUT_TAIL:] if code else [])
+    failed = [e.package for e in events if e.state in ("failed", "aborted")]
+    read_results(project, plan, outcome, failed)
+    return outcome
+
+
+def _run_all(project: Project, plans: Sequence[ComponentTests], report: Reporter) -> list[ComponentOutcome]:
+    """Every component's tests, side by side (one container each); an exception is raised after all ran."""
+    outcomes: list[ComponentOutcome] = []
+    errors: list[BaseException] = []
+    with report.progress() as update, ThreadPoolExecutor(max_workers=min(MAX_PARALLEL, len(plans))) as pool:
+        futures = [pool.submit(_run, project, plan, report, update) for plan in plans]
+        for future in futures:
+            try:
+                outcomes.append(future.result())
+            except BaseException as exc:  # collected: the other components still run
+                errors.append(exc)
+    if errors:
+        raise errors[0]
+    return outcomes
+
+
+def test(options: Options, *, component: str | None, packages: Sequence[str] = ()) -> None:
+    """Run each component's package tests; print a result per package; fail when any test did not pass."""
+    project = options.load()
+    report = Reporter(options)
+    comps = [c for c in selected_components(project, component) if c.folder is not None]
+    if component and not comps:
+        raise UsageError(f"component {component!r} has no folder: nothing to test")
+    plans = plan_tests(project, comps, packages)
+    if options.dry_run:
+        show_plan(project, plans, options)
+        return
+    if not plans:
+        raise UsageError("no component has a workspace with packages: nothing to test")
+    from robocore.adapters.image_builder import image_state
+
+    client = local_docker()
+    try:
+        for plan in plans:
+            state = image_state(client, plan.image)
+            if state is None:
+                raise BuildError(f"component {plan.component.name}: no staged image {plan.image}",
+                                 hint="run `robocore stage` first")
+            check_emulation(plan.arch, native_arch(), f"component {plan.component.name}")
+            check_current(project, plan, state.id)
+    finally:
+        client.close()
+    shutil.rmtree(project.state_dir / RESULTS_DIR, ignore_errors=True)
+    outcomes = _run_all(project, plans, report)
+    if options.json:
+        print(json.dumps(as_json(project, outcomes), indent=2))
+    elif report.human:
+        print_report(project, outcomes)
+    error = failure(project, outcomes, details=not report.human and not options.json)
+    if error is not None:
+        raise error
+
+
+def show_plan(project: Project, plans: Sequence[ComponentTests], options: Options) -> None:
+    """The dry run: per component, the image, mounts and colcon command line; Docker is not contacted."""
+    uid, gid = os.getuid(), os.getgid()
+    if options.json:
+        print(json.dumps({"dry_run": True, "components": [
+            {"component": p.component.name, "image": p.image, "user": f"{uid}:{gid}", "packages": list(p.packages),
+             "mounts": p.mounts, "argv": p.argv, "built": (p.out / "install").is_dir()} for p in plans]}, indent=2))
+        return
+    import shlex
+
+    for plan in plans:
+        built = "" if (plan.out / "install").is_dir() else " (not built yet: run build first)"
+        print(f"# {plan.component.name}: {', '.join(plan.packages)} in {plan.image} as {uid}:{gid}{built}")
+        for host, inside in plan.mounts.items():
+            print(f"  mount {host} -> {inside}")
+        print(f"  {shlex.join(plan.argv)}")
+        print(f"  results: {_rel(project, project.state_dir / RESULTS_DIR / plan.component.name)}/<package>.xml")
+    if not plans:
+        print("# nothing to test: no component has a workspace with packages")
+
+
+# ---------------------------------------------------------------------------------------------- report
+
+
+def print_report(project: Project, outcomes: Sequence[ComponentOutcome]) -> None:
+    """The table of packages, then each test that did not pass with the first lines of its message."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    from robocore.commands.run import print_table
+    from robocore.ui import stdout
+
+    table = Table(title="package tests", title_justify="left")
+    for column in ("component", "package", "tests", "failures", "errors", "skipped", "result"):
+        table.add_column(column, justify="right" if column in ("tests", "failures", "errors", "skipped") else "left")
+    for outcome in outcomes:
+        for p in outcome.packages:
+            verdict = "[green]passed[/]" if p.ok else "[red]FAILED[/]"
+            table.add_row(escape(outcome.component), escape(p.package), str(p.tests), str(p.failures),
+                          str(p.errors), str(p.skipped), verdict)
+    print_table(table)
+    out = stdout()
+    for outcome in outcomes:
+        for p in outcome.packages:
+            for case in p.not_passed:
+                out.print(f"{'FAILED' if case.outcome == 'failed' else 'ERROR'} {p.package}: {case.test_id}",
+                          markup=False, soft_wrap=True)
+                for line in case.message.splitlines():
+                    out.print(f"    {line}", markup=False, soft_wrap=True)
+            for problem in p.problems:
+                out.print(f"ERROR {p.package}: {problem}", markup=False, soft_wrap=True)
+        if outcome.exit_code:
+            out.print(f"{outcome.component}: colcon test exited {outcome.exit_code}", markup=False)
+            for line in outcome.output:
+                out.print(f"    {line}", markup=False, soft_wrap=True)
+    out.print(f"JUnit XML: {_rel(project, project.state_dir / RESULTS_DIR)}/<component>/<package>.xml", markup=False)
+
+
+def as_json(project: Project, outcomes: Sequence[ComponentOutcome]) -> dict[str, object]:
+    """The one JSON document of ``test --json``."""
+    return {
+        "ok": all(o.ok for o in outcomes),
+        "results_dir": _rel(project, project.state_dir / RESULTS_DIR),
+        "components": [{
+            "component": o.component, "ok": o.ok, "colcon_exit_code": o.exit_code, "colcon_output": o.output,
+            "packages": [{
+                "package": p.package, "ok": p.ok, "tests": p.tests, "failures": p.failures, "errors": p.errors,
+                "skipped": p.skipped, "result_file": o.result_files.get(p.package), "problems": list(p.problems),
+                "failed": [{"test": c.test_id, "outcome": c.outcome, "message": c.message} for c in p.not_passed],
+            } for p in o.packages],
+        } for o in outcomes],
+    }
+
+
+def failure(project: Project, outcomes: Sequence[ComponentOutcome], *, details: bool) -> TestFailure | None:
+    """The error of a run where something did not pass (None when all passed). Its first line counts what
+    failed; with ``details`` (no report printed) one more line names each test that did not pass."""
+    bad = [(o, p) for o in outcomes for p in o.packages if not p.ok]
+    broken = [o for o in outcomes if o.exit_code]
+    if not bad and not broken:
+        return None
+    parts = []
+    if bad:
+        failures = sum(p.failures for _, p in bad)
+        errors = sum(p.errors for _, p in bad)
+        parts.append(f"{failures} failed, {errors} errored in {', '.join(p.package for _, p in bad)}")
+    parts += [f"colcon test exited {o.exit_code} in component {o.component}" for o in broken]
+    lines = ["tests did not pass: " + "; ".join(parts)
+             + f" (JUnit XML in {_rel(project, project.state_dir / RESULTS_DIR)}/)"]
+    if details:
+        for _, p in bad:
+            lines += [f"{p.package}: {c.outcome} {c.test_id}: {(c.message.splitlines() or [''])[0]}"
+                      for c in p.not_passed]
+            lines += [f"{p.package}: {problem}" for problem in p.problems]
+    return TestFailure("\n".join(lines))
