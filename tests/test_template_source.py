@@ -113,6 +113,8 @@ def test_installation_reads_the_distributions_direct_url(tmp_path: Path, monkeyp
     ("ssh://git@example.org/org/robocore.git", "ssh://git@example.org/org/robocore.git"),
     ("/srv/git/my robocore", "file:///srv/git/my%20robocore"),
     ("relative/path", None),
+    ("https://example.org/robocore.git?ref=x y", None),  # nothing CI files could not hold
+    ("https://example.org/$(id)", None),
 ])
 def test_pip_url(location: str, url: str | None) -> None:
     assert origin.pip_url(location) == url

@@ -29,6 +29,9 @@ TEMPLATE_FILES = ("copier.yml", "template/copier.yml")
 #: A git tag, branch or commit robocore passes to git and copier (never an option: no leading '-').
 REF_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9._/+-]*")
 
+#: A repository URL the template accepts for CI (it is written into CI files): the template's own validator.
+CI_URL_PATTERN = re.compile(r"(https?|ssh|git|file)://[A-Za-z0-9._~:/@%+-]+")
+
 #: scp-like git addresses: ``git@github.com:org/robocore.git``.
 _SCP_LIKE = re.compile(r"(?P<user>[A-Za-z0-9._-]+)@(?P<host>[A-Za-z0-9._-]+):(?P<path>(?!//).+)")
 _SCHEME = re.compile(r"[a-z][a-z0-9+.-]*://")
@@ -130,22 +133,21 @@ def origin_url(repository: Path) -> str | None:
 
 
 def pip_url(location: str) -> str | None:
-    """``location`` as a URL pip installs from with ``git+`` (https://, ssh://, git://, file://); None if it is none.
+    """``location`` as a URL pip installs from with ``git+``, of :data:`CI_URL_PATTERN`; None if it is none.
 
     Accepts what copier accepts as a template address: a URL (with or without ``git+``), the
     ``gh:``/``gl:`` shortcuts, an scp-like ``user@host:path`` and an absolute local path.
     """
     url = location.removeprefix("git+")
-    for shortcut, base in _SHORTCUTS.items():
-        if url.startswith(shortcut):
-            return base + url[len(shortcut):]
-    if _SCHEME.match(url):
-        return url
-    if scp := _SCP_LIKE.fullmatch(url):
-        return f"ssh://{scp['user']}@{scp['host']}/{scp['path']}"
-    if url.startswith("/"):
-        return Path(url).as_uri()
-    return None
+    shortcut = next((s for s in _SHORTCUTS if url.startswith(s)), None)
+    scp = _SCP_LIKE.fullmatch(url)
+    if shortcut:
+        url = _SHORTCUTS[shortcut] + url[len(shortcut):]
+    elif scp:
+        url = f"ssh://{scp['user']}@{scp['host']}/{scp['path']}"
+    elif url.startswith("/"):
+        url = Path(url).as_uri()
+    return url if CI_URL_PATTERN.fullmatch(url) else None
 
 
 def is_url(location: str) -> bool:
