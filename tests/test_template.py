@@ -265,6 +265,16 @@ def test_existing_project_keeps_edits_and_gets_missing_files_back(tmp_path: Path
     assert load_robot(project).ros_domain_id == 17
 
 
+def test_an_option_is_not_taken_for_the_project_folder(tmp_path: Path) -> None:
+    done = subprocess.run([sys.executable, "-m", "robocore", "init", "--help", "--defaults"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2
+    assert done.stderr.splitlines()[0] == "error: --help: not a project folder (it starts with '-')"
+    assert list(tmp_path.iterdir()) == []
+    make(tmp_path / "-odd")  # the same name as a path is fine
+    assert (tmp_path / "-odd" / "robot.yaml").is_file()
+
+
 def test_dry_run_writes_nothing(tmp_path: Path) -> None:
     make(tmp_path / "dry", dry_run=True)
     assert not (tmp_path / "dry").exists()

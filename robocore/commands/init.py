@@ -164,6 +164,9 @@ def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry
     from robocore.adapters import copier_adapter
     from robocore.ui import console
 
+    if str(path).startswith("-"):
+        raise UsageError(f"{path}: not a project folder (it starts with '-')",
+                         hint="robocore --help init lists init's options; write ./-name for such a folder")
     destination = path.expanduser().absolute()
     data: dict[str, Any] = {}
     if (value := _choice(distro, RosDistro, "--distro")) is not None:
