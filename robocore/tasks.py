@@ -79,17 +79,22 @@ def validate(c: Context, dry_run: bool = False) -> None:
         "distro": "ROS 2 distribution (humble, jazzy, kilted, rolling).",
         "base": "Base image kind: official or wheels.",
         "dry_run": "Only print what would be written.",
+        "source": "Template source: a robocore git repository (path or URL) or a template folder "
+                  "(default: robocore's own repository at its version tag, else the bundled template).",
+        "ref": "Git tag or commit to render (default: v<robocore version>; with --source: its latest tag).",
     },
     optional=[],
 )
 @reported
 def init(
-    c: Context, path: str, defaults: bool = False, distro: str = "", base: str = "", dry_run: bool = False
+    c: Context, path: str, defaults: bool = False, distro: str = "", base: str = "", dry_run: bool = False,
+    source: str = "", ref: str = "",
 ) -> None:
     """Create a robot project in PATH from the copier template."""
     from robocore.commands import init as command
 
-    command.run(Path(path), defaults=defaults, distro=distro or None, base=base or None, dry_run=dry_run)
+    command.run(Path(path), defaults=defaults, distro=distro or None, base=base or None, dry_run=dry_run,
+                source=source or None, ref=ref or None)
 
 
 @task

@@ -5,7 +5,6 @@ from __future__ import annotations
 import ast
 import io
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -19,6 +18,7 @@ from typing import Any
 import jsonschema
 import pytest
 import yaml
+from template_repo import TEMPLATE, hide_origin
 
 from robocore.adapters import copier_adapter
 from robocore.commands import init
@@ -26,18 +26,14 @@ from robocore.config.loader import load_robot
 from robocore.config.schema import robot_schema, schema_json
 from robocore.errors import UsageError
 
-REPO = Path(__file__).resolve().parents[1]
-TEMPLATE = REPO / "template"
 PROJECT_TASKS = ["validate", "prepare-base", "stage", "build", "sync", "run", "shell", "connect",
                  "release", "status", "logs", "down"]
 PACKAGES = {"talker": "demo_talker", "listener": "demo_listener"}
-GIT_ENV = {"GIT_AUTHOR_NAME": "t", "GIT_AUTHOR_EMAIL": "t@example.com", "GIT_COMMITTER_NAME": "t",
-           "GIT_COMMITTER_EMAIL": "t@example.com", "GIT_CONFIG_GLOBAL": os.devnull, "GIT_CONFIG_NOSYSTEM": "1"}
 
 
 @pytest.fixture(autouse=True)
-def _no_template_override(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.delenv(copier_adapter.TEMPLATE_ENV, raising=False)
+def _bundled_template(monkeypatch: pytest.MonkeyPatch) -> None:
+    hide_origin(monkeypatch)
 
 
 def make(path: Path, *, distro: str | None = None, base: str | None = None, dry_run: bool = False) -> Path:
@@ -47,7 +43,9 @@ def make(path: Path, *, distro: str | None = None, base: str | None = None, dry_
 
 @pytest.fixture(scope="module")
 def project(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return make(tmp_path_factory.mktemp("gen") / "myrobot")
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        hide_origin(monkeypatch)
+        return make(tmp_path_factory.mktemp("gen") / "myrobot")
 
 
 def robot_doc(project: Path) -> dict[str, Any]:
@@ -61,12 +59,14 @@ def robot_doc(project: Path) -> dict[str, Any]:
 
 def test_init_writes_the_project_files(project: Path) -> None:
     for rel in ["robot.yaml", "tasks.py", "README.md", ".gitignore", ".copier-answers.yml",
-                ".robocore/robot.schema.json",
+                ".robocore/robot.schema.json", "noxfile.py", "pytest.ini", "tests/graph/test_talker_listener.py",
+                ".github/workflows/robot.yml",
                 "components/talker/src/demo_talker/package.xml",
                 "components/listener/src/demo_listener/package.xml"]:
         assert (project / rel).is_file(), rel
     assert not list(project.rglob("*.jinja"))
     assert not (project / "copier.yml").exists()
+    assert not (project / ".gitlab-ci.yml").exists()
 
 
 def test_generated_robot_yaml_validates_with_the_defaults(project: Path) -> None:
@@ -96,7 +96,7 @@ def test_robot_yaml_points_editors_at_the_schema_init_wrote(project: Path) -> No
 def test_gitignore_covers_generated_files(project: Path) -> None:
     lines = (project / ".gitignore").read_text().splitlines()
     assert ".robocore/" in lines
-    assert {"build/", "install/", "log/"} <= set(lines)
+    assert {"build/", "install/", "log/", ".nox/", ".pytest_cache/", ".venv-ci/"} <= set(lines)
 
 
 def test_answers_file_records_the_answers(project: Path) -> None:
@@ -106,6 +106,10 @@ def test_answers_file_records_the_answers(project: Path) -> None:
     assert answers["ros_distro"] == "jazzy"
     assert answers["base_kind"] == "official"
     assert answers["hosts"] == init.default_hosts()
+    assert answers["ci"] == "github"
+    assert answers["robocore_repository"] == ""  # the bundled template: robocore's repository is unknown
+    assert "_commit" not in answers
+    assert not {"robocore_ref", "robocore_requirement", "with_github_ci", "with_gitlab_ci"} & set(answers)
 
 
 def test_invoke_list_in_the_project_shows_the_tasks(project: Path) -> None:
@@ -261,6 +265,16 @@ def test_existing_project_keeps_edits_and_gets_missing_files_back(tmp_path: Path
     assert load_robot(project).ros_domain_id == 17
 
 
+def test_an_option_is_not_taken_for_the_project_folder(tmp_path: Path) -> None:
+    done = subprocess.run([sys.executable, "-m", "robocore", "init", "--help", "--defaults"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2
+    assert done.stderr.splitlines()[0] == "error: --help: not a project folder (it starts with '-')"
+    assert list(tmp_path.iterdir()) == []
+    make(tmp_path / "-odd")  # the same name as a path is fine
+    assert (tmp_path / "-odd" / "robot.yaml").is_file()
+
+
 def test_dry_run_writes_nothing(tmp_path: Path) -> None:
     make(tmp_path / "dry", dry_run=True)
     assert not (tmp_path / "dry").exists()
@@ -283,8 +297,9 @@ def test_without_defaults_and_without_a_terminal_init_says_so(tmp_path: Path, mo
 
 def test_missing_template_is_named(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(copier_adapter.TEMPLATE_ENV, str(tmp_path / "nowhere"))
-    with pytest.raises(copier_adapter.TemplateError, match="nowhere"):
+    with pytest.raises(UsageError, match=f"{copier_adapter.TEMPLATE_ENV} .*nowhere: no such folder"):
         make(tmp_path / "x")
+    assert not (tmp_path / "x").exists()
 
 
 def test_cli_init_and_its_errors(tmp_path: Path) -> None:
@@ -314,51 +329,6 @@ def test_plain_copier_copy_makes_a_valid_project(tmp_path: Path) -> None:
 
 
 # ---------------------------------------------------------------- copier update
-
-
-def git(cwd: Path, *args: str) -> str:
-    return subprocess.run(["git", *args], cwd=cwd, check=True, capture_output=True, text=True,
-                          env={**os.environ, **GIT_ENV}).stdout
-
-
-def test_copier_update_round_trip(tmp_path: Path) -> None:
-    template = tmp_path / "template"
-    shutil.copytree(TEMPLATE, template)
-    git(template, "init", "-q", "-b", "main")
-    git(template, "add", "-A")
-    git(template, "commit", "-qm", "template v0.1.0")
-    git(template, "tag", "v0.1.0")
-
-    project = tmp_path / "bot"
-    copier_adapter.copy(copier_adapter.CopyRequest(template=str(template), destination=project, defaults=True,
-                                                   data={"base_kind": "wheels"}))
-    answers = yaml.safe_load((project / ".copier-answers.yml").read_text())
-    assert answers["_commit"] == "v0.1.0"
-    git(project, "init", "-q", "-b", "main")
-    git(project, "add", "-A")
-    git(project, "commit", "-qm", "generated")
-    robot_yaml = project / "robot.yaml"
-    robot_yaml.write_text(robot_yaml.read_text().replace("ros_domain_id: 0", "ros_domain_id: 42"))
-    git(project, "commit", "-qam", "my domain")
-
-    with (template / ".gitignore").open("a") as handle:
-        handle.write("*.bag\n")
-    (template / "robot.yaml.jinja").write_text((template / "robot.yaml.jinja").read_text() + "# template v0.2.0\n")
-    git(template, "commit", "-qam", "template v0.2.0")
-    git(template, "tag", "v0.2.0")
-
-    done = subprocess.run([sys.executable, "-m", "copier", "update", "--defaults"], cwd=project,
-                          capture_output=True, text=True, timeout=120, env={**os.environ, **GIT_ENV})
-    assert done.returncode == 0, done.stderr
-    answers = yaml.safe_load((project / ".copier-answers.yml").read_text())
-    assert answers["_commit"] == "v0.2.0"
-    assert answers["base_kind"] == "wheels"
-    text = robot_yaml.read_text()
-    assert "# template v0.2.0" in text and "ros_domain_id: 42" in text
-    assert "<<<<<<<" not in text
-    assert "*.bag" in (project / ".gitignore").read_text().splitlines()
-    robot = load_robot(project)
-    assert (robot.ros_domain_id, robot.base.kind.value) == (42, "wheels")
 
 
 def test_update_of_a_project_without_answers_is_refused(tmp_path: Path) -> None:

@@ -29,15 +29,21 @@ class TemplateError(RobocoreError):
 
 
 def template_source() -> str:
-    """Where the project template is: ``$ROBOCORE_TEMPLATE``, else the ``template/`` folder of robocore."""
-    configured = os.environ.get(TEMPLATE_ENV)
-    if configured:
-        return configured
+    """Where the project template is: ``$ROBOCORE_TEMPLATE``, else :func:`bundled_template`."""
+    return os.environ.get(TEMPLATE_ENV) or str(bundled_template())
+
+
+def bundled_template() -> Path:
+    """The template that comes with this robocore: ``template/`` of its source tree, else the wheel's copy.
+
+    An editable install runs from robocore's repository, whose top-level ``template/`` is the
+    template; a built wheel carries a copy as ``robocore/resources/template`` (setup.py).
+    """
     package = Path(__file__).resolve().parent.parent
     candidates = (package.parent / "template", package / "resources" / "template")
     for candidate in candidates:
         if (candidate / "copier.yml").is_file():
-            return str(candidate)
+            return candidate
     looked = ", ".join(str(c) for c in candidates)
     raise ToolMissing(
         f"robocore's project template was not found (looked in {looked})",

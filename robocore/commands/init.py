@@ -1,25 +1,46 @@
 """init: a new robot project from the copier template.
 
 A thin wrapper around ``copier copy``: it fills in what copier cannot know (this machine's
-user and architecture as the default host), refuses to write into a folder that holds
-something else, writes the JSON Schema the generated robot.yaml points editors at, and
-checks the result with robocore's own loader.
+user and architecture as the default host, where CI installs robocore from), chooses the
+template source so that ``copier update`` works later (:func:`choose_template`), refuses to
+write into a folder that holds something else, writes the JSON Schema the generated robot.yaml
+points editors at, and checks the result with robocore's own loader.
 """
 
 from __future__ import annotations
 
 import getpass
+import os
 import platform
 import re
 import sys
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from robocore.adapters import origin
 from robocore.config.model import Arch, BaseKind, RosDistro, docker_arch
 from robocore.errors import UsageError
 
 #: Where the generated robot.yaml's ``yaml-language-server`` comment points (relative to the project).
 SCHEMA_FILE = Path(".robocore") / "robot.schema.json"
+
+
+@dataclass(frozen=True)
+class TemplateChoice:
+    """Where init renders the template from, and what the project records about it."""
+
+    location: str
+    """What copier copies: a git URL, a local git repository, or a template folder."""
+    ref: str | None
+    """The git tag or commit to render (None: a plain folder, or copier's default, the latest tag)."""
+    versioned: bool
+    """The project records a template version (``_commit``), so ``copier update`` can work."""
+    data: dict[str, str] = field(default_factory=dict)
+    """Answers init fills in: ``robocore_repository`` (and ``robocore_ref`` for the bundled template)."""
+    note: str = ""
+    """One line for the user about updates."""
+
 
 def machine_arch() -> str:
     """This machine's architecture as a Docker platform name (amd64 when robocore has no name for it)."""
@@ -69,11 +90,83 @@ def check_destination(path: Path) -> bool:
     )
 
 
-def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry_run: bool) -> None:
+def choose_template(source: str | None, ref: str | None) -> TemplateChoice:
+    """Decide what init renders: an explicit source, robocore's own git repository at its tag, or the bundled copy.
+
+    1. ``--source`` (else ``$ROBOCORE_TEMPLATE``): that git URL, git repository or folder, at
+       ``--ref`` (copier's default without it: the latest tag).
+    2. Else robocore's own repository at ``--ref`` or the version tag ``v<version>``: the source
+       checkout robocore runs from (editable install), then the folder pip installed it from, then
+       the git URL pip installed it from (``pip install git+URL@TAG``, checked with ``git ls-remote``);
+       the first that has the tag (and, locally, the template files at it) wins.
+    3. Else the template bundled with robocore; the project then records no version.
+    """
+    from robocore.adapters import copier_adapter
+
+    if ref is not None and not origin.REF_PATTERN.fullmatch(ref):
+        raise UsageError(f"--ref {ref!r}: not a git tag, branch or commit name")
+    explicit = source or os.environ.get(copier_adapter.TEMPLATE_ENV)
+    if explicit:
+        return _explicit_template(explicit, ref, "--source" if source else copier_adapter.TEMPLATE_ENV)
+    tag = ref or origin.version_tag()
+    installed = origin.installation()
+    for folder in (origin.source_checkout(), installed.folder):
+        if folder is not None and origin.has_template_at(folder, tag):
+            return _git_template(str(folder), tag, _repository_of(folder))
+    if installed.vcs_url and origin.remote_has_tag(installed.vcs_url, tag):
+        return _git_template(f"git+{installed.vcs_url}", tag, origin.pip_url(installed.vcs_url) or "")
+    if ref is not None:
+        raise UsageError(f"--ref {ref}: no git repository of robocore with it was found",
+                         hint="name the repository: --source PATH_OR_GIT_URL")
+    repository = origin.pip_url(installed.vcs_url) if installed.vcs_url else None
+    data = {"robocore_repository": repository or "", "robocore_ref": installed.commit or tag}
+    return TemplateChoice(
+        location=str(copier_adapter.bundled_template()), ref=None, versioned=False, data=data,
+        note=f"note: no git repository of robocore with tag {tag} was found, so the bundled template was rendered "
+             f"and copier update needs _src_path: <robocore's git URL> and _commit: {tag} in .copier-answers.yml",
+    )
+
+
+def _explicit_template(location: str, ref: str | None, flag: str) -> TemplateChoice:
+    if location.startswith("-"):
+        raise UsageError(f"{flag} {location!r}: not a path or git URL")
+    if origin.is_url(location):
+        for_copier = location if location.startswith(("git+", "gh:", "gl:")) else f"git+{location}"
+        return _git_template(for_copier, ref, origin.pip_url(location) or "")
+    folder = Path(location).expanduser().absolute()
+    if not folder.is_dir():
+        raise UsageError(f"{flag} {location}: no such folder", hint="a robocore repository (path or git URL)")
+    if origin.is_repository_root(folder):
+        return _git_template(str(folder), ref, _repository_of(folder))
+    if ref is not None:
+        raise UsageError(f"--ref {ref}: {folder} is not a git repository, so it has no versions")
+    return TemplateChoice(location=str(folder), ref=None, versioned=False,
+                          note=f"note: {folder} is a plain folder: the project records no template version "
+                               "and copier update will not work")
+
+
+def _git_template(location: str, ref: str | None, repository: str) -> TemplateChoice:
+    note = f"template: {location} at {ref or 'its latest tag'}; copier update brings later versions"
+    return TemplateChoice(location=location, ref=ref, versioned=True, data={"robocore_repository": repository},
+                          note=note)
+
+
+def _repository_of(folder: Path) -> str:
+    """Where CI installs robocore from for a local repository: its origin when that is remote, else the folder."""
+    remote = origin.origin_url(folder)
+    url = origin.pip_url(remote) if remote and origin.is_url(remote) else None
+    return url or folder.as_uri()
+
+
+def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry_run: bool,
+        source: str | None = None, ref: str | None = None) -> None:
     """Render the template into ``path``; with an existing project, only add missing files."""
     from robocore.adapters import copier_adapter
     from robocore.ui import console
 
+    if str(path).startswith("-"):
+        raise UsageError(f"{path}: not a project folder (it starts with '-')",
+                         hint="robocore --help init lists init's options; write ./-name for such a folder")
     destination = path.expanduser().absolute()
     data: dict[str, Any] = {}
     if (value := _choice(distro, RosDistro, "--distro")) is not None:
@@ -86,20 +179,23 @@ def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry
             "init asks questions but stdin is not a terminal",
             hint="add --defaults to take every default (with --distro/--base to choose those)",
         )
+    template = choose_template(source, ref)
     if existing:
         console().print(f"{destination}: existing robocore project; only missing template files are added")
         if data:
             console().print("note: robot.yaml is kept as it is; change ros_distro or base.kind in it yourself")
     request = copier_adapter.CopyRequest(
-        template=copier_adapter.template_source(),
+        template=template.location,
         destination=destination,
-        data=data,
+        data={**template.data, **data},
         user_defaults={"project_name": project_name(destination), "hosts": default_hosts()},
         defaults=defaults,
         pretend=dry_run,
         keep_existing=existing,
+        vcs_ref=template.ref,
     )
     copier_adapter.copy(request)
+    console().print(template.note, markup=False, soft_wrap=True)
     if dry_run:
         console().print(f"would write {destination / SCHEMA_FILE} and check {destination / 'robot.yaml'}")
         return
