@@ -184,8 +184,10 @@ def _fetch(project: Project, url: str, version: str | None, *, refresh: bool, dr
     from robocore.adapters import vcs
 
     dest = _cache(project) / "git" / vcs.cache_key(url, version)
-    if not dry_run:
-        vcs.fetch(url, version, dest, refresh=refresh)
+    if dry_run:
+        vcs.fetch_argv(url, version)  # the same checks as a fetch (a URL or version that is not one)
+    else:
+        vcs.fetch(url, version, dest, refresh=refresh, allow_local=project.allows_local_repositories)
     return dest
 
 

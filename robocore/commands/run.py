@@ -472,9 +472,9 @@ def print_table(table: Any) -> None:
     if out.is_terminal:
         out.print(table)
         return
-    from rich.console import Console
+    from robocore.ui import make_console
 
-    Console(file=sys.stdout, width=160, highlight=False).print(table)
+    make_console(file=sys.stdout, width=160).print(table)
 
 
 # --------------------------------------------------------------------------- down
