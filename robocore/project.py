@@ -47,10 +47,11 @@ class Project:
         return bool(getattr(self.robot, "allow_local_repositories", False))
 
     @property
-    def allows_links_outside(self) -> bool:
-        """robot.yaml's opt-in to symlinks leading out of the project in what robocore copies (staged
-        sources, install trees and read-only volumes sent to hosts), which are otherwise refused."""
-        return bool(getattr(self.robot, "allow_links_outside_project", False))
+    def allows_files_outside(self) -> bool:
+        """robot.yaml's opt-in to files from outside the project folder in what robocore copies (staged
+        sources, install trees and read-only volumes sent to hosts, reached through a symlink or a
+        ``../`` path), which are otherwise refused."""
+        return bool(getattr(self.robot, "allow_files_outside_project", False))
 
     def build_dir(self, component: str) -> Path:
         """Where colcon puts build/, install/ and log/ of ``component``."""

@@ -20,10 +20,11 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any
 
-from robocore.commands.context import Options
+from robocore.commands.context import DRY_RUN_UNKNOWN, Options
 from robocore.config.loader import ROBOT_FILE
 from robocore.config.model import BaseKind, Component, docker_arch
 from robocore.errors import BuildError, ConfigError, DockerError, Problem, ToolMissing, UsageError
+from robocore.files import refuse_links_leaving
 from robocore.plan import dockerfiles, naming
 from robocore.plan.dockerfiles import ContextEntry, ImagePlan
 from robocore.plan.inputs import inputs_hash
@@ -82,7 +83,7 @@ class Outcome:
 
     what: str  # image reference or component name
     role: str  # base | component | build
-    action: str  # built | up-to-date | would-build | failed
+    action: str  # built | up-to-date | would-build | unknown (dry run) | failed
     reason: str = ""
     image_id: str | None = None
     seconds: float = 0.0
@@ -104,9 +105,11 @@ class Reporter:
             console().print(message)
 
     def plain(self, text: str) -> None:
-        """Plan text (dry run), printed as is on stdout."""
+        """Plan text (dry run) on stdout, control characters escaped."""
         if not self.options.json:
-            print(text, flush=True)
+            from robocore.ui import clean
+
+            print(clean(text), flush=True)
 
     @contextmanager
     def progress(self) -> Iterator[Callable[[str, str], None]]:
@@ -131,7 +134,9 @@ class Reporter:
                       console=console(), transient=True) as bar:
 
             def update(key: str, text: str) -> None:
-                line = f"[bold]{key}[/]: {_escape(text)[:100]}"
+                from robocore.ui import clean
+
+                line = f"[bold]{key}[/]: {_escape(clean(text))[:100]}"
                 if key not in tasks:
                     tasks[key] = bar.add_task(line, total=None)
                 else:
@@ -148,7 +153,8 @@ class Reporter:
             return
         for o in outcomes:
             mark = {"built": "[green]built[/]", "up-to-date": "[dim]up to date[/]",
-                    "would-build": "[yellow]would build[/]", "failed": "[red]failed[/]"}.get(o.action, o.action)
+                    "would-build": "[yellow]would build[/]", "unknown": "[yellow]build or keep[/]",
+                    "failed": "[red]failed[/]"}.get(o.action, o.action)
             extra = f" ({o.reason})" if o.reason else ""
             secs = f" in {o.seconds:.1f}s" if o.action == "built" else ""
             self.info(f"{o.what}: {mark}{secs}{_escape(extra)}")
@@ -180,14 +186,16 @@ def _cache(project: Project) -> Path:
     return project.state_dir / "cache"
 
 
-def _fetch(project: Project, url: str, version: str | None, *, refresh: bool, dry_run: bool) -> Path:
+def _fetch(project: Project, url: str, version: str | None, *, refresh: bool, dry_run: bool) -> Path | None:
+    """The checkout of ``url`` at ``version`` (fetched unless cached); in a dry run the cached one, or
+    None when there is none yet (nothing is fetched)."""
     from robocore.adapters import vcs
 
     dest = _cache(project) / "git" / vcs.cache_key(url, version)
     if dry_run:
         vcs.fetch_argv(url, version)  # the same checks as a fetch (a URL or version that is not one)
-    else:
-        vcs.fetch(url, version, dest, refresh=refresh, allow_local=project.allows_local_repositories)
+        return dest if (dest / ".git" / vcs.SOURCE_FILE).is_file() else None
+    vcs.fetch(url, version, dest, refresh=refresh, allow_local=project.allows_local_repositories)
     return dest
 
 
@@ -208,24 +216,32 @@ class Planned:
     labels: dict[str, str]
 
 
-def _planned(project: Project, plan: ImagePlan, parent_id: str) -> Planned:
+def _planned(project: Project, plan: ImagePlan, parent_id: str, *, known: bool = True) -> Planned:
+    """``plan`` with its context files and inputs hash; the hash is :data:`DRY_RUN_UNKNOWN` when the parent
+    image or a source is unknown (a dry run)."""
     from robocore.adapters.image_builder import expand
 
     files = tuple(expand(plan.context))
     digest = inputs_hash(plan.dockerfile, [f.digest() for f in files], parent=parent_id, platform=plan.platform)
+    if not known or parent_id == DRY_RUN_UNKNOWN:
+        digest = DRY_RUN_UNKNOWN
     labels = {naming.LABEL_PROJECT: project.name, naming.LABEL_ROLE: plan.role, naming.LABEL_INPUTS: digest}
     if plan.component:
         labels[naming.LABEL_COMPONENT] = plan.component
     return Planned(plan=plan, files=files, parent_id=parent_id, inputs=digest, labels=labels)
 
 
-def _base_parent(project: Project, client: docker.DockerClient, arch: str, *, dry_run: bool,
+def _base_parent(project: Project, client: docker.DockerClient | None, arch: str, *, dry_run: bool,
                  say: Callable[[str], None]) -> tuple[str, str]:
-    """(FROM reference, its image ID) of the base for ``arch``."""
+    """(FROM reference, its image ID) of the base for ``arch``; without a client (a dry run) the ID is
+    :data:`DRY_RUN_UNKNOWN`."""
     from robocore.adapters import rootfs
     from robocore.adapters.image_builder import image_state
 
     robot = project.robot
+    if client is None:
+        default = rootfs.BOOTSTRAPPED if robot.base.kind is BaseKind.wheels else dockerfiles.official_image(robot)
+        return robot.base.image or default, DRY_RUN_UNKNOWN
     if robot.base.kind is BaseKind.wheels:
         if dry_run:
             for ref in ([robot.base.image] if robot.base.image else [rootfs.BOOTSTRAPPED, rootfs.UPSTREAM]):
@@ -253,7 +269,7 @@ def _base_parent(project: Project, client: docker.DockerClient, arch: str, *, dr
     return ref, state.id
 
 
-def plan_base(project: Project, client: docker.DockerClient, arch: str, *, dry_run: bool = False,
+def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *, dry_run: bool = False,
               refresh_sources: bool = False, say: Callable[[str], None] = lambda _: None) -> Planned:
     """The base image plan for ``arch`` (resolves the root image and fetches common packages)."""
     robot = project.robot
@@ -272,20 +288,26 @@ def plan_base(project: Project, client: docker.DockerClient, arch: str, *, dry_r
     if ca is not None:
         entries.append(ContextEntry("host-ca.pem", data=ca.read_bytes()))
     common: list[str] = []
+    known = True
     for pkg in robot.common_packages:
         if pkg.repo:
             source = _fetch(project, pkg.repo, pkg.branch, refresh=refresh_sources, dry_run=dry_run)
         else:
             source = project.root / (pkg.folder or pkg.name)
-        entries.append(ContextEntry(f"common/{pkg.name}", source=source))
+            refuse_links_leaving(source, project.root, what=f"common package {pkg.name}, staged into the base image",
+                                 allowed=project.allows_files_outside)
+        if source is None:
+            known = False  # a dry run before the first fetch
+        else:
+            entries.append(ContextEntry(f"common/{pkg.name}", source=source))
         common.append(pkg.name)
     dockerfile = dockerfiles.base_dockerfile(robot, root_image=root_ref, has_ca=ca is not None, common=common)
     plan = ImagePlan(role="base", name=naming.base_image(robot, project.name), tag=dockerfiles.base_tag(arch, native),
                      arch=arch, dockerfile=dockerfile, parent=root_ref, context=tuple(entries))
-    return _planned(project, plan, root_id)
+    return _planned(project, plan, root_id, known=known)
 
 
-def _workspace_files(ws: Path) -> Iterator[tuple[str, Path]]:
+def workspace_files(ws: Path) -> Iterator[tuple[str, Path]]:
     """Files of a workspace, without build outputs, VCS data, caches and COLCON_IGNOREd folders."""
     from robocore.adapters.image_builder import SKIP_DIRS
 
@@ -301,9 +323,19 @@ def _workspace_files(ws: Path) -> Iterator[tuple[str, Path]]:
                 yield (here / name).relative_to(ws).as_posix(), here / name
 
 
+def check_workspace(project: Project, component: Component) -> Path:
+    """The workspace folder of ``component``; UnsafePath if it, or a symlink in it, leads out of the project
+    (unless robot.yaml allows that): stage copies from it and build mounts it."""
+    assert component.folder is not None
+    ws = project.root / component.folder
+    refuse_links_leaving(ws, project.root, what=f"the workspace of component {component.name}",
+                         allowed=project.allows_files_outside)
+    return ws
+
+
 def package_xmls(ws: Path) -> list[str]:
     """Workspace-relative paths of every package.xml of a component's workspace."""
-    return [rel for rel, _ in _workspace_files(ws) if rel.rsplit("/", 1)[-1] == "package.xml"]
+    return [rel for rel, _ in workspace_files(ws) if rel.rsplit("/", 1)[-1] == "package.xml"]
 
 
 @dataclass(frozen=True)
@@ -325,29 +357,36 @@ def plan_component(project: Project, component: Component, base: BaseRef, *, dry
     entries: list[ContextEntry] = []
     xmls: list[str] = []
     if robot.base.kind is BaseKind.official and component.folder:
-        ws = project.root / component.folder
+        ws = check_workspace(project, component)
         for rel in package_xmls(ws):
             dest = dockerfiles.rosdep_dest(PurePosixPath(rel))
             entries.append(ContextEntry(dest, source=ws / rel))
             xmls.append(dest)
     folders: list[str] = []
+    known = True
     for repo in component.repositories:
         folder = dockerfiles.repo_folder(repo)
         source = _fetch(project, repo.url, repo.version, refresh=refresh_sources, dry_run=dry_run)
-        entries.append(ContextEntry(f"repos/{folder}", source=source))
+        if source is None:
+            known = False  # a dry run before the first fetch
+        else:
+            entries.append(ContextEntry(f"repos/{folder}", source=source))
         folders.append(folder)
     dockerfile = dockerfiles.component_dockerfile(robot, component, base_ref=base.ref, package_xmls=xmls,
                                                   repo_folders=folders)
     plan = ImagePlan(role="component", name=naming.component_image(robot, project.name, component.name),
                      tag="latest", arch=base.arch, dockerfile=dockerfile, parent=base.ref,
                      context=tuple(entries), component=component.name)
-    return _planned(project, plan, base.inputs)
+    return _planned(project, plan, base.inputs, known=known)
 
 
 def decide(state: ImageState | None, planned: Planned, *, force: bool) -> str | None:
-    """Why the image must be built, or None when it is up to date."""
+    """Why the image must be built, or None when it is up to date (:data:`DRY_RUN_UNKNOWN` when a dry run
+    cannot know)."""
     if force:
         return "--force"
+    if planned.inputs == DRY_RUN_UNKNOWN:
+        return DRY_RUN_UNKNOWN
     if state is None:
         return "not built yet"
     if state.labels.get(naming.LABEL_INPUTS) != planned.inputs:
@@ -381,8 +420,12 @@ def _build_one(planned: Planned, reason: str, update: Callable[[str, str], None]
 
 
 def _show_plan(report: Reporter, planned: Planned, reason: str | None) -> None:
-    status = f"would build ({reason})" if reason else "up to date"
-    report.plain(f"# {planned.plan.ref} [{planned.plan.platform}] inputs {planned.inputs[:19]}: {status}")
+    if reason == DRY_RUN_UNKNOWN:
+        status = f"build or keep: {DRY_RUN_UNKNOWN}"
+    else:
+        status = f"would build ({reason})" if reason else "up to date"
+    inputs = planned.inputs if planned.inputs == DRY_RUN_UNKNOWN else planned.inputs[:19]
+    report.plain(f"# {planned.plan.ref} [{planned.plan.platform}] inputs {inputs}: {status}")
     report.plain(planned.plan.dockerfile)
 
 
@@ -417,14 +460,14 @@ def prepare_base(options: Options, *, force: bool) -> None:
     project = options.load()
     report = Reporter(options)
     _config_problems(project, dockerfiles.wheels_problems(project.robot))
-    client = _client()
+    client = None if options.dry_run else _client()  # a dry run contacts no daemon
     from robocore.adapters.image_builder import image_state
 
     outcomes: list[Outcome] = []
     work: list[tuple[Planned, str]] = []
     for arch in _arches(project):
         planned = plan_base(project, client, arch, dry_run=options.dry_run, refresh_sources=force, say=report.info)
-        reason = decide(image_state(client, planned.plan.ref), planned, force=force)
+        reason = decide(image_state(client, planned.plan.ref) if client else None, planned, force=force)
         if options.dry_run:
             _show_plan(report, planned, reason)
         _triage(planned, reason, options.dry_run, outcomes, work)
@@ -437,6 +480,8 @@ def _triage(planned: Planned, reason: str | None, dry_run: bool,
     """Up to date, would build (dry run) or queued for building: the one decision per image."""
     if reason is None:
         outcomes.append(Outcome(what=planned.plan.ref, role=planned.plan.role, action="up-to-date"))
+    elif reason == DRY_RUN_UNKNOWN:
+        outcomes.append(Outcome(what=planned.plan.ref, role=planned.plan.role, action="unknown", reason=reason))
     elif dry_run:
         outcomes.append(Outcome(what=planned.plan.ref, role=planned.plan.role, action="would-build", reason=reason))
     else:
@@ -453,11 +498,15 @@ def _selected(project: Project, component: str | None) -> list[Component]:
     return [c for c in project.robot.components if c.image is None]
 
 
-def _existing_base(project: Project, client: docker.DockerClient, arch: str, *, dry_run: bool = False) -> BaseRef:
-    """The built base image for ``arch`` (stage does not rebuild it: that is prepare-base's job)."""
+def _existing_base(project: Project, client: docker.DockerClient | None, arch: str, *,
+                   dry_run: bool = False) -> BaseRef:
+    """The built base image for ``arch`` (stage does not rebuild it: that is prepare-base's job); without
+    a client (a dry run) its inputs are :data:`DRY_RUN_UNKNOWN`."""
     from robocore.adapters.image_builder import image_state
 
     ref = f"{naming.base_image(project.robot, project.name)}:{dockerfiles.base_tag(arch, native_arch())}"
+    if client is None:
+        return BaseRef(ref=ref, arch=arch, inputs=DRY_RUN_UNKNOWN)
     state = image_state(client, ref)
     if state is None or naming.LABEL_INPUTS not in state.labels:
         if dry_run:
@@ -493,11 +542,12 @@ def stage(options: Options, *, refresh: bool, component: str | None, force: bool
         return
     comps = _selected(project, component)
     _config_problems(project, dockerfiles.wheels_problems(project.robot))
-    client = _client()
+    client = None if options.dry_run else _client()  # a dry run contacts no daemon
     from robocore.adapters.image_builder import image_state
 
     bases = {arch: _existing_base(project, client, arch, dry_run=options.dry_run) for arch in _arches(project, comps)}
-    _warn_stale_base(project, client, bases, report)
+    if client is not None:
+        _warn_stale_base(project, client, bases, report)
     outcomes: list[Outcome] = []
     work: list[tuple[Planned, str]] = []
     for comp in comps:
@@ -505,7 +555,7 @@ def stage(options: Options, *, refresh: bool, component: str | None, force: bool
         if not options.dry_run:
             check_emulation(base.arch, native_arch(), f"component {comp.name} (host {comp.runs_on})")
         planned = plan_component(project, comp, base, dry_run=options.dry_run, refresh_sources=force)
-        reason = decide(image_state(client, planned.plan.ref), planned, force=force)
+        reason = decide(image_state(client, planned.plan.ref) if client else None, planned, force=force)
         if options.dry_run:
             _show_plan(report, planned, reason)
             if comp.repositories:
@@ -515,7 +565,8 @@ def stage(options: Options, *, refresh: bool, component: str | None, force: bool
                 report.plain(f"# {comp.name}: repositories (vcstool .repos), fetched on this machine into repos/\n"
                              + vcs.repos_file(comp.repositories, folders))
         _triage(planned, reason, options.dry_run, outcomes, work)
-    client.close()
+    if client is not None:
+        client.close()
     outcomes += _run_builds(report, work, parallel=True)
     if options.dry_run:
         report.plain("then: rewrite the per-host compose files")

@@ -20,6 +20,7 @@ from robocore.commands.run import for_each_host, managed_containers, print_table
 from robocore.config.model import DockerAccess, Host
 from robocore.errors import DockerError, GroupError, RobocoreError, UsageError
 from robocore.plan import dds, naming
+from robocore.plan.addresses import url_host
 from robocore.plan.containers import discovery_service
 from robocore.project import Project
 from robocore.ui import console, stdout
@@ -312,8 +313,8 @@ def connect(options: Options, *, component: str, cmd: str | None) -> int:
     tty = sys.stdin.isatty()
     docker_argv = ["docker", "exec", "-it" if tty else "-i"]
     for key, value in sorted(env.items()):
-        docker_argv += ["-e", f"{key}={value}"]
-    docker_argv += [name, *argv]
+        docker_argv.append(f"--env={key}={value}")
+    docker_argv += ["--", name, *argv]
     full, extra_env = _interactive_argv(project, host, docker_argv, tty=tty)
     return subprocess.call(full, env={**os.environ, **extra_env})
 
@@ -328,6 +329,7 @@ def _interactive_argv(project: Project, host: Host, docker_argv: list[str], *,
         from robocore.adapters import ssh
 
         ssh.require_ssh()
+        ssh.ensure_control_dir()
         return ["ssh", "-t" if tty else "-T", *ssh.ssh_options(host), "--", ssh.destination(host),
                 shlex.join(docker_argv)], {}
     if access is DockerAccess.tls and host.tls is not None:
@@ -335,10 +337,11 @@ def _interactive_argv(project: Project, host: Host, docker_argv: list[str], *,
             path = os.path.expanduser(value)
             return path if os.path.isabs(path) else str(project.root / path)
 
-        tls = ["--tlsverify", "--tlscacert", resolve(host.tls.ca_cert), "--tlscert", resolve(host.tls.client_cert),
-               "--tlskey", resolve(host.tls.client_key)]
-        return ["docker", *tls, *docker_argv[1:]], {"DOCKER_HOST": f"tcp://{host.ip}:{host.docker_port or 2376}"}
-    return docker_argv, {"DOCKER_HOST": f"tcp://{host.ip}:{host.docker_port or 2375}"}
+        tls = ["--tlsverify", f"--tlscacert={resolve(host.tls.ca_cert)}", f"--tlscert={resolve(host.tls.client_cert)}",
+               f"--tlskey={resolve(host.tls.client_key)}"]
+        tcp = f"tcp://{url_host(host.ip, host.docker_port or 2376)}"
+        return ["docker", *tls, *docker_argv[1:]], {"DOCKER_HOST": tcp}
+    return docker_argv, {"DOCKER_HOST": f"tcp://{url_host(host.ip, host.docker_port or 2375)}"}
 
 
 def _require_running(project: Project, host: Host, name: str, component: str) -> tuple[docker.DockerClient, Any]:
