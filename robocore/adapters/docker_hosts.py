@@ -219,9 +219,11 @@ def _tcp_client(host: Host, timeout: int, connect_timeout: int) -> docker.Docker
     if not host.insecure:
         raise HostError(f"host {host.name}: docker: tcp is plain, unauthenticated TCP",
                         hint="use ssh or tls, or set insecure: true on this host if the network is trusted")
+    from rich.markup import escape
+
     from robocore.ui import console
 
-    console().print(f"[yellow]warning:[/] host {host.name}: Docker over plain TCP ({describe(host)}): "
+    console().print(f"[yellow]warning:[/] host {host.name}: Docker over plain TCP ({escape(describe(host))}): "
                     "anyone on the network can control this daemon; prefer ssh or tls")
     return _tcp_like(host, f"tcp://{url_host(host.ip, host.docker_port or 2375)}", timeout, connect_timeout, False)
 

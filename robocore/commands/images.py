@@ -97,12 +97,12 @@ class Reporter:
         self.options = options
         self.human = not options.quiet and not options.json
 
-    def info(self, message: str) -> None:
-        """A line of progress."""
+    def info(self, message: str, *, markup: bool = False) -> None:
+        """A line of progress (rich markup only with ``markup``: the text may hold values from robot.yaml)."""
         if self.human:
             from robocore.ui import console
 
-            console().print(message)
+            console().print(message, markup=markup)
 
     def plain(self, text: str) -> None:
         """Plan text (dry run) on stdout, control characters escaped."""
@@ -155,9 +155,9 @@ class Reporter:
             mark = {"built": "[green]built[/]", "up-to-date": "[dim]up to date[/]",
                     "would-build": "[yellow]would build[/]", "unknown": "[yellow]build or keep[/]",
                     "failed": "[red]failed[/]"}.get(o.action, o.action)
-            extra = f" ({o.reason})" if o.reason else ""
+            extra = f": {o.reason}" if o.action == "unknown" else f" ({o.reason})" if o.reason else ""
             secs = f" in {o.seconds:.1f}s" if o.action == "built" else ""
-            self.info(f"{o.what}: {mark}{secs}{_escape(extra)}")
+            self.info(f"{_escape(o.what)}: {mark}{secs}{_escape(extra)}", markup=True)
 
 
 def _escape(text: str) -> str:
@@ -523,8 +523,8 @@ def _warn_stale_base(project: Project, client: docker.DockerClient, bases: dict[
     for arch, base in bases.items():
         current = plan_base(project, client, arch, dry_run=True)
         if current.inputs != base.inputs and not base.inputs.startswith("("):
-            report.info(f"[yellow]warning[/]: the inputs of {base.ref} changed since it was built "
-                        "(common packages or base settings); run prepare-base to rebuild it")
+            report.info(f"[yellow]warning[/]: the inputs of {_escape(base.ref)} changed since it was built "
+                        "(common packages or base settings); run prepare-base to rebuild it", markup=True)
 
 
 def stage(options: Options, *, refresh: bool, component: str | None, force: bool) -> None:

@@ -87,7 +87,8 @@ def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry
             hint="add --defaults to take every default (with --distro/--base to choose those)",
         )
     if existing:
-        console().print(f"{destination}: existing robocore project; only missing template files are added")
+        console().print(f"{destination}: existing robocore project; only missing template files are added",
+                        markup=False)
         if data:
             console().print("note: robot.yaml is kept as it is; change ros_distro or base.kind in it yourself")
     request = copier_adapter.CopyRequest(
@@ -101,7 +102,8 @@ def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry
     )
     copier_adapter.copy(request)
     if dry_run:
-        console().print(f"would write {destination / SCHEMA_FILE} and check {destination / 'robot.yaml'}")
+        console().print(f"would write {destination / SCHEMA_FILE} and check {destination / 'robot.yaml'}",
+                        markup=False)
         return
     _write_schema(destination)
     _check(destination)

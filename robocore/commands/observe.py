@@ -23,7 +23,7 @@ from robocore.plan import dds, naming
 from robocore.plan.addresses import url_host
 from robocore.plan.containers import discovery_service
 from robocore.project import Project
-from robocore.ui import console, stdout
+from robocore.ui import clean, console, stdout
 
 if TYPE_CHECKING:
     import docker
@@ -159,7 +159,7 @@ def status(options: Options) -> None:
     hosts = select_hosts(project, None)
     if options.dry_run:
         for h in hosts:
-            stdout().print(f"would list {project.name} containers on {h.name}")
+            stdout().print(f"would list {project.name} containers on {h.name}", markup=False)
         stdout().print("would run `ros2 node list` as a super client in the discovery server container")
         return
     rows, failures = collect_status(project, hosts)
@@ -179,23 +179,26 @@ def status(options: Options) -> None:
 
 def print_status(rows: list[Row], failures: dict[str, RobocoreError], nodes: list[str] | None, where: str) -> None:
     """The status table, then the ROS nodes line."""
+    from rich.markup import escape
     from rich.table import Table
 
     table = Table(title="robot status", title_justify="left")
     for column in ("component", "host", "state", "uptime", "restarts", "image"):
         table.add_column(column, no_wrap=column in {"component", "image"})
     colors = {"running": "green", "missing": "red"}
-    for row in rows:
-        color = colors.get(row.state.split()[0], "yellow")
-        table.add_row(row.component, row.host, f"[{color}]{row.state}[/]", row.uptime, str(row.restarts), row.image)
+    for row in rows:  # what the hosts said is text, never rich markup
+        color = colors.get(row.state.split()[0] if row.state.split() else "", "yellow")
+        table.add_row(escape(row.component), row.host, f"[{color}]{escape(row.state)}[/]", escape(row.uptime),
+                      str(row.restarts), escape(row.image))
     for host, error in sorted(failures.items()):
-        table.add_row("-", host, "[red]unreachable[/]", "-", "-", error.lines()[0])
+        table.add_row("-", host, "[red]unreachable[/]", "-", "-", escape(error.lines()[0]))
     print_table(table)
     out = stdout()
     if nodes is None:
-        out.print(f"ROS nodes: unknown ({where})")
+        out.print(f"ROS nodes: unknown ({where})", markup=False, soft_wrap=True)
     else:
-        out.print(f"ROS nodes ({len(nodes)}, via {where}): " + (", ".join(nodes) if nodes else "none"))
+        out.print(f"ROS nodes ({len(nodes)}, via {where}): " + (", ".join(nodes) if nodes else "none"),
+                  markup=False, soft_wrap=True)
 
 
 # --------------------------------------------------------------------------- logs
@@ -219,14 +222,15 @@ def logs(options: Options, *, component: str | None, follow: bool, tail: int) ->
     hosts = [project.host(project.component(component).runs_on)] if component else select_hosts(project, None)
     if options.dry_run:
         for h in hosts:
-            stdout().print(f"would read logs of {component or 'every container'} on {h.name}")
+            stdout().print(f"would read logs of {component or 'every container'} on {h.name}", markup=False)
         return
     results, failures = for_each_host(hosts, lambda h: _component_containers(project, h, component))
     containers = [item for h in hosts for item in sorted(results.get(h.name, []), key=lambda i: i[0])]
     for host, error in sorted(failures.items()):
-        console().print(f"[red]{host}: {error.lines()[0]}[/]")
+        console().print(f"{host}: {error.lines()[0]}", style="red", markup=False)
     if not containers and not failures:
-        console().print(f"no {project.name} containers" + (f" for {component}" if component else "") + "; run `run`")
+        console().print(f"no {project.name} containers" + (f" for {component}" if component else "") + "; run `run`",
+                        markup=False)
     width = max((len(name) for name, _ in containers), default=0)
     if not follow:
         for name, container in containers:
@@ -251,7 +255,10 @@ def _lines(data: bytes | Iterator[bytes]) -> Iterator[str]:
 
 
 def _emit(name: str, width: int, line: str) -> None:
-    sys.stdout.write(f"{name:<{width}} | {line}\n")
+    """One log line behind its component's name. The line is the container's own output: its colours
+    (SGR sequences, which ROS logging uses) are kept, any other control sequence (titles, cursor moves,
+    screen clears) is escaped, and so is the name (a label read from the host)."""
+    sys.stdout.write(f"{clean(name):<{width}} | {clean(line, keep_sgr=True)}\n")
     sys.stdout.flush()
 
 
@@ -301,8 +308,8 @@ def connect(options: Options, *, component: str, cmd: str | None) -> int:
     if options.dry_run:
         entry = None if comp.image else [naming.ENTRYPOINT]
         where = f"on {host.name} ({'interactive' if cmd is None else 'no tty'}), in {name}"
-        print(f"{where}: {shlex.join(exec_argv(entry, command))}")
-        print("environment: " + " ".join(f"{k}={v}" for k, v in sorted(env.items())))
+        print(clean(f"{where}: {shlex.join(exec_argv(entry, command))}"))
+        print(clean("environment: " + " ".join(f"{k}={v}" for k, v in sorted(env.items()))))
         return 0
     client, container = _require_running(project, host, name, comp.name)
     entrypoint = container.attrs.get("Config", {}).get("Entrypoint") or None

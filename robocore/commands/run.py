@@ -348,10 +348,11 @@ def _check_name_conflicts(client: docker.DockerClient, specs: Sequence[Container
 def _apply(client: docker.DockerClient, action: Action, spec: ContainerSpec | None, container: Any, host: Host, *,
            quiet: bool) -> None:
     from docker.errors import APIError
+    from rich.markup import escape
 
     def say(text: str) -> None:
         if not quiet:
-            console().print(f"[bold]{host.name}[/]: {text}")
+            console().print(f"[bold]{host.name}[/]: {escape(text)}")
 
     try:
         if action.verb == "remove":
@@ -455,6 +456,7 @@ def _report(results: dict[str, HostOutcome], failures: dict[str, RobocoreError],
         return
     if options.quiet and not failures:
         return
+    from rich.markup import escape
     from rich.table import Table
 
     if options.dry_run:
@@ -463,9 +465,9 @@ def _report(results: dict[str, HostOutcome], failures: dict[str, RobocoreError],
             for action in out.actions if out else []:
                 reason = f" ({action.reason})" if action.reason else ""
                 verb = "" if action.verb == UNKNOWN else "keep " if action.verb == "keep" else f"would {action.verb} "
-                stdout().print(f"{h.name}: {verb}{action.name}{reason}", markup=False)
+                stdout().print(f"{h.name}: {verb}{action.name}{reason}", markup=False, soft_wrap=True)
             for note in out.notes if out else []:
-                stdout().print(f"{h.name}: {note}", markup=False)
+                stdout().print(f"{h.name}: {note}", markup=False, soft_wrap=True)
         if not failures:
             return
     table = Table(title=f"robocore {title}", title_justify="left")
@@ -473,10 +475,10 @@ def _report(results: dict[str, HostOutcome], failures: dict[str, RobocoreError],
         table.add_column(column)
     for h in hosts:
         if h.name in failures:
-            table.add_row(h.name, "[red]failed[/]", "", "", "", "", "", failures[h.name].lines()[0])
+            table.add_row(h.name, "[red]failed[/]", "", "", "", "", "", escape(failures[h.name].lines()[0]))
             continue
         out = results[h.name]
-        detail = "; ".join(out.notes)
+        detail = escape("; ".join(out.notes))
         table.add_row(h.name, "[green]ok[/]", *(str(out.count(v)) for v in ("create", "replace", "start", "keep",
                                                                              "remove")), detail)
     print_table(table)
@@ -504,6 +506,7 @@ def stop_host(project: Project, host: Host, *, dry_run: bool, quiet: bool, forge
     keep running. ``dry_run`` contacts no host: which containers it runs is unknown.
     """
     from docker.errors import NotFound
+    from rich.markup import escape
 
     outcome = HostOutcome(host.name)
     if dry_run:
@@ -519,7 +522,7 @@ def stop_host(project: Project, host: Host, *, dry_run: bool, quiet: bool, forge
             if not dry_run:
                 container.remove(force=True)
                 if not quiet:
-                    console().print(f"[bold]{host.name}[/]: removed {container.name}")
+                    console().print(f"[bold]{host.name}[/]: removed {escape(container.name)}")
         if forget_servers and not dry_run:
             for server in dds.servers(project.robot):
                 if server.host != host.name:
@@ -544,7 +547,7 @@ def down(options: Options, *, host: str | None) -> None:
     if options.dry_run:
         for name, out in results.items():
             for note in out.notes:
-                stdout().print(f"{name}: {note}", markup=False)
+                stdout().print(f"{name}: {note}", markup=False, soft_wrap=True)
     elif not options.quiet:
         for name, out in results.items():
             if not out.actions:

@@ -306,21 +306,22 @@ def _print_dry_run(project: Project, hosts: list[Host], plans: dict[str, list[pl
     out = stdout()
     for h in hosts:
         if h.is_local:
-            out.print(f"# {h.name}: this machine, nothing to copy")
+            out.print(f"# {h.name}: this machine, nothing to copy", markup=False)
             continue
         rsh = ssh.rsh_command(h)
         items = plans[h.name]
         if not items:
             continue
-        out.print(f"# {h.name}: " + ", ".join(f"{i.component} -> {i.root}" for i in items), markup=False)
+        out.print(f"# {h.name}: " + ", ".join(f"{i.component} -> {i.root}" for i in items), markup=False,
+                  soft_wrap=True)
         out.print(f"# one session (holding flock on {h.deploy_root}/{plan.LOCK_FILE} there) prepares, waits "
-                  f"for the rsyncs, then releases each changed copy", markup=False)
+                  f"for the rsyncs, then releases each changed copy", markup=False, soft_wrap=True)
         out.print(shlex.join(ssh.ssh_argv(h, plan.session_argv(h.deploy_root, _holder(), items))), markup=False,
                   soft_wrap=True)
         for item in items:
             out.print(shlex.join(plan.rsync_argv(item, h, rsh)), markup=False, soft_wrap=True)
         steps = " ".join(plan.RELEASE for _ in items)
-        out.print(f"# then, on that session's stdin: {plan.new_release_id()} {steps}", markup=False)
+        out.print(f"# then, on that session's stdin: {plan.new_release_id()} {steps}", markup=False, soft_wrap=True)
 
 
 def _print_table(rows: list[ComponentResult]) -> None:
