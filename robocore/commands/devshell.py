@@ -41,6 +41,9 @@ UID_ENV = "ROBOCORE_UID"
 GID_ENV = "ROBOCORE_GID"
 READY_MARK = "robocore-shell: ready"
 READY_TIMEOUT = 60.0
+#: What ``--devices all`` is warned with when the shell starts.
+DEVICES_ALL_WARNING = ("--devices all: every device of this machine's /dev (disks, input devices, cameras) "
+                       "is passed into the shell container")
 
 
 def run(options: Options, *, component: str, cmd: str | None, new: bool, devices: str | None,
@@ -72,6 +75,8 @@ def run(options: Options, *, component: str, cmd: str | None, new: bool, devices
         print(json.dumps(out, indent=2))
         return 0
 
+    if request.devices_all:  # said even with --quiet: the shell gets the whole machine's hardware
+        ui.console().print(f"warning: {DEVICES_ALL_WARNING}", markup=False, soft_wrap=True)
     if not options.quiet:
         for note in spec.notes:
             ui.console().print(f"note: {note}", markup=False)

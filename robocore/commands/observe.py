@@ -318,25 +318,32 @@ def connect(options: Options, *, component: str, cmd: str | None) -> int:
         return _exec_streaming(client, container, host, name, argv, env)
     client.close()
     tty = sys.stdin.isatty()
-    docker_argv = ["docker", "exec", "-it" if tty else "-i"]
-    for key, value in sorted(env.items()):
-        docker_argv.append(f"--env={key}={value}")
-    docker_argv += ["--", name, *argv]
-    full, extra_env = _interactive_argv(project, host, docker_argv, tty=tty)
+    full, extra_env = interactive_argv(project, host, docker_exec_argv(name, argv, env, tty=tty), tty=tty)
+    if host.access is DockerAccess.ssh:
+        from robocore.adapters import ssh
+
+        ssh.require_ssh()
+        ssh.ensure_control_dir()
     return subprocess.call(full, env={**os.environ, **extra_env})
 
 
-def _interactive_argv(project: Project, host: Host, docker_argv: list[str], *,
-                      tty: bool) -> tuple[list[str], dict[str, str]]:
-    """The local argv of an interactive ``docker exec -it`` on ``host`` and extra environment for it."""
+def docker_exec_argv(name: str, argv: list[str], env: dict[str, str], *, tty: bool) -> list[str]:
+    """``docker exec`` of ``argv`` in container ``name``: each variable attached to its flag
+    (``--env=K=V``), ``--`` before the container name and the command."""
+    return ["docker", "exec", "-it" if tty else "-i", *(f"--env={key}={value}" for key, value in sorted(env.items())),
+            "--", name, *argv]
+
+
+def interactive_argv(project: Project, host: Host, docker_argv: list[str], *,
+                     tty: bool) -> tuple[list[str], dict[str, str]]:
+    """The local argv of an interactive ``docker exec -it`` on ``host`` and extra environment for it
+    (over ssh: the docker argv quoted argument by argument, after ``--`` and the destination)."""
     access = host.access
     if access is DockerAccess.local:
         return docker_argv, {}
     if access is DockerAccess.ssh:
         from robocore.adapters import ssh
 
-        ssh.require_ssh()
-        ssh.ensure_control_dir()
         return ["ssh", "-t" if tty else "-T", *ssh.ssh_options(host), "--", ssh.destination(host),
                 shlex.join(docker_argv)], {}
     if access is DockerAccess.tls and host.tls is not None:
