@@ -96,7 +96,19 @@ def control_dir() -> Path:
     runtime = os.environ.get("XDG_RUNTIME_DIR", "")
     if runtime.startswith("/") and _private_problem(Path(runtime)) is None:
         return Path(runtime) / "robocore-ssh"
-    return Path(tempfile.gettempdir()) / f"robocore-ssh-{os.getuid()}"
+    return _temp_root() / f"robocore-ssh-{os.getuid()}"
+
+
+def _temp_root() -> Path:
+    """The temp folder, as :func:`tempfile.gettempdir` would choose it but without its write test (a dry
+    run writes nothing): ``tempfile.tempdir`` if set, ``$TMPDIR``/``$TEMP``/``$TMP``, else ``/tmp``."""
+    if tempfile.tempdir:
+        return Path(tempfile.tempdir)
+    for name in ("TMPDIR", "TEMP", "TMP"):
+        value = os.environ.get(name, "")
+        if value.startswith("/") and os.path.isdir(value):
+            return Path(value)
+    return Path("/tmp")
 
 
 def _private_problem(path: Path) -> str | None:

@@ -124,7 +124,8 @@ def project(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     for folder in ("components/talker/src", "components/listener/src"):
         (root / folder).mkdir(parents=True)
     (root / "robot.yaml").write_text(ROBOT_YAML)
-    monkeypatch.delenv(PROJECT_ENV, raising=False)  # main() sets it for -p; restored after the test
+    monkeypatch.setenv(PROJECT_ENV, "unset")  # main() sets it for -p: recorded here, so that it is restored
+    monkeypatch.delenv(PROJECT_ENV)
     monkeypatch.setenv("DOCKER_HOST", f"unix://{tmp_path}/no-daemon.sock")  # nothing listens there
     monkeypatch.chdir(root)
     return root
@@ -167,7 +168,7 @@ def test_nothing_was_written_by_refused_lines(project: Path, capsys: pytest.Capt
     for case in CASES:
         if case.code == 2 and "init" not in case.argv:
             run_main([arg.replace(MARK, str(project.parent / "MARKER")) for arg in case.argv], capsys)
-            os.environ.pop(PROJECT_ENV, None)
+            os.environ.pop(PROJECT_ENV, None)  # each line starts without the previous one's -p
     assert sorted(p.relative_to(project.parent) for p in project.parent.rglob("*")) == before
 
 
