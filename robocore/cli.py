@@ -80,6 +80,8 @@ def init_in_project(rest: list[str], project: str) -> list[str]:
     return ["init", f"--path={project}", *rest[1:]]
 
 
+#: The values of invoke's ``--list-format``.
+LIST_FORMATS = ("flat", "nested", "json")
 #: What a malformed command line is told, after invoke's own words.
 USAGE_HINT = "robocore --help lists the tasks, robocore TASK --help their flags"
 
@@ -118,7 +120,13 @@ def _program(namespace: Any) -> Any:
 
     class RobocoreProgram(Program):
         parse_core = _one_line(Program.parse_core)
-        parse_cleanup = _one_line(Program.parse_cleanup)
+
+        @_one_line
+        def parse_cleanup(self) -> None:
+            chosen = self.args["list-format"].value
+            if chosen not in LIST_FORMATS:  # invoke would fail with a traceback
+                raise _usage_error(f"--list-format {chosen!r}: choose one of {', '.join(LIST_FORMATS)}")
+            super().parse_cleanup()
 
         @_one_line
         def parse_tasks(self) -> None:

@@ -65,6 +65,8 @@ CASES = [
     refused("logs", "--tail", "1e3", says="got '1e3'"),
     refused("logs", "--follow", "--tail", f"$(touch {MARK})", says="--tail takes a whole number"),
     refused("-D", "abc", "validate", says="a flag's value is not valid"),
+    refused("-T", "-1x", "validate", says="a flag's value is not valid"),
+    refused("--list", "--list-format", "bogus", says="--list-format 'bogus': choose one of"),
     # image tags
     refused("run", "--tag", "a;b", says="not a valid image tag"),
     refused("run", "--tag", f"$(touch {MARK})", says="not a valid image tag"),
