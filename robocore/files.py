@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from robocore.errors import UnsafePath
@@ -75,28 +75,33 @@ def is_inside(path: Path, folder: Path) -> bool:
     return path.resolve().is_relative_to(folder.resolve())
 
 
-def links_leaving(root: Path, boundary: Path) -> Iterator[tuple[Path, str]]:
+def links_leaving(root: Path, boundary: Path, *,
+                  skip: Callable[[Path, str], bool] | None = None) -> Iterator[tuple[Path, str]]:
     """Every symlink at or under ``root`` whose target, followed to the end, is not inside ``boundary``,
     with its target as written. Folders behind symlinks are not walked (the link itself is reported
-    if it leaves)."""
+    if it leaves), nor folders for which ``skip(parent, name)`` is true (what is never copied)."""
     boundary = boundary.resolve()
     if root.is_symlink() and not is_inside(root, boundary):
         yield root, os.readlink(root)
         return
     for dirpath, dirnames, filenames in os.walk(root):
+        here = Path(dirpath)
+        if skip is not None:
+            dirnames[:] = [d for d in dirnames if not skip(here, d)]
         for name in sorted([*dirnames, *filenames]):
-            path = Path(dirpath) / name
+            path = here / name
             if path.is_symlink() and not is_inside(path, boundary):
                 yield path, os.readlink(path)
 
 
-def refuse_links_leaving(root: Path, boundary: Path, *, what: str, allowed: bool = False) -> None:
+def refuse_links_leaving(root: Path, boundary: Path, *, what: str, allowed: bool = False,
+                         skip: Callable[[Path, str], bool] | None = None) -> None:
     """Raise :class:`~robocore.errors.UnsafePath` naming the first symlink at or under ``root`` that leads
     out of ``boundary`` (the project), unless ``allowed`` (robot.yaml opts in). ``what`` says what the
-    files are for (``"staged into the image of component talker"``)."""
+    files are for (``"the workspace of component talker"``); ``skip`` as for :func:`links_leaving`."""
     if allowed:
         return
-    for path, target in links_leaving(root, boundary):
+    for path, target in links_leaving(root, boundary, skip=skip):
         boundary = boundary.resolve()
         shown = path.relative_to(boundary) if path.is_relative_to(boundary) else path
         raise UnsafePath(f"{shown}: a symlink to {target!r}, outside the project folder; robocore does not copy "

@@ -307,17 +307,23 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
     return _planned(project, plan, root_id, known=known)
 
 
-def workspace_files(ws: Path) -> Iterator[tuple[str, Path]]:
-    """Files of a workspace, without build outputs, VCS data, caches and COLCON_IGNOREd folders."""
+def _skipped(ws: Path) -> Callable[[Path, str], bool]:
+    """Which folders of workspace ``ws`` robocore never reads: VCS data, caches, hidden folders and the
+    build outputs at its top."""
     from robocore.adapters.image_builder import SKIP_DIRS
 
+    return lambda here, name: name in SKIP_DIRS or name.startswith(".") or (here == ws and name in SKIP_WS_DIRS)
+
+
+def workspace_files(ws: Path) -> Iterator[tuple[str, Path]]:
+    """Files of a workspace, without build outputs, VCS data, caches and COLCON_IGNOREd folders."""
+    skipped = _skipped(ws)
     for dirpath, dirnames, filenames in os.walk(ws):
         here = Path(dirpath)
         if "COLCON_IGNORE" in filenames:
             dirnames[:] = []
             continue
-        dirnames[:] = sorted(d for d in dirnames if d not in SKIP_DIRS and not (here == ws and d in SKIP_WS_DIRS)
-                             and not d.startswith("."))
+        dirnames[:] = sorted(d for d in dirnames if not skipped(here, d))
         for name in sorted(filenames):
             if not name.endswith((".pyc", ".pyo")):
                 yield (here / name).relative_to(ws).as_posix(), here / name
@@ -329,7 +335,7 @@ def check_workspace(project: Project, component: Component) -> Path:
     assert component.folder is not None
     ws = project.root / component.folder
     refuse_links_leaving(ws, project.root, what=f"the workspace of component {component.name}",
-                         allowed=project.allows_files_outside)
+                         allowed=project.allows_files_outside, skip=_skipped(ws))
     return ws
 
 

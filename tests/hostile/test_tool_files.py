@@ -147,6 +147,18 @@ def test_a_workspace_symlink_leading_out_of_the_project_is_refused(tmp_path: Pat
     build.plan_build(project, talker, "sha256:x")
 
 
+def test_links_in_folders_robocore_never_reads_are_left_alone(tmp_path: Path) -> None:
+    project = make(tmp_path)
+    ws = project.root / "components/talker"
+    for folder in (".git/objects", "build", "src/pkg/__pycache__"):
+        (ws / folder).mkdir(parents=True, exist_ok=True)
+        (ws / folder / "link").symlink_to("/etc/hostname")
+    build.plan_build(project, project.robot.component("talker"), "sha256:x")
+    (ws / "src" / "link").symlink_to("/etc/hostname")  # negative control: in the sources it counts
+    with pytest.raises(UnsafePath, match=r"^components/talker/src/link: "):
+        build.plan_build(project, project.robot.component("talker"), "sha256:x")
+
+
 def test_a_workspace_folder_that_is_itself_a_link_out_of_the_project_is_refused(tmp_path: Path) -> None:
     project = make(tmp_path)
     home = tmp_path / "home"
