@@ -40,19 +40,6 @@ class Project:
         """Folder of generated files (git-ignored)."""
         return self.root / STATE_DIR
 
-    @property
-    def allows_local_repositories(self) -> bool:
-        """robot.yaml's opt-in to git repositories on this machine (``file://`` URLs and paths), which
-        git is otherwise not allowed to read (see :func:`robocore.adapters.vcs.git_config`)."""
-        return bool(getattr(self.robot, "allow_local_repositories", False))
-
-    @property
-    def allows_files_outside(self) -> bool:
-        """robot.yaml's opt-in to files from outside the project folder in what robocore copies (staged
-        sources, install trees and read-only volumes sent to hosts, reached through a symlink or a
-        ``../`` path), which are otherwise refused."""
-        return bool(getattr(self.robot, "allow_files_outside_project", False))
-
     def build_dir(self, component: str) -> Path:
         """Where colcon puts build/, install/ and log/ of ``component``."""
         return self.state_dir / "build" / component

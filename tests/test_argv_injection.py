@@ -215,14 +215,18 @@ def test_git_refuses_urls_it_would_read_as_options(url: str) -> None:
         vcs.fetch_argv(url, "main")
 
 
-def test_git_config_allows_network_transports_only_unless_local_is_opted_in() -> None:
+def test_git_config_allows_network_transports_only_unless_an_entry_opts_in() -> None:
     default = vcs.git_config()
-    pairs = [default[i + 1] for i in range(0, len(default), 2)]
     assert all(default[i] == "-c" for i in range(0, len(default), 2))
-    assert pairs[0] == "protocol.allow=never"
-    assert "protocol.ext.allow=never" in pairs and "protocol.file.allow=never" in pairs
-    assert "protocol.file.allow=always" in vcs.git_config(allow_local=True)
-    assert "protocol.ext.allow=never" in vcs.git_config(allow_local=True)
+    settings = dict(default[i + 1].split("=") for i in range(0, len(default), 2))
+    assert default[:2] == ["-c", "protocol.allow=never"]
+    assert {k: v for k, v in settings.items() if v == "always"} == {
+        f"protocol.{name}.allow": "always" for name in ("https", "ssh", "http", "git")}
+    assert settings["protocol.ext.allow"] == settings["protocol.file.allow"] == "never"
+    for opt_in, opened in (("file", "file"), ("ext", "ext"), ("git", None), (None, None)):
+        config = vcs.git_config(allow_protocol=opt_in)
+        for name in ("ext", "file"):
+            assert f"protocol.{name}.allow={'always' if name == opened else 'never'}" in config
 
 
 def _repo(path: Path) -> None:
@@ -242,11 +246,15 @@ def test_git_refuses_local_and_ext_transports_by_default(tmp_path: Path) -> None
     for url in (upstream.as_uri(), str(upstream)):
         with pytest.raises(BuildError, match="not allowed"):
             vcs.fetch(url, "main", tmp_path / "dest")
-    assert len(vcs.fetch(upstream.as_uri(), "main", tmp_path / "dest", allow_local=True)) == 40  # the opt-in
+    assert len(vcs.fetch(upstream.as_uri(), "main", tmp_path / "dest", allow_protocol="file")) == 40  # opted in
     ext = f"ext::sh -c touch% {marker}"
-    with pytest.raises(BuildError, match="not allowed"):
-        vcs.fetch(ext, None, tmp_path / "ext", allow_local=True)
+    for opt_in in (None, "file", "git"):
+        with pytest.raises(BuildError, match="not allowed"):
+            vcs.fetch(ext, None, tmp_path / "ext", allow_protocol=opt_in)
     assert not marker.exists()
+    with pytest.raises(BuildError):  # negative control: opted in, ext:: runs its command (then fails the fetch)
+        vcs.fetch(ext, None, tmp_path / "ext", allow_protocol="ext")
+    assert marker.exists()
 
 
 @pytest.mark.skipif(shutil.which("git") is None, reason="git is not installed")

@@ -147,8 +147,8 @@ def _git_repo(path: Path, text: str) -> str:
 
 
 def test_repositories_are_fetched_into_the_context_and_pinned_versions_hash(tmp_path: Path, monkeypatch: Any) -> None:
-    # a local (file://) repository: robot.yaml's opt-in to local repositories is on
-    monkeypatch.setattr(Project, "allows_local_repositories", property(lambda self: True))
+    # a local (file://) repository: as if the entry said allow_protocol: file
+    monkeypatch.setattr(images, "allowed_protocol", lambda entry: "file")
     upstream = tmp_path / "upstream"
     first = _git_repo(upstream, "one")
     second = _git_repo(upstream, "two")

@@ -5,9 +5,9 @@ version are unchanged; ``refresh=True`` fetches again (moving branches).
 
 robot.yaml's URL and version never reach git as options: the version must be a valid ref name
 (:func:`check_version`, git's own ``check-ref-format`` rules) and both follow ``--end-of-options``.
-Every git command runs with :func:`git_config`: only the network transports (https, http, ssh,
-git) are allowed, so a URL cannot run a command (``ext::``) or read this machine's own
-repositories (``file://``, a path) unless robot.yaml opts in to local repositories.
+Every fetch runs with :func:`git_config`: only the network transports (https, ssh, http, git) are
+allowed, so a URL cannot run a command (``ext::``) or read this machine's own repositories
+(``file://``, a path) unless its robot.yaml entry opts in (``allow_protocol: ext`` or ``file``).
 """
 
 from __future__ import annotations
@@ -24,19 +24,23 @@ from robocore.config.model import Repository
 from robocore.errors import BuildError, ToolMissing, UsageError
 
 SOURCE_FILE = "robocore-source"
-#: Transports git may use to fetch robot.yaml's repositories.
-NETWORK_PROTOCOLS = ("https", "http", "ssh", "git")
+#: Transports git may use to fetch robot.yaml's repositories without an opt-in.
+NETWORK_PROTOCOLS = ("https", "ssh", "http", "git")
+#: Transports only an entry's ``allow_protocol`` opens: ext:: runs a command, file reads this machine's files.
+LOCAL_PROTOCOLS = ("ext", "file")
 #: What git's check-ref-format refuses anywhere in a ref name (with --allow-onelevel).
 _BAD_REF = re.compile(r"[\x00-\x20\x7f~^:?*\[\\]|\.\.|@\{|//|/\.|\.lock(/|$)|^[./-]|[/.]$")
 
 
-def git_config(*, allow_local: bool = False) -> list[str]:
-    """``-c`` settings of every git command: transports limited to :data:`NETWORK_PROTOCOLS`, ``ext::``
-    always refused, local repositories (``file://`` and paths) only with ``allow_local``."""
+def git_config(*, allow_protocol: str | None = None) -> list[str]:
+    """``-c`` settings of a fetch: transports limited to :data:`NETWORK_PROTOCOLS`; ``ext::`` and local
+    repositories (``file://`` and paths) refused unless ``allow_protocol`` (robot.yaml's opt-in of the
+    entry) names them."""
     argv = ["-c", "protocol.allow=never"]
     for name in NETWORK_PROTOCOLS:
         argv += ["-c", f"protocol.{name}.allow=always"]
-    argv += ["-c", "protocol.ext.allow=never", "-c", f"protocol.file.allow={'always' if allow_local else 'never'}"]
+    for name in LOCAL_PROTOCOLS:
+        argv += ["-c", f"protocol.{name}.allow={'always' if allow_protocol == name else 'never'}"]
     return argv
 
 
@@ -62,7 +66,7 @@ def cache_key(url: str, version: str | None) -> str:
     return f"{safe}-{digest}"
 
 
-def fetch_argv(url: str, version: str | None, *, allow_local: bool = False) -> list[str]:
+def fetch_argv(url: str, version: str | None, *, allow_protocol: str | None = None) -> list[str]:
     """The ``git`` argv (without ``git``) that fetches ``version`` of ``url`` into the current repository.
 
     Raises UsageError for a URL or version git could read as anything but an operand.
@@ -70,7 +74,7 @@ def fetch_argv(url: str, version: str | None, *, allow_local: bool = False) -> l
     check_url(url)
     if version is not None:
         check_version(version)
-    return [*git_config(allow_local=allow_local), "fetch", "-q", "--depth", "1", "--end-of-options", url,
+    return [*git_config(allow_protocol=allow_protocol), "fetch", "-q", "--depth", "1", "--end-of-options", url,
             version or "HEAD"]
 
 
@@ -80,13 +84,14 @@ def _git(args: Sequence[str], cwd: Path | None = None) -> subprocess.CompletedPr
     return subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, check=False)
 
 
-def fetch(url: str, version: str | None, dest: Path, *, refresh: bool = False, allow_local: bool = False) -> str:
+def fetch(url: str, version: str | None, dest: Path, *, refresh: bool = False,
+          allow_protocol: str | None = None) -> str:
     """Check out ``url`` at ``version`` (branch, tag or commit; default: the remote HEAD) into ``dest``.
 
     Returns the commit ID. Reuses an existing checkout of the same source unless ``refresh``.
-    ``allow_local`` lets git read a local repository (robot.yaml's opt-in).
+    ``allow_protocol`` is the entry's opt-in (``file`` lets git read a local repository, ``ext`` run one).
     """
-    fetch_step = fetch_argv(url, version, allow_local=allow_local)
+    fetch_step = fetch_argv(url, version, allow_protocol=allow_protocol)
     marker = dest / ".git" / SOURCE_FILE
     source = f"{url}@{version or 'HEAD'}"
     if not refresh and marker.is_file() and marker.read_text() == source:

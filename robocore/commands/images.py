@@ -186,16 +186,23 @@ def _cache(project: Project) -> Path:
     return project.state_dir / "cache"
 
 
-def _fetch(project: Project, url: str, version: str | None, *, refresh: bool, dry_run: bool) -> Path | None:
-    """The checkout of ``url`` at ``version`` (fetched unless cached); in a dry run the cached one, or
-    None when there is none yet (nothing is fetched)."""
+def allowed_protocol(entry: object) -> str | None:
+    """A repository or common package's ``allow_protocol`` opt-in (``file``, ``ext``, ...), if it has one."""
+    value = getattr(entry, "allow_protocol", None)
+    return value if isinstance(value, str) else None
+
+
+def _fetch(project: Project, url: str, version: str | None, allow: str | None, *, refresh: bool,
+           dry_run: bool) -> Path | None:
+    """The checkout of ``url`` at ``version`` (fetched unless cached; ``allow`` is the entry's protocol
+    opt-in); in a dry run the cached one, or None when there is none yet (nothing is fetched)."""
     from robocore.adapters import vcs
 
     dest = _cache(project) / "git" / vcs.cache_key(url, version)
     if dry_run:
         vcs.fetch_argv(url, version)  # the same checks as a fetch (a URL or version that is not one)
         return dest if (dest / ".git" / vcs.SOURCE_FILE).is_file() else None
-    vcs.fetch(url, version, dest, refresh=refresh, allow_local=project.allows_local_repositories)
+    vcs.fetch(url, version, dest, refresh=refresh, allow_protocol=allow)
     return dest
 
 
@@ -291,11 +298,11 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
     known = True
     for pkg in robot.common_packages:
         if pkg.repo:
-            source = _fetch(project, pkg.repo, pkg.branch, refresh=refresh_sources, dry_run=dry_run)
+            source = _fetch(project, pkg.repo, pkg.branch, allowed_protocol(pkg), refresh=refresh_sources,
+                            dry_run=dry_run)
         else:
             source = project.root / (pkg.folder or pkg.name)
-            refuse_links_leaving(source, project.root, what=f"common package {pkg.name}, staged into the base image",
-                                 allowed=project.allows_files_outside)
+            refuse_links_leaving(source, project.root, what=f"common package {pkg.name}, staged into the base image")
         if source is None:
             known = False  # a dry run before the first fetch
         else:
@@ -330,12 +337,11 @@ def workspace_files(ws: Path) -> Iterator[tuple[str, Path]]:
 
 
 def check_workspace(project: Project, component: Component) -> Path:
-    """The workspace folder of ``component``; UnsafePath if it, or a symlink in it, leads out of the project
-    (unless robot.yaml allows that): stage copies from it and build mounts it."""
+    """The workspace folder of ``component``; UnsafePath if it, or a symlink in it, leads out of the project:
+    stage copies from it and build mounts it, and what it builds is sent to robots."""
     assert component.folder is not None
     ws = project.root / component.folder
-    refuse_links_leaving(ws, project.root, what=f"the workspace of component {component.name}",
-                         allowed=project.allows_files_outside, skip=_skipped(ws))
+    refuse_links_leaving(ws, project.root, what=f"the workspace of component {component.name}", skip=_skipped(ws))
     return ws
 
 
@@ -372,7 +378,8 @@ def plan_component(project: Project, component: Component, base: BaseRef, *, dry
     known = True
     for repo in component.repositories:
         folder = dockerfiles.repo_folder(repo)
-        source = _fetch(project, repo.url, repo.version, refresh=refresh_sources, dry_run=dry_run)
+        source = _fetch(project, repo.url, repo.version, allowed_protocol(repo), refresh=refresh_sources,
+                        dry_run=dry_run)
         if source is None:
             known = False  # a dry run before the first fetch
         else:

@@ -85,7 +85,7 @@ def plan_host(project: Project, host: Host, *, dry_run: bool = False) -> list[pl
                 raise UsageError(f"component {comp.name}: no install tree at {install}",
                                  hint=f"run `build --component {comp.name}` first")
             refuse_links_leaving(install, project.root, what=f"the install tree of component {comp.name}, "
-                                 f"sent to host {host.name}", allowed=project.allows_files_outside)
+                                 f"sent to host {host.name}")
             sources.append(plan.Source(install, "install"))
         if not dds_dir.is_dir() or not compose.is_file():
             raise UsageError(f"host {host.name}: {compose if not compose.is_file() else dds_dir} is missing",
@@ -109,6 +109,7 @@ def _project_files(project: Project, host: Host, comp: Component, *, dry_run: bo
     import shutil
 
     wanted = [(i, rel) for i, v in enumerate(comp.volumes) if (rel := read_only_project_path(v)) is not None]
+    allowed = bool(getattr(comp, "allow_outside_project", False))  # robot.yaml's opt-in, for symlinks only
     farm = project.state_dir / "sync" / "files" / host.name / comp.name / layout.FILES
     links: dict[str, Path] = {}
     for index, rel in wanted:
@@ -116,11 +117,15 @@ def _project_files(project: Project, host: Host, comp: Component, *, dry_run: bo
         if not real.exists():
             raise UsageError(f"component {comp.name}: volumes[{index}]: {project.root / rel} does not exist",
                              hint=f"create it, or remove the volume: sync copies it to {host.name}")
-        if not real.is_relative_to(project.root) and not project.allows_files_outside:
+        if rel == ".." or rel.startswith("../"):
             raise UnsafePath(f"component {comp.name}: volumes[{index}]: {rel} is outside the project folder "
                              f"({real}); sync would send it to host {host.name}",
                              hint="move it into the project, or mount it from the host's own file system")
-        refuse_links_leaving(project.root / rel, project.root, allowed=project.allows_files_outside,
+        if not real.is_relative_to(project.root) and not allowed:  # through a symlink
+            raise UnsafePath(f"component {comp.name}: volumes[{index}]: {rel} leads to {real}, outside the "
+                             f"project folder; sync would send it to host {host.name}",
+                             hint="move it into the project, or set allow_outside_project: true on the component")
+        refuse_links_leaving(project.root / rel, project.root, allowed=allowed,
                              what=f"read-only volume {comp.volumes[index]!r} of component {comp.name}, "
                              f"sent to host {host.name}")
         links[rel] = real

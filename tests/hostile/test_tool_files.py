@@ -170,12 +170,19 @@ def test_a_workspace_folder_that_is_itself_a_link_out_of_the_project_is_refused(
         build.plan_build(project, project.robot.component("talker"), "sha256:x")
 
 
-def test_a_link_leaving_the_project_is_allowed_with_the_opt_in(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    project = make(tmp_path)
-    (tmp_path / "shared.txt").write_text("shared")
-    (project.root / "components/talker/src/pkg/shared.txt").symlink_to(tmp_path / "shared.txt")
-    monkeypatch.setattr(Project, "allows_files_outside", property(lambda self: True))
-    build.plan_build(project, project.robot.component("talker"), "sha256:x")
+def test_a_volume_linked_out_of_the_project_is_sent_only_with_the_components_opt_in(tmp_path: Path) -> None:
+    project = make(tmp_path, '"./linked:/l:ro"')
+    (tmp_path / "outside").mkdir()
+    (project.root / "linked").symlink_to(tmp_path / "outside")
+    write_compose_files(project)
+    (project.build_dir("talker") / "install").mkdir(parents=True)
+    with pytest.raises(UnsafePath, match=r"volumes\[0\]: linked leads to .*outside, outside the project folder"):
+        sync_command.plan_host(project, project.host("pi"), dry_run=True)
+    talker = project.robot.component("talker").model_copy(update={"allow_outside_project": True})
+    others = [c for c in project.robot.components if c.name != "talker"]
+    opted = Project(root=project.root, robot=project.robot.model_copy(update={"components": [talker, *others]}))
+    items = sync_command.plan_host(opted, opted.host("pi"), dry_run=True)
+    assert [s.name for s in items[0].sources][-1] == "files"
 
 
 def test_sync_refuses_install_tree_links_and_volumes_that_leave_the_project(tmp_path: Path) -> None:
@@ -206,5 +213,5 @@ def test_a_read_only_volume_outside_the_project_is_not_sent(volume: str, tmp_pat
     (project.root / "linked").symlink_to(tmp_path / "outside")
     write_compose_files(project)
     (project.build_dir("talker") / "install").mkdir(parents=True)
-    with pytest.raises(UnsafePath, match=r"volumes\[0\]: .* is outside the project folder"):
+    with pytest.raises(UnsafePath, match=r"volumes\[0\]: .* (is outside|leads to .*, outside) the project folder"):
         sync_command.plan_host(project, project.host("pi"), dry_run=True)
