@@ -31,8 +31,8 @@ def _escape_char(match: re.Match[str]) -> str:
 
 
 def clean(text: str, *, keep_sgr: bool = False) -> str:
-    """``text`` with every control character escaped (``\\x1b``, ``\\r``-like as ``\\x0d``), tabs and
-    newlines kept.
+    """``text`` with every control character written as a visible escape (ESC as ``\\x1b``, a carriage
+    return as ``\\x0d``, a bidirectional override as ``\\u202e``); tabs and newlines are kept.
 
     ``keep_sgr`` keeps colour sequences (``ESC [ ... m``), which container logs legitimately carry,
     and ends a line that used one with a reset so that colour does not leak into the next line;

@@ -6,7 +6,12 @@ else the user's ``~/.ssh/config``. Authentication is key-based only (``BatchMode
 never asks for or stores a password.
 
 Remote commands are argv lists. OpenSSH sends one command string to the remote shell, so each
-argument is quoted with :func:`shlex.quote` here, in one place, and never interpolated.
+argument is quoted with :func:`shlex.quote` here, in one place, and never interpolated; the
+destination follows ``--``.
+
+Connections to a host are shared through control sockets in :func:`control_dir`, which is checked
+before every ssh (:func:`ensure_control_dir`): a folder this user owns and no one else may enter,
+never a symlink, so that no one can plant a socket robocore's ssh would connect through.
 """
 
 from __future__ import annotations
