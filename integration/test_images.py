@@ -13,6 +13,7 @@ import os
 import random
 import re
 import shlex
+import subprocess
 import time
 import uuid
 from collections.abc import Iterator
@@ -21,7 +22,7 @@ from typing import Any
 
 import pytest
 
-from robocore.config.model import Component
+from robocore.config.model import Component, Repository
 from robocore.plan import naming
 from robocore.project import Project
 
@@ -257,7 +258,8 @@ def test_failed_build_names_the_package_and_shows_its_log(demo_project: Path, ru
 
 def test_dry_run_prints_the_plan(demo_project: Path, run_robocore: Any) -> None:
     out = run_robocore(demo_project, "stage", "--dry-run").stdout
-    assert "FROM " in out and "up to date" in out
+    # a dry run asks no daemon, so whether the images are up to date is unknown, and said so
+    assert "FROM " in out and "build or keep: unknown (dry run: not contacted)" in out
 
 
 # ------------------------------------------------------------------ common packages, repositories, pip
@@ -278,11 +280,29 @@ def _ament_python_pkg(folder: Path, name: str, module_text: str) -> None:
         f"('share/ament_index/resource_index/packages', ['resource/{name}']), ('share/{name}', ['package.xml'])])\n")
 
 
-@pytest.fixture(scope="module")
-def deps_project(docker_client: Any, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A wheels project with a common package, a component with a git repository and pip packages."""
-    import subprocess
+def _git_daemon(base: Path) -> tuple[subprocess.Popen[bytes], int]:
+    """``git daemon`` serving the repositories under ``base`` on a free loopback port (git:// is a network
+    transport: robocore fetches it without robot.yaml's opt-in to local repositories)."""
+    import socket
 
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    proc = subprocess.Popen(["git", "daemon", "--export-all", f"--base-path={base}", "--listen=127.0.0.1",
+                             f"--port={port}", "--reuseaddr", str(base)], stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        with socket.socket() as client, contextlib.suppress(OSError):
+            client.connect(("127.0.0.1", port))
+            return proc, port
+        time.sleep(0.1)
+    proc.kill()
+    raise RuntimeError("git daemon did not start")
+
+
+@pytest.fixture(scope="module")
+def deps_project(docker_client: Any, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """A wheels project with a common package, a component with a git repository and pip packages."""
     import yaml
 
     root = tmp_path_factory.mktemp("deps") / "robocore-it-deps"
@@ -291,6 +311,10 @@ def deps_project(docker_client: Any, tmp_path_factory: pytest.TempPathFactory) -
     for args in (["init", "-q", "-b", "main"], ["add", "-A"],
                  ["-c", "user.name=t", "-c", "user.email=t@t", "commit", "-q", "-m", "init"]):
         subprocess.run(["git", *args], cwd=upstream, check=True, capture_output=True)
+    daemon, port = _git_daemon(root.parent)
+    repository = {"url": f"git://127.0.0.1:{port}/{upstream.name}", "version": "main"}
+    if "allow_protocol" in Repository.model_fields:  # where robot.yaml must opt in to plain git://
+        repository["allow_protocol"] = "git"
     _ament_python_pkg(root / "common" / "it_common_util", "it_common_util", "VALUE = 'from common'\n")
     for comp in ("alpha", "beta"):
         _ament_python_pkg(root / "components" / comp / "src" / f"it_{comp}_code", f"it_{comp}_code", "SECRET = 1\n")
@@ -300,13 +324,15 @@ def deps_project(docker_client: Any, tmp_path_factory: pytest.TempPathFactory) -
         "common_packages": [{"name": "it_common_util", "folder": "common/it_common_util"}],
         "components": [
             {"name": "alpha", "runs_on": "devmachine", "folder": "components/alpha",
-             "repositories": [{"url": upstream.as_uri(), "version": "main"}],
+             "repositories": [repository],
              "postinstall": ["python -c 'import it_dep_util' && touch /etc/alpha-postinstall-ran"]},
             {"name": "beta", "runs_on": "devmachine", "folder": "components/beta", "pip_packages": ["six"]},
         ],
     }
     (root / "robot.yaml").write_text(yaml.safe_dump(robot, sort_keys=False))
-    return root
+    yield root
+    daemon.terminate()
+    daemon.wait(timeout=10)
 
 
 def test_common_packages_repositories_and_pip_are_in_the_images(

@@ -111,7 +111,7 @@ def current_target(fleet: RobotFleet, index: int, comp: str) -> str:
 
 def test_dry_run_prints_commands_and_copies_nothing(fleet: RobotFleet, project: Path) -> None:
     proc = robocore(project, "sync", "--dry-run")
-    assert "rsync -a -R --delete" in proc.stdout
+    assert "rsync -a -R -s --delete" in proc.stdout
     assert "--link-dest=/root/robocore/talker/current/" in proc.stdout
     assert f"root@{fleet.hosts[1].ip}:/root/robocore/listener/staging/" in proc.stdout
     listing = fleet.hosts[0].ssh(fleet, "ls", "-a", "/root")

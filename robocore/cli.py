@@ -80,12 +80,61 @@ def init_in_project(rest: list[str], project: str) -> list[str]:
     return ["init", f"--path={project}", *rest[1:]]
 
 
+#: The values of invoke's ``--list-format``.
+LIST_FORMATS = ("flat", "nested", "json")
+#: What a malformed command line is told, after invoke's own words.
+USAGE_HINT = "robocore --help lists the tasks, robocore TASK --help their flags"
+
+
+def _usage_error(message: str) -> Any:
+    """invoke's Exit carrying one escaped line and exit code 2 (Program.run prints it and exits)."""
+    from invoke.exceptions import Exit
+
+    from robocore.ui import clean
+
+    text = " ".join(clean(message).split("\n"))
+    return Exit(message=f"robocore: {text} ({USAGE_HINT})", code=2)
+
+
+def _one_line(step: Any) -> Any:
+    """A parse step of invoke's Program whose parse errors (and a flag value invoke cannot convert, such as
+    ``-D abc``) become one line and exit code 2 instead of invoke's exit code 1 or a traceback."""
+    from invoke.exceptions import ParseError
+
+    def wrapped(self: Any, *args: Any) -> Any:
+        try:
+            return step(self, *args)
+        except ParseError as error:
+            raise _usage_error(str(error)) from None
+        except ValueError as error:
+            raise _usage_error(f"a flag's value is not valid: {error}") from None
+
+    return wrapped
+
+
 def _program(namespace: Any) -> Any:
-    """An invoke Program named robocore whose help documents ``-p/--project`` (instead of invoke's ``--pty``)."""
+    """An invoke Program named robocore whose help documents ``-p/--project`` (instead of invoke's ``--pty``),
+    and whose command-line errors are one line with exit code 2."""
     from invoke.parser.argument import Argument
     from invoke.program import Program
 
     class RobocoreProgram(Program):
+        parse_core = _one_line(Program.parse_core)
+
+        @_one_line
+        def parse_cleanup(self) -> None:
+            chosen = self.args["list-format"].value
+            if chosen not in LIST_FORMATS:  # invoke would fail with a traceback
+                raise _usage_error(f"--list-format {chosen!r}: choose one of {', '.join(LIST_FORMATS)}")
+            super().parse_cleanup()
+
+        @_one_line
+        def parse_tasks(self) -> None:
+            super().parse_tasks()
+            remainder = self.core.remainder if self.core is not None else ""
+            if remainder.strip():
+                raise _usage_error(f"robocore tasks take no arguments after '--' (got {remainder!r})")
+
         def core_args(self) -> list[Argument]:
             args = [a for a in super().core_args() if "pty" not in a.names]
             args.append(Argument(names=("pty",), kind=bool, default=False, help="Use a pty for shell commands."))
@@ -117,7 +166,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     try:
         project, rest = split_project(args, names)
     except CommandLineError as error:
-        print(f"robocore: {error} (robocore -p DIR TASK, robocore DIR TASK)", file=sys.stderr)
+        from robocore.ui import clean
+
+        print(f"robocore: {clean(str(error))} (robocore -p DIR TASK, robocore DIR TASK)", file=sys.stderr)
         sys.exit(2)
     if project is not None:
         os.environ[PROJECT_ENV] = os.path.abspath(project)

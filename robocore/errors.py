@@ -63,6 +63,13 @@ class UsageError(RobocoreError):
     exit_code = 2
 
 
+class UnsafePath(RobocoreError):
+    """A file or folder robocore would read, copy or connect through is not safe to use: a symlink
+    leading out of the project, a folder another user owns or may write to."""
+
+    exit_code = 2
+
+
 class NotImplementedYet(RobocoreError):
     """A task whose implementation has not landed yet."""
 

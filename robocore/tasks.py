@@ -41,8 +41,10 @@ def reported(body: F) -> F:
         try:
             return body(*args, **kwargs)
         except RobocoreError as error:
+            from robocore.ui import clean
+
             for line in error.lines():
-                print(f"error: {line}" if not line.startswith("hint:") else line, file=sys.stderr)
+                print(clean(f"error: {line}" if not line.startswith("hint:") else line), file=sys.stderr)
             raise Exit(code=error.exit_code) from None
         except KeyboardInterrupt:
             print("interrupted", file=sys.stderr)
@@ -56,6 +58,30 @@ def _require(component: str, task_name: str) -> None:
         from robocore.errors import UsageError
 
         raise UsageError(f"{task_name} needs --component NAME", hint=f"robocore {task_name} --component talker")
+
+
+def _tag(tag: str) -> str | None:
+    """``--tag``: None when not given, else a valid image tag (UsageError otherwise)."""
+    if not tag:
+        return None
+    from robocore.plan.naming import is_image_tag
+
+    if not is_image_tag(tag):
+        from robocore.errors import UsageError
+
+        raise UsageError(f"--tag {tag!r} is not a valid image tag (a letter, digit or '_', then up to 127 "
+                         "letters, digits, '_', '.' or '-')")
+    return tag
+
+
+def _count(value: str, flag: str) -> int:
+    """A flag that takes a whole number of at least 0 (taken as text, so that invoke never fails on it)."""
+    text = value.strip()
+    if not text.isdigit() or not text.isascii():
+        from robocore.errors import UsageError
+
+        raise UsageError(f"{flag} takes a whole number, 0 or more (got {value!r})")
+    return int(text)
 
 
 def _options(c: Context, **flags: Any) -> Any:
@@ -175,7 +201,7 @@ def run(
     """(Re)start each host's containers and the discovery server."""
     from robocore.commands import run as command
 
-    command.run(_options(c, dry_run=dry_run, quiet=quiet, json=json), host=host or None, tag=tag or None)
+    command.run(_options(c, dry_run=dry_run, quiet=quiet, json=json), host=host or None, tag=_tag(tag))
 
 
 @task(help={"host": "Stop only this host.", "dry_run": "Print what would be removed.", "quiet": "Only errors."})
@@ -196,14 +222,15 @@ def status(c: Context, json: bool = False, dry_run: bool = False) -> None:
     observe.status(_options(c, json=json, dry_run=dry_run))
 
 
-@task(help={"component": "Only this component.", "follow": "Keep following.", "tail": "Lines per container.",
-            "dry_run": "Print what would be read."})
+@task(help={"component": "Only this component.", "follow": "Keep following.",
+            "tail": "Lines per container (a whole number; default 100).", "dry_run": "Print what would be read."})
 @reported
-def logs(c: Context, component: str = "", follow: bool = False, tail: int = 100, dry_run: bool = False) -> None:
+def logs(c: Context, component: str = "", follow: bool = False, tail: str = "100", dry_run: bool = False) -> None:
     """Logs of the robot's containers on all hosts, each line prefixed by its component."""
+    lines = _count(tail, "--tail")
     from robocore.commands import observe
 
-    observe.logs(_options(c, dry_run=dry_run), component=component or None, follow=follow, tail=tail)
+    observe.logs(_options(c, dry_run=dry_run), component=component or None, follow=follow, tail=lines)
 
 
 @task(help={"component": "The component to open a shell in (required).", "cmd": "Run this instead of a shell.",
@@ -243,7 +270,7 @@ def release(c: Context, tag: str = "", dry_run: bool = False) -> None:
     """Tag every image with a version and push it to the registry."""
     from robocore.commands import release as command
 
-    command.release(_options(c, dry_run=dry_run), tag=tag or None)
+    command.release(_options(c, dry_run=dry_run), tag=_tag(tag))
 
 
 @task(help={"host": "Only this host.", "dry_run": "Print what would be done."})

@@ -1,25 +1,83 @@
-"""Console output: one rich console on stderr for progress and messages."""
+"""Console output: one rich console on stderr for progress and messages, and the escaping of what is printed.
+
+Values printed by robocore come from robot.yaml, from the command line, from hosts and from
+containers; any of them may carry terminal control sequences (an OSC sequence in a host
+address retitles the terminal, a clear-screen hides what came before). :func:`clean` turns every
+control character into a visible escape (``\\x1b``); it is applied at the print edges: the rich
+consoles below escape every string they render (table cells and titles included), and the
+plain ``print`` edges (error lines, dry-run plans, log lines) call it themselves.
+"""
 
 from __future__ import annotations
 
 import functools
-from typing import TYPE_CHECKING
+import re
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from rich.console import Console
+
+#: C0 controls except tab and newline, DEL, C1 controls, and the Unicode bidirectional overrides
+#: and isolates (they reorder what the reader sees).
+_CONTROL = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069]")
+#: A Select Graphic Rendition sequence (colours, bold): the only escape sequence :func:`clean` may keep.
+_SGR = re.compile(r"\x1b\[[0-9;:]{0,64}m")
+_RESET = "\x1b[0m"
+
+
+def _escape_char(match: re.Match[str]) -> str:
+    code = ord(match.group())
+    return f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}"
+
+
+def clean(text: str, *, keep_sgr: bool = False) -> str:
+    """``text`` with every control character written as a visible escape (ESC as ``\\x1b``, a carriage
+    return as ``\\x0d``, a bidirectional override as ``\\u202e``); tabs and newlines are kept.
+
+    ``keep_sgr`` keeps colour sequences (``ESC [ ... m``), which container logs legitimately carry,
+    and ends a line that used one with a reset so that colour does not leak into the next line;
+    every other sequence (titles, cursor moves, screen clears) is still escaped.
+    """
+    if not _CONTROL.search(text):
+        return text
+    if not keep_sgr:
+        return _CONTROL.sub(_escape_char, text)
+    parts: list[str] = []
+    last = 0
+    for match in _SGR.finditer(text):
+        parts.append(_CONTROL.sub(_escape_char, text[last:match.start()]))
+        parts.append(match.group())
+        last = match.end()
+    parts.append(_CONTROL.sub(_escape_char, text[last:]))
+    out = "".join(parts)
+    return out + _RESET if last else out
+
+
+def _make(**kwargs: Any) -> Console:
+    from rich.console import Console
+    from rich.text import Text
+
+    class CleanConsole(Console):
+        """A rich console that escapes control characters in every string it renders."""
+
+        def render_str(self, text: str, **options: Any) -> Text:
+            return super().render_str(clean(text), **options)
+
+    return CleanConsole(highlight=False, soft_wrap=True, **kwargs)  # lines are never cut: logs and CI grep them
 
 
 @functools.cache
 def console() -> Console:
     """The console for human output (stderr, so stdout stays clean for --json)."""
-    from rich.console import Console
-
-    return Console(stderr=True, highlight=False)
+    return _make(stderr=True)
 
 
 @functools.cache
 def stdout() -> Console:
     """The console for results meant for stdout (tables, JSON)."""
-    from rich.console import Console
+    return _make()
 
-    return Console(highlight=False)
+
+def make_console(**kwargs: Any) -> Console:
+    """Another console with the same escaping (e.g. a fixed width for logs and CI)."""
+    return _make(**kwargs)

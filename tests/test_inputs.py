@@ -146,7 +146,9 @@ def _git_repo(path: Path, text: str) -> str:
     return run("rev-parse", "HEAD").stdout.strip()
 
 
-def test_repositories_are_fetched_into_the_context_and_pinned_versions_hash(tmp_path: Path) -> None:
+def test_repositories_are_fetched_into_the_context_and_pinned_versions_hash(tmp_path: Path, monkeypatch: Any) -> None:
+    # a local (file://) repository: as if the entry said allow_protocol: file
+    monkeypatch.setattr(images, "allowed_protocol", lambda entry: "file")
     upstream = tmp_path / "upstream"
     first = _git_repo(upstream, "one")
     second = _git_repo(upstream, "two")

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 from robocore.adapters.ssh import CONNECT_TIMEOUT
 from robocore.config.model import DockerAccess, Host
 from robocore.errors import DockerError, HostError
+from robocore.plan.addresses import bare, url_host
 
 if TYPE_CHECKING:
     import docker
@@ -111,10 +112,10 @@ def describe(host: Host) -> str:
     if access is DockerAccess.local:
         return "local socket"
     if access is DockerAccess.ssh:
-        return f"ssh://{host.user}@{host.ip}:{host.ssh_port}"
+        return f"ssh://{host.user}@{url_host(host.ip, host.ssh_port)}"
     if access is DockerAccess.tls:
-        return f"https://{host.ip}:{host.docker_port or 2376} (tls)"
-    return f"tcp://{host.ip}:{host.docker_port or 2375} (insecure)"
+        return f"https://{url_host(host.ip, host.docker_port or 2376)} (tls)"
+    return f"tcp://{url_host(host.ip, host.docker_port or 2375)} (insecure)"
 
 
 #: What to do when a host's daemon cannot be reached and nothing more specific is known.
@@ -168,6 +169,7 @@ def _ssh_client(host: Host, timeout: int, connect_timeout: int) -> docker.Docker
 def _dial(host: Host, timeout: int, connect_timeout: int, version: str | None) -> docker.DockerClient:
     from robocore.adapters import docker_over_ssh, ssh
 
+    ssh.ensure_control_dir()
     client = docker_over_ssh.client(ssh.ssh_argv(host, ["docker", "system", "dial-stdio"],
                                                  connect_timeout=connect_timeout),
                                     timeout=timeout, version=version or _BOOTSTRAP_API)
@@ -210,18 +212,20 @@ def _tls_client(host: Host, timeout: int, connect_timeout: int, root: Path) -> d
 
     tls = TLSConfig(client_cert=(resolve(host.tls.client_cert), resolve(host.tls.client_key)),
                     ca_cert=resolve(host.tls.ca_cert), verify=True)
-    return _tcp_like(host, f"https://{host.ip}:{host.docker_port or 2376}", timeout, connect_timeout, tls)
+    return _tcp_like(host, f"https://{url_host(host.ip, host.docker_port or 2376)}", timeout, connect_timeout, tls)
 
 
 def _tcp_client(host: Host, timeout: int, connect_timeout: int) -> docker.DockerClient:
     if not host.insecure:
         raise HostError(f"host {host.name}: docker: tcp is plain, unauthenticated TCP",
                         hint="use ssh or tls, or set insecure: true on this host if the network is trusted")
+    from rich.markup import escape
+
     from robocore.ui import console
 
-    console().print(f"[yellow]warning:[/] host {host.name}: Docker over plain TCP ({describe(host)}): "
+    console().print(f"[yellow]warning:[/] host {host.name}: Docker over plain TCP ({escape(describe(host))}): "
                     "anyone on the network can control this daemon; prefer ssh or tls")
-    return _tcp_like(host, f"tcp://{host.ip}:{host.docker_port or 2375}", timeout, connect_timeout, False)
+    return _tcp_like(host, f"tcp://{url_host(host.ip, host.docker_port or 2375)}", timeout, connect_timeout, False)
 
 
 def _tcp_like(host: Host, base_url: str, timeout: int, connect_timeout: int, tls: Any) -> docker.DockerClient:
@@ -232,7 +236,7 @@ def _tcp_like(host: Host, base_url: str, timeout: int, connect_timeout: int, tls
     port = int(base_url.rsplit(":", 1)[1])
     try:
         # Fail fast on a dead host: requests would otherwise wait for the full API timeout.
-        socket.create_connection((host.ip, port), timeout=connect_timeout).close()
+        socket.create_connection((bare(host.ip), port), timeout=connect_timeout).close()
         client = docker.DockerClient(base_url=base_url, tls=tls, timeout=timeout, version=_BOOTSTRAP_API)
         api: Any = client.api
         # Not the environment's proxy or CA bundle (REQUESTS_CA_BUNDLE would replace the host's CA).

@@ -7,6 +7,7 @@ import shutil
 import subprocess
 from collections.abc import Sequence
 
+from robocore.adapters.ssh import ensure_control_dir
 from robocore.config.model import Host
 from robocore.errors import HostError, ToolMissing
 from robocore.plan.sync import RsyncStats, parse_stats
@@ -25,6 +26,7 @@ def require_rsync() -> None:
 def run(host: Host, argv: Sequence[str], *, timeout: float = 3600) -> RsyncStats:
     """Run an rsync argv (from :func:`robocore.plan.sync.rsync_argv`); return its stats or raise HostError."""
     require_rsync()
+    ensure_control_dir()  # rsync's ssh shares robocore's connection to the host
     try:
         proc = subprocess.run(list(argv), capture_output=True, text=True, timeout=timeout, check=False)
     except subprocess.TimeoutExpired:

@@ -6,7 +6,12 @@ else the user's ``~/.ssh/config``. Authentication is key-based only (``BatchMode
 never asks for or stores a password.
 
 Remote commands are argv lists. OpenSSH sends one command string to the remote shell, so each
-argument is quoted with :func:`shlex.quote` here, in one place, and never interpolated.
+argument is quoted with :func:`shlex.quote` here, in one place, and never interpolated; the
+destination follows ``--``.
+
+Connections to a host are shared through control sockets in :func:`control_dir`, which is checked
+before every ssh (:func:`ensure_control_dir`): a folder this user owns and no one else may enter,
+never a symlink, so that no one can plant a socket robocore's ssh would connect through.
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ from __future__ import annotations
 import os
 import selectors
 import shlex
+import stat
 import subprocess
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
@@ -21,7 +27,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
-from robocore.errors import HostError, RobocoreError, ToolMissing
+from robocore.errors import HostError, RobocoreError, ToolMissing, UnsafePath
+from robocore.plan.addresses import bare
 
 if TYPE_CHECKING:
     from robocore.config.model import Host
@@ -59,8 +66,8 @@ class Target(Protocol):
 
 
 def destination(host: Target) -> str:
-    """``user@ip`` of a host."""
-    return f"{host.user}@{host.ip}"
+    """``user@ip`` of a host (an IPv6 address bare: ssh takes the destination on its own, after ``--``)."""
+    return f"{host.user}@{bare(host.ip)}"
 
 
 def ssh_options(host: Target, *, connect_timeout: int = CONNECT_TIMEOUT) -> list[str]:
@@ -85,9 +92,66 @@ def ssh_options(host: Target, *, connect_timeout: int = CONNECT_TIMEOUT) -> list
 
 
 def control_dir() -> Path:
-    """A private folder for ssh control sockets (short path: unix sockets are limited to 108 bytes)."""
-    path = Path(tempfile.gettempdir()) / f"robocore-ssh-{os.getuid()}"
-    path.mkdir(mode=0o700, exist_ok=True)
+    """The folder of ssh's control sockets (short path: unix sockets are limited to 108 bytes); nothing
+    is created here (:func:`ensure_control_dir` does that before ssh runs).
+
+    ``$XDG_RUNTIME_DIR/robocore-ssh`` when the runtime folder is this user's own and private, else
+    ``<tmp>/robocore-ssh-<uid>``.
+    """
+    runtime = os.environ.get("XDG_RUNTIME_DIR", "")
+    if runtime.startswith("/") and _private_problem(Path(runtime)) is None:
+        return Path(runtime) / "robocore-ssh"
+    return _temp_root() / f"robocore-ssh-{os.getuid()}"
+
+
+def _temp_root() -> Path:
+    """The temp folder, as :func:`tempfile.gettempdir` would choose it but without its write test (a dry
+    run writes nothing): ``tempfile.tempdir`` if set, ``$TMPDIR``/``$TEMP``/``$TMP``, else ``/tmp``."""
+    if tempfile.tempdir:
+        return Path(tempfile.tempdir)
+    for name in ("TMPDIR", "TEMP", "TMP"):
+        value = os.environ.get(name, "")
+        if value.startswith("/") and os.path.isdir(value):
+            return Path(value)
+    return Path("/tmp")
+
+
+def _private_problem(path: Path) -> str | None:
+    """Why ``path`` is not a private folder of this user (None when it is one): a folder, not a symlink,
+    owned by this user, that no other user may enter or write to."""
+    try:
+        info = os.lstat(path)
+    except OSError as exc:
+        return exc.strerror or "cannot be read"
+    if stat.S_ISLNK(info.st_mode):
+        return "is a symlink"
+    if not stat.S_ISDIR(info.st_mode):
+        return "is not a folder"
+    if info.st_uid != os.getuid():
+        return f"is owned by uid {info.st_uid}, not by this user (uid {os.getuid()})"
+    if info.st_mode & 0o077:
+        return f"has mode {stat.S_IMODE(info.st_mode):04o}: other users may use it"
+    return None
+
+
+def ensure_control_dir() -> Path:
+    """Create :func:`control_dir` (mode 0700) unless it exists, then check that it is this user's private
+    folder; raise UnsafePath otherwise, so that ssh never connects through a socket planted by someone
+    else (a folder another user made beforehand, or a symlink to one)."""
+    path = control_dir()
+    try:
+        path.mkdir(mode=0o700)
+        os.chmod(path, 0o700)  # whatever the umask
+    except FileExistsError:
+        pass
+    except OSError as exc:
+        raise UnsafePath(f"{path}: cannot create the folder of robocore's ssh connections: {exc.strerror}",
+                         hint="set XDG_RUNTIME_DIR or TMPDIR to a private folder") from None
+    problem = _private_problem(path)
+    if problem is not None:
+        raise UnsafePath(f"{path}: {problem}; robocore keeps its ssh connection sockets there and will not use it",
+                         hint=f"if you made it, remove it (rm -r {path}) and run again; "
+                         "or set XDG_RUNTIME_DIR to a private folder")
     return path
 
 
@@ -119,6 +183,10 @@ def warm(host: Target) -> None:
 
     if which("ssh") is None:
         return
+    try:
+        ensure_control_dir()
+    except UnsafePath:
+        return  # the step that needs the host says why
     subprocess.Popen(ssh_argv(host, ["true"]), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                      stderr=subprocess.DEVNULL, start_new_session=True)
 
@@ -128,6 +196,7 @@ def run(host: Host, remote: Sequence[str], *, timeout: float = 120, stdin: bytes
     """Run ``remote`` on ``host`` over ssh; raise HostError naming the host on failure (``check``)
     or when it does not finish within ``timeout`` seconds."""
     require_ssh()
+    ensure_control_dir()
     argv = ssh_argv(host, remote, connect_timeout=connect_timeout)
     try:
         proc = subprocess.run(argv, input=stdin, capture_output=True, timeout=timeout, check=False)
@@ -225,6 +294,7 @@ def hold(host: Host, remote: Sequence[str], *, ready: str, what: str, timeout: f
     turn that into a specific error; otherwise a HostError.
     """
     require_ssh()
+    ensure_control_dir()
     proc = subprocess.Popen(ssh_argv(host, remote), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE)
     assert proc.stdin is not None and proc.stdout is not None and proc.stderr is not None

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from robocore.commands.context import Options
+from robocore.commands.context import DRY_RUN_UNKNOWN, Options
 from robocore.commands.images import (
     MAX_PARALLEL,
     Outcome,
@@ -30,7 +30,7 @@ from robocore.commands.images import (
     check_emulation,
     native_arch,
 )
-from robocore.commands.workspace import local_docker, selected_components, workspace_files
+from robocore.commands.workspace import check_workspace, local_docker, selected_components, workspace_files
 from robocore.config.model import Component
 from robocore.errors import BuildError, UsageError
 from robocore.files import write_atomic
@@ -82,7 +82,7 @@ class BuildPlan:
 
     component: Component
     image: str
-    image_id: str
+    image_id: str | None  # None: unknown (a dry run contacts no daemon)
     arch: str
     workspace: Path
     out: Path
@@ -120,13 +120,13 @@ def _recorded_files(before: Mapping[str, Any]) -> WorkspaceFiles:
     return out
 
 
-def plan_build(project: Project, comp: Component, image_id: str, *, full: bool = False) -> BuildPlan:
+def plan_build(project: Project, comp: Component, image_id: str | None, *, full: bool = False) -> BuildPlan:
     """Which packages of ``comp`` must be (re)built, from the last successful build's state.
 
     Unless ``full``, an edit that only changes plain-copied files becomes a list of patches.
+    ``image_id`` None (a dry run, which asks no daemon) takes the staged image as unchanged and says so.
     """
-    assert comp.folder is not None
-    ws = project.root / comp.folder
+    ws = check_workspace(project, comp)
     out = project.build_dir(comp.name)
     roots, files = workspace_packages(ws)
     packages = _hashes(roots, files)
@@ -135,7 +135,7 @@ def plan_build(project: Project, comp: Component, image_id: str, *, full: bool =
     changed: list[str] | None
     patches: list[install_patch.Patch] = []
     copies = before.get("copies") if isinstance(before.get("copies"), dict) else None
-    if not (out / "install").is_dir() or before.get("image") != image_id:
+    if not (out / "install").is_dir() or (image_id is not None and before.get("image") != image_id):
         changed, reason = None, "first build" if not before else "image changed"
     elif set(old) != set(packages):
         changed, reason = None, "packages added or removed"
@@ -148,6 +148,8 @@ def plan_build(project: Project, comp: Component, image_id: str, *, full: bool =
                 reason += f" ({len(patches)} file{'s' if len(patches) != 1 else ''} copied, no colcon)"
             elif why:
                 reason += f" (colcon: {why})"
+    if image_id is None and before:
+        reason += f"; whether the staged image changed: {DRY_RUN_UNKNOWN}"
     image = f"{naming.component_image(project.robot, project.name, comp.name)}:latest"
     return BuildPlan(component=comp, image=image, image_id=image_id, arch=project.robot.host(comp.runs_on).arch.value,
                      workspace=ws, out=out, packages=packages, files=files, roots=roots, changed=changed, reason=reason,
@@ -237,19 +239,19 @@ def build(options: Options, *, component: str | None, full: bool = False) -> Non
         raise UsageError(f"component {component!r} has no folder: nothing to build")
     from robocore.adapters.image_builder import image_state
 
-    client = local_docker()
     plans: list[BuildPlan] = []
-    for comp in comps:
-        ref = f"{naming.component_image(project.robot, project.name, comp.name)}:latest"
-        state = image_state(client, ref)
-        if state is None:
-            if options.dry_run:
-                report.plain(f"# {comp.name}: no staged image {ref} yet (run stage)")
-                continue
-            raise BuildError(f"component {comp.name}: no staged image {ref}", hint="run `stage` first")
-        check_emulation(project.robot.host(comp.runs_on).arch.value, native_arch(), f"component {comp.name}")
-        plans.append(plan_build(project, comp, state.id, full=full))
-    client.close()
+    if options.dry_run:  # a dry run contacts no daemon: the staged images are not looked at
+        plans = [plan_build(project, comp, None, full=full) for comp in comps]
+    else:
+        client = local_docker()
+        for comp in comps:
+            ref = f"{naming.component_image(project.robot, project.name, comp.name)}:latest"
+            state = image_state(client, ref)
+            if state is None:
+                raise BuildError(f"component {comp.name}: no staged image {ref}", hint="run `stage` first")
+            check_emulation(project.robot.host(comp.runs_on).arch.value, native_arch(), f"component {comp.name}")
+            plans.append(plan_build(project, comp, state.id, full=full))
+        client.close()
     outcomes: list[Outcome] = []
     todo: list[BuildPlan] = []
     for plan in plans:

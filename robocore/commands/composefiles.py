@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from robocore.files import write_atomic
+from robocore.files import PRIVATE, write_atomic
 from robocore.plan import compose, dds
 from robocore.project import Project
 
@@ -30,7 +30,9 @@ def write_dds_profiles(project: Project) -> list[Path]:
 
 
 def write_compose_files(project: Project, *, tag: str | None = None) -> list[Path]:
-    """Write one compose file per host (and the DDS profiles they mount); return the compose paths."""
+    """Write one compose file per host (and the DDS profiles they mount); return the compose paths.
+
+    Compose files hold the containers' environment, so they are mode 0600 whatever the umask."""
     from robocore.commands.run import with_local_build
     from robocore.plan.containers import host_specs
 
@@ -40,7 +42,8 @@ def write_compose_files(project: Project, *, tag: str | None = None) -> list[Pat
         path = project.compose_file(host.name)
         # The same labels `run` gives the containers (local components: the build they run).
         specs = with_local_build(project, host, host_specs(project, host.name, tag=tag))
-        write_atomic(path, compose.render(project, host.name, tag=tag, specs=specs))
+        # they hold the containers' environment (robot.yaml's values, perhaps tokens): for the user's eyes only
+        write_atomic(path, compose.render(project, host.name, tag=tag, specs=specs), mode=PRIVATE)
         paths.append(path)
     known = {p.name for p in paths}
     for stale in project.compose_file("x").parent.glob("*.yaml"):

@@ -7,6 +7,9 @@ from pathlib import Path
 
 from robocore.project import Project
 
+#: What a dry run says where the plan needs an answer only a Docker daemon or a host could give.
+DRY_RUN_UNKNOWN = "unknown (dry run: not contacted)"
+
 
 @dataclass(frozen=True)
 class Options:

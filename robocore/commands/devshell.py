@@ -41,6 +41,9 @@ UID_ENV = "ROBOCORE_UID"
 GID_ENV = "ROBOCORE_GID"
 READY_MARK = "robocore-shell: ready"
 READY_TIMEOUT = 60.0
+#: What ``--devices all`` is warned with when the shell starts.
+DEVICES_ALL_WARNING = ("--devices all: every device of this machine's /dev (disks, input devices, cameras) "
+                       "is passed into the shell container")
 
 
 def run(options: Options, *, component: str, cmd: str | None, new: bool, devices: str | None,
@@ -72,9 +75,11 @@ def run(options: Options, *, component: str, cmd: str | None, new: bool, devices
         print(json.dumps(out, indent=2))
         return 0
 
+    if request.devices_all:  # said even with --quiet: the shell gets the whole machine's hardware
+        ui.console().print(f"warning: {DEVICES_ALL_WARNING}", markup=False, soft_wrap=True)
     if not options.quiet:
         for note in spec.notes:
-            ui.console().print(f"note: {note}")
+            ui.console().print(f"note: {note}", markup=False)
     docker_cli = shutil.which("docker")
     if docker_cli is None:
         raise ToolMissing("the docker command-line client is not installed (the shell runs `docker exec`)",
@@ -197,7 +202,7 @@ def _warn_if_stale(client: docker.DockerClient, container: Container, spec: plan
         pass
     for reason in reasons:
         ui.console().print(f"note: joining the running dev container {spec.name}, but {reason}; "
-                           "leave all its shells to start a fresh one, or use --new")
+                           "leave all its shells to start a fresh one, or use --new", markup=False)
 
 
 def _ensure_dir(path: Path, owner: tuple[int, int]) -> None:
@@ -231,10 +236,10 @@ def _refresh_cookie(project: Project, spec: plan.ShellSpec, machine: plan.DevMac
     try:
         written = x11.write_cookie_file(display, folder, file_name=plan.XAUTH_FILE, owner=(spec.uid, spec.gid))
     except ToolMissing as missing:
-        ui.console().print(f"note: {missing.message}")
+        ui.console().print(f"note: {missing.message}", markup=False)
         return False
     if not written:
-        ui.console().print(f"note: no xauth cookie for DISPLAY={display}: X programs may be refused")
+        ui.console().print(f"note: no xauth cookie for DISPLAY={display}: X programs may be refused", markup=False)
     return written
 
 
@@ -272,7 +277,7 @@ def _create(client: docker.DockerClient, project: Project, spec: plan.ShellSpec,
         raise DockerError(f"component {comp.name}: cannot start dev container {spec.name}: {_explain(exc)}",
                           hint=_hint(spec, exc)) from None
     if not quiet:
-        ui.console().print(f"started dev container {spec.name} from {spec.image}")
+        ui.console().print(f"started dev container {spec.name} from {spec.image}", markup=False)
     _wait_ready(container, spec)
     return container
 

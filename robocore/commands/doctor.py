@@ -62,6 +62,8 @@ class DoctorProblems(HostError):
 
 def doctor(options: Options, *, host: str | None) -> None:
     """Check hosts; print what was found; raise DoctorProblems when anything needs fixing."""
+    from rich.markup import escape
+
     from robocore.ui import console
 
     project = options.load()
@@ -78,7 +80,7 @@ def doctor(options: Options, *, host: str | None) -> None:
     out = console()
     for report in reports:
         mark = "[green]ok[/]" if not report.problems else f"[red]{len(report.problems)} problem(s)[/]"
-        out.print(f"{report.host}: {mark}  " + ", ".join(report.facts), markup=True, highlight=False)
+        out.print(f"{report.host}: {mark}  " + escape(", ".join(report.facts)), markup=True, highlight=False)
     if any(r.problems for r in reports):
         raise DoctorProblems([r for r in reports if r.problems])
 

@@ -20,11 +20,12 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any
 
-from robocore.commands.context import Options
-from robocore.commands.workspace import local_docker, selected_components, workspace_files
+from robocore.commands.context import DRY_RUN_UNKNOWN, Options
+from robocore.commands.workspace import check_workspace, local_docker, selected_components, workspace_files
 from robocore.config.loader import ROBOT_FILE
 from robocore.config.model import BaseKind, Component, docker_arch
 from robocore.errors import BuildError, ConfigError, DockerError, Problem, ToolMissing
+from robocore.files import refuse_links_leaving
 from robocore.plan import dockerfiles, naming
 from robocore.plan.dockerfiles import ContextEntry, ImagePlan
 from robocore.plan.inputs import inputs_hash
@@ -82,7 +83,7 @@ class Outcome:
 
     what: str  # image reference or component name
     role: str  # base | component | build
-    action: str  # built | up-to-date | would-build | failed
+    action: str  # built | up-to-date | would-build | unknown (dry run) | failed
     reason: str = ""
     image_id: str | None = None
     seconds: float = 0.0
@@ -96,17 +97,19 @@ class Reporter:
         self.options = options
         self.human = not options.quiet and not options.json
 
-    def info(self, message: str) -> None:
-        """A line of progress."""
+    def info(self, message: str, *, markup: bool = False) -> None:
+        """A line of progress (rich markup only with ``markup``: the text may hold values from robot.yaml)."""
         if self.human:
             from robocore.ui import console
 
-            console().print(message)
+            console().print(message, markup=markup)
 
     def plain(self, text: str) -> None:
-        """Plan text (dry run), printed as is on stdout."""
+        """Plan text (dry run) on stdout, control characters escaped."""
         if not self.options.json:
-            print(text, flush=True)
+            from robocore.ui import clean
+
+            print(clean(text), flush=True)
 
     @contextmanager
     def progress(self) -> Iterator[Callable[[str, str], None]]:
@@ -131,7 +134,9 @@ class Reporter:
                       console=console(), transient=True) as bar:
 
             def update(key: str, text: str) -> None:
-                line = f"[bold]{key}[/]: {_escape(text)[:100]}"
+                from robocore.ui import clean
+
+                line = f"[bold]{key}[/]: {_escape(clean(text))[:100]}"
                 if key not in tasks:
                     tasks[key] = bar.add_task(line, total=None)
                 else:
@@ -148,10 +153,11 @@ class Reporter:
             return
         for o in outcomes:
             mark = {"built": "[green]built[/]", "up-to-date": "[dim]up to date[/]",
-                    "would-build": "[yellow]would build[/]", "failed": "[red]failed[/]"}.get(o.action, o.action)
-            extra = f" ({o.reason})" if o.reason else ""
+                    "would-build": "[yellow]would build[/]", "unknown": "[yellow]build or keep[/]",
+                    "failed": "[red]failed[/]"}.get(o.action, o.action)
+            extra = f": {o.reason}" if o.action == "unknown" else f" ({o.reason})" if o.reason else ""
             secs = f" in {o.seconds:.1f}s" if o.action == "built" else ""
-            self.info(f"{o.what}: {mark}{secs}{_escape(extra)}")
+            self.info(f"{_escape(o.what)}: {mark}{secs}{_escape(extra)}", markup=True)
 
 
 def _escape(text: str) -> str:
@@ -180,12 +186,23 @@ def _cache(project: Project) -> Path:
     return project.state_dir / "cache"
 
 
-def _fetch(project: Project, url: str, version: str | None, *, refresh: bool, dry_run: bool) -> Path:
+def allowed_protocol(entry: object) -> str | None:
+    """A repository or common package's ``allow_protocol`` opt-in (``file``, ``ext``, ...), if it has one."""
+    value = getattr(entry, "allow_protocol", None)
+    return value if isinstance(value, str) else None
+
+
+def _fetch(project: Project, url: str, version: str | None, allow: str | None, *, refresh: bool,
+           dry_run: bool) -> Path | None:
+    """The checkout of ``url`` at ``version`` (fetched unless cached; ``allow`` is the entry's protocol
+    opt-in); in a dry run the cached one, or None when there is none yet (nothing is fetched)."""
     from robocore.adapters import vcs
 
     dest = _cache(project) / "git" / vcs.cache_key(url, version)
-    if not dry_run:
-        vcs.fetch(url, version, dest, refresh=refresh)
+    if dry_run:
+        vcs.fetch_argv(url, version)  # the same checks as a fetch (a URL or version that is not one)
+        return dest if (dest / ".git" / vcs.SOURCE_FILE).is_file() else None
+    vcs.fetch(url, version, dest, refresh=refresh, allow_protocol=allow)
     return dest
 
 
@@ -206,24 +223,32 @@ class Planned:
     labels: dict[str, str]
 
 
-def _planned(project: Project, plan: ImagePlan, parent_id: str) -> Planned:
+def _planned(project: Project, plan: ImagePlan, parent_id: str, *, known: bool = True) -> Planned:
+    """``plan`` with its context files and inputs hash; the hash is :data:`DRY_RUN_UNKNOWN` when the parent
+    image or a source is unknown (a dry run)."""
     from robocore.adapters.image_builder import expand
 
     files = tuple(expand(plan.context))
     digest = inputs_hash(plan.dockerfile, [f.digest() for f in files], parent=parent_id, platform=plan.platform)
+    if not known or parent_id == DRY_RUN_UNKNOWN:
+        digest = DRY_RUN_UNKNOWN
     labels = {naming.LABEL_PROJECT: project.name, naming.LABEL_ROLE: plan.role, naming.LABEL_INPUTS: digest}
     if plan.component:
         labels[naming.LABEL_COMPONENT] = plan.component
     return Planned(plan=plan, files=files, parent_id=parent_id, inputs=digest, labels=labels)
 
 
-def _base_parent(project: Project, client: docker.DockerClient, arch: str, *, dry_run: bool,
+def _base_parent(project: Project, client: docker.DockerClient | None, arch: str, *, dry_run: bool,
                  say: Callable[[str], None]) -> tuple[str, str]:
-    """(FROM reference, its image ID) of the base for ``arch``."""
+    """(FROM reference, its image ID) of the base for ``arch``; without a client (a dry run) the ID is
+    :data:`DRY_RUN_UNKNOWN`."""
     from robocore.adapters import rootfs
     from robocore.adapters.image_builder import image_state
 
     robot = project.robot
+    if client is None:
+        default = rootfs.BOOTSTRAPPED if robot.base.kind is BaseKind.wheels else dockerfiles.official_image(robot)
+        return robot.base.image or default, DRY_RUN_UNKNOWN
     if robot.base.kind is BaseKind.wheels:
         if dry_run:
             for ref in ([robot.base.image] if robot.base.image else [rootfs.BOOTSTRAPPED, rootfs.UPSTREAM]):
@@ -251,7 +276,7 @@ def _base_parent(project: Project, client: docker.DockerClient, arch: str, *, dr
     return ref, state.id
 
 
-def plan_base(project: Project, client: docker.DockerClient, arch: str, *, dry_run: bool = False,
+def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *, dry_run: bool = False,
               refresh_sources: bool = False, say: Callable[[str], None] = lambda _: None) -> Planned:
     """The base image plan for ``arch`` (resolves the root image and fetches common packages)."""
     robot = project.robot
@@ -270,17 +295,23 @@ def plan_base(project: Project, client: docker.DockerClient, arch: str, *, dry_r
     if ca is not None:
         entries.append(ContextEntry("host-ca.pem", data=ca.read_bytes()))
     common: list[str] = []
+    known = True
     for pkg in robot.common_packages:
         if pkg.repo:
-            source = _fetch(project, pkg.repo, pkg.branch, refresh=refresh_sources, dry_run=dry_run)
+            source = _fetch(project, pkg.repo, pkg.branch, allowed_protocol(pkg), refresh=refresh_sources,
+                            dry_run=dry_run)
         else:
             source = project.root / (pkg.folder or pkg.name)
-        entries.append(ContextEntry(f"common/{pkg.name}", source=source))
+            refuse_links_leaving(source, project.root, what=f"common package {pkg.name}, staged into the base image")
+        if source is None:
+            known = False  # a dry run before the first fetch
+        else:
+            entries.append(ContextEntry(f"common/{pkg.name}", source=source))
         common.append(pkg.name)
     dockerfile = dockerfiles.base_dockerfile(robot, root_image=root_ref, has_ca=ca is not None, common=common)
     plan = ImagePlan(role="base", name=naming.base_image(robot, project.name), tag=dockerfiles.base_tag(arch, native),
                      arch=arch, dockerfile=dockerfile, parent=root_ref, context=tuple(entries))
-    return _planned(project, plan, root_id)
+    return _planned(project, plan, root_id, known=known)
 
 
 def package_xmls(ws: Path) -> list[str]:
@@ -307,29 +338,37 @@ def plan_component(project: Project, component: Component, base: BaseRef, *, dry
     entries: list[ContextEntry] = []
     xmls: list[str] = []
     if robot.base.kind is BaseKind.official and component.folder:
-        ws = project.root / component.folder
+        ws = check_workspace(project, component)
         for rel in package_xmls(ws):
             dest = dockerfiles.rosdep_dest(PurePosixPath(rel))
             entries.append(ContextEntry(dest, source=ws / rel))
             xmls.append(dest)
     folders: list[str] = []
+    known = True
     for repo in component.repositories:
         folder = dockerfiles.repo_folder(repo)
-        source = _fetch(project, repo.url, repo.version, refresh=refresh_sources, dry_run=dry_run)
-        entries.append(ContextEntry(f"repos/{folder}", source=source))
+        source = _fetch(project, repo.url, repo.version, allowed_protocol(repo), refresh=refresh_sources,
+                        dry_run=dry_run)
+        if source is None:
+            known = False  # a dry run before the first fetch
+        else:
+            entries.append(ContextEntry(f"repos/{folder}", source=source))
         folders.append(folder)
     dockerfile = dockerfiles.component_dockerfile(robot, component, base_ref=base.ref, package_xmls=xmls,
                                                   repo_folders=folders)
     plan = ImagePlan(role="component", name=naming.component_image(robot, project.name, component.name),
                      tag="latest", arch=base.arch, dockerfile=dockerfile, parent=base.ref,
                      context=tuple(entries), component=component.name)
-    return _planned(project, plan, base.inputs)
+    return _planned(project, plan, base.inputs, known=known)
 
 
 def decide(state: ImageState | None, planned: Planned, *, force: bool) -> str | None:
-    """Why the image must be built, or None when it is up to date."""
+    """Why the image must be built, or None when it is up to date (:data:`DRY_RUN_UNKNOWN` when a dry run
+    cannot know)."""
     if force:
         return "--force"
+    if planned.inputs == DRY_RUN_UNKNOWN:
+        return DRY_RUN_UNKNOWN
     if state is None:
         return "not built yet"
     if state.labels.get(naming.LABEL_INPUTS) != planned.inputs:
@@ -357,8 +396,12 @@ def _build_one(planned: Planned, reason: str, update: Callable[[str, str], None]
 
 
 def _show_plan(report: Reporter, planned: Planned, reason: str | None) -> None:
-    status = f"would build ({reason})" if reason else "up to date"
-    report.plain(f"# {planned.plan.ref} [{planned.plan.platform}] inputs {planned.inputs[:19]}: {status}")
+    if reason == DRY_RUN_UNKNOWN:
+        status = f"build or keep: {DRY_RUN_UNKNOWN}"
+    else:
+        status = f"would build ({reason})" if reason else "up to date"
+    inputs = planned.inputs if planned.inputs == DRY_RUN_UNKNOWN else planned.inputs[:19]
+    report.plain(f"# {planned.plan.ref} [{planned.plan.platform}] inputs {inputs}: {status}")
     report.plain(planned.plan.dockerfile)
 
 
@@ -393,14 +436,14 @@ def prepare_base(options: Options, *, force: bool) -> None:
     project = options.load()
     report = Reporter(options)
     _config_problems(project, dockerfiles.wheels_problems(project.robot))
-    client = local_docker()
+    client = None if options.dry_run else local_docker()  # a dry run contacts no daemon
     from robocore.adapters.image_builder import image_state
 
     outcomes: list[Outcome] = []
     work: list[tuple[Planned, str]] = []
     for arch in _arches(project):
         planned = plan_base(project, client, arch, dry_run=options.dry_run, refresh_sources=force, say=report.info)
-        reason = decide(image_state(client, planned.plan.ref), planned, force=force)
+        reason = decide(image_state(client, planned.plan.ref) if client else None, planned, force=force)
         if options.dry_run:
             _show_plan(report, planned, reason)
         _triage(planned, reason, options.dry_run, outcomes, work)
@@ -413,17 +456,23 @@ def _triage(planned: Planned, reason: str | None, dry_run: bool,
     """Up to date, would build (dry run) or queued for building: the one decision per image."""
     if reason is None:
         outcomes.append(Outcome(what=planned.plan.ref, role=planned.plan.role, action="up-to-date"))
+    elif reason == DRY_RUN_UNKNOWN:
+        outcomes.append(Outcome(what=planned.plan.ref, role=planned.plan.role, action="unknown", reason=reason))
     elif dry_run:
         outcomes.append(Outcome(what=planned.plan.ref, role=planned.plan.role, action="would-build", reason=reason))
     else:
         work.append((planned, reason))
 
 
-def _existing_base(project: Project, client: docker.DockerClient, arch: str, *, dry_run: bool = False) -> BaseRef:
-    """The built base image for ``arch`` (stage does not rebuild it: that is prepare-base's job)."""
+def _existing_base(project: Project, client: docker.DockerClient | None, arch: str, *,
+                   dry_run: bool = False) -> BaseRef:
+    """The built base image for ``arch`` (stage does not rebuild it: that is prepare-base's job); without
+    a client (a dry run) its inputs are :data:`DRY_RUN_UNKNOWN`."""
     from robocore.adapters.image_builder import image_state
 
     ref = f"{naming.base_image(project.robot, project.name)}:{dockerfiles.base_tag(arch, native_arch())}"
+    if client is None:
+        return BaseRef(ref=ref, arch=arch, inputs=DRY_RUN_UNKNOWN)
     state = image_state(client, ref)
     if state is None or naming.LABEL_INPUTS not in state.labels:
         if dry_run:
@@ -440,8 +489,8 @@ def _warn_stale_base(project: Project, client: docker.DockerClient, bases: dict[
     for arch, base in bases.items():
         current = plan_base(project, client, arch, dry_run=True)
         if current.inputs != base.inputs and not base.inputs.startswith("("):
-            report.info(f"[yellow]warning[/]: the inputs of {base.ref} changed since it was built "
-                        "(common packages or base settings); run prepare-base to rebuild it")
+            report.info(f"[yellow]warning[/]: the inputs of {_escape(base.ref)} changed since it was built "
+                        "(common packages or base settings); run prepare-base to rebuild it", markup=True)
 
 
 def stage(options: Options, *, refresh: bool, component: str | None, force: bool) -> None:
@@ -459,11 +508,12 @@ def stage(options: Options, *, refresh: bool, component: str | None, force: bool
         return
     comps = selected_components(project, component)
     _config_problems(project, dockerfiles.wheels_problems(project.robot))
-    client = local_docker()
+    client = None if options.dry_run else local_docker()  # a dry run contacts no daemon
     from robocore.adapters.image_builder import image_state
 
     bases = {arch: _existing_base(project, client, arch, dry_run=options.dry_run) for arch in _arches(project, comps)}
-    _warn_stale_base(project, client, bases, report)
+    if client is not None:
+        _warn_stale_base(project, client, bases, report)
     outcomes: list[Outcome] = []
     work: list[tuple[Planned, str]] = []
     for comp in comps:
@@ -471,7 +521,7 @@ def stage(options: Options, *, refresh: bool, component: str | None, force: bool
         if not options.dry_run:
             check_emulation(base.arch, native_arch(), f"component {comp.name} (host {comp.runs_on})")
         planned = plan_component(project, comp, base, dry_run=options.dry_run, refresh_sources=force)
-        reason = decide(image_state(client, planned.plan.ref), planned, force=force)
+        reason = decide(image_state(client, planned.plan.ref) if client else None, planned, force=force)
         if options.dry_run:
             _show_plan(report, planned, reason)
             if comp.repositories:
@@ -481,7 +531,8 @@ def stage(options: Options, *, refresh: bool, component: str | None, force: bool
                 report.plain(f"# {comp.name}: repositories (vcstool .repos), fetched on this machine into repos/\n"
                              + vcs.repos_file(comp.repositories, folders))
         _triage(planned, reason, options.dry_run, outcomes, work)
-    client.close()
+    if client is not None:
+        client.close()
     outcomes += _run_builds(report, work, parallel=True)
     if options.dry_run:
         report.plain("then: rewrite the per-host compose files")

@@ -181,7 +181,8 @@ def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry
         )
     template = choose_template(source, ref)
     if existing:
-        console().print(f"{destination}: existing robocore project; only missing template files are added")
+        console().print(f"{destination}: existing robocore project; only missing template files are added",
+                        markup=False)
         if data:
             console().print("note: robot.yaml is kept as it is; change ros_distro or base.kind in it yourself")
     request = copier_adapter.CopyRequest(
@@ -197,7 +198,8 @@ def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry
     copier_adapter.copy(request)
     console().print(template.note, markup=False, soft_wrap=True)
     if dry_run:
-        console().print(f"would write {destination / SCHEMA_FILE} and check {destination / 'robot.yaml'}")
+        console().print(f"would write {destination / SCHEMA_FILE} and check {destination / 'robot.yaml'}",
+                        markup=False)
         return
     _write_schema(destination)
     _check(destination)

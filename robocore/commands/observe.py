@@ -20,9 +20,10 @@ from robocore.commands.run import for_each_host, managed_containers, print_table
 from robocore.config.model import DockerAccess, Host
 from robocore.errors import DockerError, GroupError, RobocoreError, UsageError
 from robocore.plan import dds, naming
+from robocore.plan.addresses import url_host
 from robocore.plan.containers import discovery_service
 from robocore.project import Project
-from robocore.ui import console, stdout
+from robocore.ui import clean, console, stdout
 
 if TYPE_CHECKING:
     import docker
@@ -158,7 +159,7 @@ def status(options: Options) -> None:
     hosts = select_hosts(project, None)
     if options.dry_run:
         for h in hosts:
-            stdout().print(f"would list {project.name} containers on {h.name}")
+            stdout().print(f"would list {project.name} containers on {h.name}", markup=False)
         stdout().print("would run `ros2 node list` as a super client in the discovery server container")
         return
     rows, failures = collect_status(project, hosts)
@@ -178,23 +179,26 @@ def status(options: Options) -> None:
 
 def print_status(rows: list[Row], failures: dict[str, RobocoreError], nodes: list[str] | None, where: str) -> None:
     """The status table, then the ROS nodes line."""
+    from rich.markup import escape
     from rich.table import Table
 
     table = Table(title="robot status", title_justify="left")
     for column in ("component", "host", "state", "uptime", "restarts", "image"):
         table.add_column(column, no_wrap=column in {"component", "image"})
     colors = {"running": "green", "missing": "red"}
-    for row in rows:
-        color = colors.get(row.state.split()[0], "yellow")
-        table.add_row(row.component, row.host, f"[{color}]{row.state}[/]", row.uptime, str(row.restarts), row.image)
+    for row in rows:  # what the hosts said is text, never rich markup
+        color = colors.get(row.state.split()[0] if row.state.split() else "", "yellow")
+        table.add_row(escape(row.component), row.host, f"[{color}]{escape(row.state)}[/]", escape(row.uptime),
+                      str(row.restarts), escape(row.image))
     for host, error in sorted(failures.items()):
-        table.add_row("-", host, "[red]unreachable[/]", "-", "-", error.lines()[0])
+        table.add_row("-", host, "[red]unreachable[/]", "-", "-", escape(error.lines()[0]))
     print_table(table)
     out = stdout()
     if nodes is None:
-        out.print(f"ROS nodes: unknown ({where})")
+        out.print(f"ROS nodes: unknown ({where})", markup=False, soft_wrap=True)
     else:
-        out.print(f"ROS nodes ({len(nodes)}, via {where}): " + (", ".join(nodes) if nodes else "none"))
+        out.print(f"ROS nodes ({len(nodes)}, via {where}): " + (", ".join(nodes) if nodes else "none"),
+                  markup=False, soft_wrap=True)
 
 
 # --------------------------------------------------------------------------- logs
@@ -218,14 +222,15 @@ def logs(options: Options, *, component: str | None, follow: bool, tail: int) ->
     hosts = [project.host(project.component(component).runs_on)] if component else select_hosts(project, None)
     if options.dry_run:
         for h in hosts:
-            stdout().print(f"would read logs of {component or 'every container'} on {h.name}")
+            stdout().print(f"would read logs of {component or 'every container'} on {h.name}", markup=False)
         return
     results, failures = for_each_host(hosts, lambda h: _component_containers(project, h, component))
     containers = [item for h in hosts for item in sorted(results.get(h.name, []), key=lambda i: i[0])]
     for host, error in sorted(failures.items()):
-        console().print(f"[red]{host}: {error.lines()[0]}[/]")
+        console().print(f"{host}: {error.lines()[0]}", style="red", markup=False)
     if not containers and not failures:
-        console().print(f"no {project.name} containers" + (f" for {component}" if component else "") + "; run `run`")
+        console().print(f"no {project.name} containers" + (f" for {component}" if component else "") + "; run `run`",
+                        markup=False)
     width = max((len(name) for name, _ in containers), default=0)
     if not follow:
         for name, container in containers:
@@ -250,7 +255,10 @@ def _lines(data: bytes | Iterator[bytes]) -> Iterator[str]:
 
 
 def _emit(name: str, width: int, line: str) -> None:
-    sys.stdout.write(f"{name:<{width}} | {line}\n")
+    """One log line behind its component's name. The line is the container's own output: its colours
+    (SGR sequences, which ROS logging uses) are kept, any other control sequence (titles, cursor moves,
+    screen clears) is escaped, and so is the name (a label read from the host)."""
+    sys.stdout.write(f"{clean(name):<{width}} | {clean(line, keep_sgr=True)}\n")
     sys.stdout.flush()
 
 
@@ -300,8 +308,8 @@ def connect(options: Options, *, component: str, cmd: str | None) -> int:
     if options.dry_run:
         entry = None if comp.image else [naming.ENTRYPOINT]
         where = f"on {host.name} ({'interactive' if cmd is None else 'no tty'}), in {name}"
-        print(f"{where}: {shlex.join(exec_argv(entry, command))}")
-        print("environment: " + " ".join(f"{k}={v}" for k, v in sorted(env.items())))
+        print(clean(f"{where}: {shlex.join(exec_argv(entry, command))}"))
+        print(clean("environment: " + " ".join(f"{k}={v}" for k, v in sorted(env.items()))))
         return 0
     client, container = _require_running(project, host, name, comp.name)
     entrypoint = container.attrs.get("Config", {}).get("Entrypoint") or None
@@ -310,24 +318,32 @@ def connect(options: Options, *, component: str, cmd: str | None) -> int:
         return _exec_streaming(client, container, host, name, argv, env)
     client.close()
     tty = sys.stdin.isatty()
-    docker_argv = ["docker", "exec", "-it" if tty else "-i"]
-    for key, value in sorted(env.items()):
-        docker_argv += ["-e", f"{key}={value}"]
-    docker_argv += [name, *argv]
-    full, extra_env = _interactive_argv(project, host, docker_argv, tty=tty)
+    full, extra_env = interactive_argv(project, host, docker_exec_argv(name, argv, env, tty=tty), tty=tty)
+    if host.access is DockerAccess.ssh:
+        from robocore.adapters import ssh
+
+        ssh.require_ssh()
+        ssh.ensure_control_dir()
     return subprocess.call(full, env={**os.environ, **extra_env})
 
 
-def _interactive_argv(project: Project, host: Host, docker_argv: list[str], *,
-                      tty: bool) -> tuple[list[str], dict[str, str]]:
-    """The local argv of an interactive ``docker exec -it`` on ``host`` and extra environment for it."""
+def docker_exec_argv(name: str, argv: list[str], env: dict[str, str], *, tty: bool) -> list[str]:
+    """``docker exec`` of ``argv`` in container ``name``: each variable attached to its flag
+    (``--env=K=V``), ``--`` before the container name and the command."""
+    return ["docker", "exec", "-it" if tty else "-i", *(f"--env={key}={value}" for key, value in sorted(env.items())),
+            "--", name, *argv]
+
+
+def interactive_argv(project: Project, host: Host, docker_argv: list[str], *,
+                     tty: bool) -> tuple[list[str], dict[str, str]]:
+    """The local argv of an interactive ``docker exec -it`` on ``host`` and extra environment for it
+    (over ssh: the docker argv quoted argument by argument, after ``--`` and the destination)."""
     access = host.access
     if access is DockerAccess.local:
         return docker_argv, {}
     if access is DockerAccess.ssh:
         from robocore.adapters import ssh
 
-        ssh.require_ssh()
         return ["ssh", "-t" if tty else "-T", *ssh.ssh_options(host), "--", ssh.destination(host),
                 shlex.join(docker_argv)], {}
     if access is DockerAccess.tls and host.tls is not None:
@@ -335,10 +351,11 @@ def _interactive_argv(project: Project, host: Host, docker_argv: list[str], *,
             path = os.path.expanduser(value)
             return path if os.path.isabs(path) else str(project.root / path)
 
-        tls = ["--tlsverify", "--tlscacert", resolve(host.tls.ca_cert), "--tlscert", resolve(host.tls.client_cert),
-               "--tlskey", resolve(host.tls.client_key)]
-        return ["docker", *tls, *docker_argv[1:]], {"DOCKER_HOST": f"tcp://{host.ip}:{host.docker_port or 2376}"}
-    return docker_argv, {"DOCKER_HOST": f"tcp://{host.ip}:{host.docker_port or 2375}"}
+        tls = ["--tlsverify", f"--tlscacert={resolve(host.tls.ca_cert)}", f"--tlscert={resolve(host.tls.client_cert)}",
+               f"--tlskey={resolve(host.tls.client_key)}"]
+        tcp = f"tcp://{url_host(host.ip, host.docker_port or 2376)}"
+        return ["docker", *tls, *docker_argv[1:]], {"DOCKER_HOST": tcp}
+    return docker_argv, {"DOCKER_HOST": f"tcp://{url_host(host.ip, host.docker_port or 2375)}"}
 
 
 def _require_running(project: Project, host: Host, name: str, component: str) -> tuple[docker.DockerClient, Any]:

@@ -15,7 +15,6 @@ returns to where the first one started.
 from __future__ import annotations
 
 import json
-import re
 import subprocess
 from datetime import datetime, timezone
 from pathlib import Path
@@ -29,7 +28,6 @@ from robocore.plan import naming
 from robocore.project import Project
 
 HISTORY_KEEP = 20
-_TAG_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,127}$")
 
 # $1 = component root, $2 = release id: point current at an existing release, atomically.
 _SWITCH_SCRIPT = """\
@@ -76,7 +74,7 @@ def release(options: Options, *, tag: str | None) -> None:
         raise UsageError(f"{project.robot_file}: release needs a registry (registry: HOST[:PORT][/PATH])",
                          hint="without a registry, `run` streams images to each host instead")
     version = tag or default_tag(project)
-    if not _TAG_RE.match(version):
+    if not naming.is_image_tag(version):
         raise UsageError(f"{version!r} is not a valid image tag", hint="letters, digits, '_', '.', '-' (max 128)")
     plan = [(f"{repo}:latest", naming.registry_image(robot, repo), version) for repo in released_images(project)]
     if options.dry_run:

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from robocore.adapters.docker_hosts import is_connection_error
-from robocore.commands.context import Options
+from robocore.commands.context import DRY_RUN_UNKNOWN, Options
 from robocore.config.model import Host
 from robocore.errors import DockerError, GroupError, HostError, RobocoreError, UsageError
 from robocore.plan import dds, naming
@@ -41,6 +41,8 @@ T = TypeVar("T")
 
 #: Roles of the containers ``run`` and ``down`` manage (dev shells and build containers are left alone).
 MANAGED_ROLES = (ROLE_COMPONENT, ROLE_DISCOVERY)
+#: Verb of a dry run's action: what the host runs now is not known.
+UNKNOWN = "unknown"
 #: Note of a host ``run`` leaves alone: nothing planned there, and no run of this project ever reached it.
 NOT_CONTACTED = "nothing planned, never deployed here: not contacted"
 #: Seconds a host gets to answer before it is reported unreachable.
@@ -276,8 +278,17 @@ def with_local_build(project: Project, host: Host, specs: Sequence[ContainerSpec
 
 def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *, dry_run: bool,
                 quiet: bool) -> HostOutcome:
-    """Bring one host to its planned containers (or, with ``dry_run``, say what that would take)."""
+    """Bring one host to its planned containers (or, with ``dry_run``, say what that would take from what
+    is known here: the host is not contacted, so what it runs now is unknown)."""
     outcome = HostOutcome(host.name)
+    if dry_run:
+        try:
+            check_install_trees(project, host)
+        except UsageError as error:
+            outcome.notes.append(f"would fail: {error.message}")
+        what = f"create, replace, start or keep: {DRY_RUN_UNKNOWN}"
+        outcome.actions = [Action(UNKNOWN, spec.name, f"{spec.image}; {what}") for spec in specs]
+        return outcome
     check_install_trees(project, host)
     specs = with_local_build(project, host, specs)
     client = connect(project, host)
@@ -337,10 +348,11 @@ def _check_name_conflicts(client: docker.DockerClient, specs: Sequence[Container
 def _apply(client: docker.DockerClient, action: Action, spec: ContainerSpec | None, container: Any, host: Host, *,
            quiet: bool) -> None:
     from docker.errors import APIError
+    from rich.markup import escape
 
     def say(text: str) -> None:
         if not quiet:
-            console().print(f"[bold]{host.name}[/]: {text}")
+            console().print(f"[bold]{host.name}[/]: {escape(text)}")
 
     try:
         if action.verb == "remove":
@@ -444,23 +456,29 @@ def _report(results: dict[str, HostOutcome], failures: dict[str, RobocoreError],
         return
     if options.quiet and not failures:
         return
+    from rich.markup import escape
     from rich.table import Table
 
     if options.dry_run:
         for h in hosts:
-            for action in results[h.name].actions if h.name in results else []:
+            out = results.get(h.name)
+            for action in out.actions if out else []:
                 reason = f" ({action.reason})" if action.reason else ""
-                verb = action.verb if action.verb == "keep" else f"would {action.verb}"
-                stdout().print(f"{h.name}: {verb} {action.name}{reason}")
+                verb = "" if action.verb == UNKNOWN else "keep " if action.verb == "keep" else f"would {action.verb} "
+                stdout().print(f"{h.name}: {verb}{action.name}{reason}", markup=False, soft_wrap=True)
+            for note in out.notes if out else []:
+                stdout().print(f"{h.name}: {note}", markup=False, soft_wrap=True)
+        if not failures:
+            return
     table = Table(title=f"robocore {title}", title_justify="left")
     for column in ("host", "result", "created", "replaced", "started", "kept", "removed", "detail"):
         table.add_column(column)
     for h in hosts:
         if h.name in failures:
-            table.add_row(h.name, "[red]failed[/]", "", "", "", "", "", failures[h.name].lines()[0])
+            table.add_row(h.name, "[red]failed[/]", "", "", "", "", "", escape(failures[h.name].lines()[0]))
             continue
         out = results[h.name]
-        detail = "; ".join(out.notes)
+        detail = escape("; ".join(out.notes))
         table.add_row(h.name, "[green]ok[/]", *(str(out.count(v)) for v in ("create", "replace", "start", "keep",
                                                                              "remove")), detail)
     print_table(table)
@@ -472,9 +490,9 @@ def print_table(table: Any) -> None:
     if out.is_terminal:
         out.print(table)
         return
-    from rich.console import Console
+    from robocore.ui import make_console
 
-    Console(file=sys.stdout, width=160, highlight=False).print(table)
+    make_console(file=sys.stdout, width=160).print(table)
 
 
 # --------------------------------------------------------------------------- down
@@ -485,11 +503,16 @@ def stop_host(project: Project, host: Host, *, dry_run: bool, quiet: bool, forge
 
     ``forget_servers`` also removes the discovery servers' state volumes, so that the next start is
     a first start (no restart hold): right when every host goes down, wrong when clients elsewhere
-    keep running.
+    keep running. ``dry_run`` contacts no host: which containers it runs is unknown.
     """
     from docker.errors import NotFound
+    from rich.markup import escape
 
     outcome = HostOutcome(host.name)
+    if dry_run:
+        outcome.notes.append(f"would remove every container labelled {naming.LABEL_PROJECT}={project.name}; "
+                             f"which ones: {DRY_RUN_UNKNOWN}")
+        return outcome
     client = connect(project, host)
     try:
         containers = managed_containers(client, project.name)
@@ -499,7 +522,7 @@ def stop_host(project: Project, host: Host, *, dry_run: bool, quiet: bool, forge
             if not dry_run:
                 container.remove(force=True)
                 if not quiet:
-                    console().print(f"[bold]{host.name}[/]: removed {container.name}")
+                    console().print(f"[bold]{host.name}[/]: removed {escape(container.name)}")
         if forget_servers and not dry_run:
             for server in dds.servers(project.robot):
                 if server.host != host.name:
@@ -523,8 +546,8 @@ def down(options: Options, *, host: str | None) -> None:
     results, failures = for_each_host(hosts, work)
     if options.dry_run:
         for name, out in results.items():
-            for action in out.actions:
-                stdout().print(f"{name}: would remove {action.name}")
+            for note in out.notes:
+                stdout().print(f"{name}: {note}", markup=False, soft_wrap=True)
     elif not options.quiet:
         for name, out in results.items():
             if not out.actions:

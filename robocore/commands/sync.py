@@ -28,8 +28,8 @@ from typing import Any
 from robocore.adapters import rsync, ssh
 from robocore.commands.context import Options
 from robocore.config.model import Component, Host, read_only_project_path
-from robocore.errors import GroupError, HostError, RobocoreError, UsageError
-from robocore.files import write_atomic
+from robocore.errors import GroupError, HostError, RobocoreError, UnsafePath, UsageError
+from robocore.files import refuse_links_leaving, write_atomic
 from robocore.plan import layout
 from robocore.plan import sync as plan
 from robocore.project import Project
@@ -64,8 +64,13 @@ def synced_releases(project: Project, host: str) -> dict[str, str]:
     return {name: str(entry.get("release", "")) for name, entry in comps.items() if isinstance(entry, dict)}
 
 
-def plan_host(project: Project, host: Host) -> list[plan.ComponentSync]:
-    """The sync items of ``host`` (empty for this machine), or a UsageError if inputs are missing."""
+def plan_host(project: Project, host: Host, *, dry_run: bool = False) -> list[plan.ComponentSync]:
+    """The sync items of ``host`` (empty for this machine), or a UsageError if inputs are missing.
+
+    What is sent must stay in the project: a symlink in an install tree or a read-only volume that leads
+    out of it is refused (UnsafePath) unless robot.yaml allows it, since rsync copies what such links
+    point to. ``dry_run`` writes nothing (the folder of links to the read-only volumes is not made).
+    """
     if host.is_local:
         return []
     robot = project.robot
@@ -79,13 +84,15 @@ def plan_host(project: Project, host: Host) -> list[plan.ComponentSync]:
             if not install.is_dir():
                 raise UsageError(f"component {comp.name}: no install tree at {install}",
                                  hint=f"run `build --component {comp.name}` first")
+            refuse_links_leaving(install, project.root, what=f"the install tree of component {comp.name}, "
+                                 f"sent to host {host.name}")
             sources.append(plan.Source(install, "install"))
         if not dds_dir.is_dir() or not compose.is_file():
             raise UsageError(f"host {host.name}: {compose if not compose.is_file() else dds_dir} is missing",
                              hint="run `stage` (or `stage --refresh`) first: it writes compose files and DDS profiles")
         sources.append(plan.Source(dds_dir, "dds"))
         sources.append(plan.Source(compose, compose.name))
-        files = _project_files(project, host, comp)
+        files = _project_files(project, host, comp, dry_run=dry_run)
         if files is not None:
             sources.append(files)
         items.append(plan.ComponentSync(
@@ -95,12 +102,14 @@ def plan_host(project: Project, host: Host) -> list[plan.ComponentSync]:
     return items
 
 
-def _project_files(project: Project, host: Host, comp: Component) -> plan.Source | None:
+def _project_files(project: Project, host: Host, comp: Component, *, dry_run: bool = False) -> plan.Source | None:
     """The read-only project volumes of ``comp`` as one source: a folder of symlinks to them, kept in
-    ``.robocore/sync/files/<host>/<component>/files`` and made anew whenever the set of links changes."""
+    ``.robocore/sync/files/<host>/<component>/files`` and made anew whenever the set of links changes
+    (not in a dry run, which writes nothing)."""
     import shutil
 
     wanted = [(i, rel) for i, v in enumerate(comp.volumes) if (rel := read_only_project_path(v)) is not None]
+    allowed = bool(getattr(comp, "allow_outside_project", False))  # robot.yaml's opt-in, for symlinks only
     farm = project.state_dir / "sync" / "files" / host.name / comp.name / layout.FILES
     links: dict[str, Path] = {}
     for index, rel in wanted:
@@ -108,7 +117,20 @@ def _project_files(project: Project, host: Host, comp: Component) -> plan.Source
         if not real.exists():
             raise UsageError(f"component {comp.name}: volumes[{index}]: {project.root / rel} does not exist",
                              hint=f"create it, or remove the volume: sync copies it to {host.name}")
+        if rel == ".." or rel.startswith("../"):
+            raise UnsafePath(f"component {comp.name}: volumes[{index}]: {rel} is outside the project folder "
+                             f"({real}); sync would send it to host {host.name}",
+                             hint="move it into the project, or mount it from the host's own file system")
+        if not real.is_relative_to(project.root) and not allowed:  # through a symlink
+            raise UnsafePath(f"component {comp.name}: volumes[{index}]: {rel} leads to {real}, outside the "
+                             f"project folder; sync would send it to host {host.name}",
+                             hint="move it into the project, or set allow_outside_project: true on the component")
+        refuse_links_leaving(project.root / rel, project.root, allowed=allowed,
+                             what=f"read-only volume {comp.volumes[index]!r} of component {comp.name}, "
+                             f"sent to host {host.name}")
         links[rel] = real
+    if dry_run:
+        return plan.Source(farm, layout.FILES, follow=True) if links else None
     if _farm_links(farm) != links:  # made anew only when it changes: its folders' times are in the digest
         shutil.rmtree(farm, ignore_errors=True)
         for rel, real in links.items():
@@ -133,7 +155,7 @@ def sync(options: Options, *, host: str | None) -> None:
 
     project = options.load()
     hosts = [project.host(host)] if host else list(project.robot.hosts)
-    plans = {h.name: plan_host(project, h) for h in hosts}
+    plans = {h.name: plan_host(project, h, dry_run=options.dry_run) for h in hosts}
     if options.dry_run:
         _print_dry_run(project, hosts, plans)
         return
@@ -289,21 +311,22 @@ def _print_dry_run(project: Project, hosts: list[Host], plans: dict[str, list[pl
     out = stdout()
     for h in hosts:
         if h.is_local:
-            out.print(f"# {h.name}: this machine, nothing to copy")
+            out.print(f"# {h.name}: this machine, nothing to copy", markup=False)
             continue
         rsh = ssh.rsh_command(h)
         items = plans[h.name]
         if not items:
             continue
-        out.print(f"# {h.name}: " + ", ".join(f"{i.component} -> {i.root}" for i in items), markup=False)
+        out.print(f"# {h.name}: " + ", ".join(f"{i.component} -> {i.root}" for i in items), markup=False,
+                  soft_wrap=True)
         out.print(f"# one session (holding flock on {h.deploy_root}/{plan.LOCK_FILE} there) prepares, waits "
-                  f"for the rsyncs, then releases each changed copy", markup=False)
+                  f"for the rsyncs, then releases each changed copy", markup=False, soft_wrap=True)
         out.print(shlex.join(ssh.ssh_argv(h, plan.session_argv(h.deploy_root, _holder(), items))), markup=False,
                   soft_wrap=True)
         for item in items:
             out.print(shlex.join(plan.rsync_argv(item, h, rsh)), markup=False, soft_wrap=True)
         steps = " ".join(plan.RELEASE for _ in items)
-        out.print(f"# then, on that session's stdin: {plan.new_release_id()} {steps}", markup=False)
+        out.print(f"# then, on that session's stdin: {plan.new_release_id()} {steps}", markup=False, soft_wrap=True)
 
 
 def _print_table(rows: list[ComponentResult]) -> None:

@@ -10,7 +10,7 @@ the ssh handshake with each robot host (about 0.2 s on a LAN). Both can happen a
 - the next command calls :func:`warm_recorded` first thing, before anything heavy is imported: if
   robot.yaml is unchanged, the recorded hosts are warmed at once.
 
-Only command lines naming a remote step, and not ``--dry-run``, warm anything. Warming never
+Only command lines naming a remote step, and not a dry run (``--dry-run`` or ``-d``), warm anything. Warming never
 waits and never reports: a host that cannot be reached is named by the step that needs it. The
 record holds host names, users, addresses and ports, nothing secret. This module imports no
 config model (pydantic), so that the CLI can call it before loading one.
@@ -48,14 +48,21 @@ class Endpoint:
     ssh_port: int
 
 
+def may_be_dry_run(argv: Sequence[str]) -> bool:
+    """True when ``argv`` may ask for a dry run: ``--dry-run``, or a short flag such as ``-d`` or ``-qd``
+    (the remote steps' short form of it). Read before the command line is parsed, so it errs on the side
+    of a dry run: a dry run contacts no host, not even to warm a connection."""
+    return any(arg == "--dry-run" or (arg[:1] == "-" and arg[1:2] != "-" and "d" in arg[1:]) for arg in argv)
+
+
 def wants_remote(argv: Sequence[str]) -> bool:
     """True when ``argv`` names a step that will use the robot hosts, and is not a dry run."""
-    return bool(REMOTE_STEPS & set(argv)) and "--dry-run" not in argv
+    return bool(REMOTE_STEPS & set(argv)) and not may_be_dry_run(argv)
 
 
 def wants_docker(argv: Sequence[str]) -> bool:
     """True when ``argv`` names a step that will use the robot hosts' Docker daemons, and is not a dry run."""
-    return bool(DOCKER_STEPS & set(argv)) and "--dry-run" not in argv
+    return bool(DOCKER_STEPS & set(argv)) and not may_be_dry_run(argv)
 
 
 def warm(endpoints: Iterable[Endpoint]) -> None:

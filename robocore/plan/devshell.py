@@ -376,8 +376,8 @@ def exec_argv(spec: ShellSpec, *, cmd: str | None, stdin_tty: bool, docker: str 
         argv.append("-i")
     argv += ["-u", str(spec.uid), "-w", spec.workdir]
     for key, value in spec.session_env.items():
-        argv += ["-e", f"{key}={value}"]
-    argv.append(spec.name)
+        argv += ["-e", f"{key}={value}"]  # KEY=...: never an option
+    argv += ["--", spec.name]
     argv += ["bash", "-l"] if cmd is None else ["bash", "-lc", cmd]
     return argv
 

@@ -21,7 +21,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
+from robocore.config.loader import ROBOT_FILE
 from robocore.config.model import Arch, BaseKind, Component, Repository, Robot
+from robocore.errors import ConfigError, Problem
 from robocore.plan import colcon, naming
 
 #: ROS 2 wheels from PyPI, pinned per distro (x86_64, CPython 3.11/3.12). See design.md §5.
@@ -142,6 +144,30 @@ def _apt_install(packages: Sequence[str]) -> str:
             f"{names} && rm -rf /var/lib/apt/lists/*")
 
 
+def shell_words(values: Sequence[str], key: str) -> str:
+    """robot.yaml's ``values`` as shell words of a Dockerfile ``RUN`` line, each quoted on its own.
+
+    Quoting keeps them from the shell; a control character (a newline would end the instruction and
+    start another one) is refused with a ConfigError naming ``key`` (``components[0].apt_packages``).
+    """
+    for index, value in enumerate(values):
+        if any(ord(ch) < 0x20 or ord(ch) == 0x7F for ch in value):
+            raise ConfigError([Problem(ROBOT_FILE, None, f"{key}[{index}]",
+                                       f"{value!r} contains a control character")])
+    return " ".join(shlex.quote(value) for value in values)
+
+
+def _component_apt(component: Component, key: str) -> str:
+    """apt-get install of a component's packages: ``--`` before them, so none is read as an option."""
+    return ("RUN apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends -- "
+            f"{shell_words(component.apt_packages, key)} && rm -rf /var/lib/apt/lists/*")
+
+
+def _component_pip(component: Component, key: str) -> str:
+    """pip install of a component's requirements: ``--`` before them (pip's option parser stops there)."""
+    return f"RUN python3 -m pip install -- {shell_words(component.pip_packages, key)}"
+
+
 def _colcon_underlay(source: str, install: str) -> str:
     argv = colcon.underlay_build_argv(source, install, f"{STAGING}/colcon-build")
     return f"RUN {naming.ENTRYPOINT} {shlex.join(argv)} && rm -rf {STAGING}"
@@ -210,11 +236,11 @@ def component_dockerfile(
     """
     official = robot.base.kind is BaseKind.official
     lines = [f"# robocore image of component {component.name}: {GENERATED}", f"FROM {base_ref}"]
+    key = f"components[{_index(robot, component)}]"
     if component.apt_packages:
-        lines.append(f"RUN {_apt_install(component.apt_packages)}")
+        lines.append(_component_apt(component, f"{key}.apt_packages"))
     if component.pip_packages:
-        quoted = " ".join(shlex.quote(p) for p in component.pip_packages)
-        lines.append(f"RUN python3 -m pip install {quoted}")
+        lines.append(_component_pip(component, f"{key}.pip_packages"))
     rosdep_paths: list[str] = []
     if repo_folders:
         lines.append(f"COPY repos {STAGING}/deps")
@@ -231,6 +257,13 @@ def component_dockerfile(
     for command in component.postinstall:
         lines.append("RUN " + json.dumps([naming.ENTRYPOINT, "bash", "-c", command]))
     return "\n".join(lines) + "\n"
+
+
+def _index(robot: Robot, component: Component) -> int | str:
+    for index, comp in enumerate(robot.components):
+        if comp is component or comp.name == component.name:
+            return index
+    return component.name
 
 
 def rosdep_dest(package_xml: PurePosixPath) -> str:

@@ -5,6 +5,8 @@ One place, so that stage, run, shell and status agree without passing names arou
 
 from __future__ import annotations
 
+import re
+
 from robocore.config.model import Robot
 
 LABEL_PROJECT = "dev.robocore.project"
@@ -18,6 +20,16 @@ CONTAINER_WS = "/robocore/ws"  # the component's workspace (source), build and s
 CONTAINER_INSTALL = "/robocore/install"  # the component's colcon install tree
 CONTAINER_DDS = "/robocore/dds"  # generated DDS profiles
 ENTRYPOINT = "/robocore/entrypoint.sh"  # sources ROS and the install tree, then execs
+
+
+#: A Docker image tag: a letter, digit or '_', then up to 127 letters, digits, '_', '.' or '-'.
+TAG_PATTERN = r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,127}$"
+_TAG_RE = re.compile(TAG_PATTERN)
+
+
+def is_image_tag(text: str) -> bool:
+    """True when ``text`` is a valid Docker image tag (``v1.2``, ``2026-01-05``)."""
+    return bool(_TAG_RE.fullmatch(text))
 
 
 def image_prefix(robot: Robot, project_name: str) -> str:

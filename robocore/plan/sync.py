@@ -40,6 +40,8 @@ from datetime import datetime, timezone
 from pathlib import Path, PurePosixPath
 
 from robocore.config.model import Host
+from robocore.errors import HostError
+from robocore.plan.addresses import bare, bracketed
 
 #: Complete releases kept per component (the current one always among them).
 KEEP_RELEASES = 3
@@ -201,18 +203,31 @@ def finish_line(release_id: str, steps: Sequence[str]) -> str:
     return " ".join([release_id, *steps])
 
 
+def remote_path(host: Host, path: str) -> str:
+    """rsync's ``user@host:path`` of ``path`` on ``host``, an IPv6 address in brackets (``fe80::1:/x``
+    would be read as rsync's daemon syntax). A user or address starting with ``-`` is refused: rsync
+    hands both to ssh as arguments."""
+    if host.user.startswith("-") or bare(host.ip).startswith("-"):
+        raise HostError(f"host {host.name}: user {host.user!r} or address {host.ip!r} starts with '-'",
+                        hint="fix the host's user and ip in robot.yaml")
+    return f"{host.user}@{bracketed(host.ip)}:{path}"
+
+
 def rsync_argv(item: ComponentSync, host: Host, rsh: str, *, io_timeout: int = 60) -> list[str]:
     """The local rsync argv copying ``item``'s sources into ``staging`` on ``host``.
 
-    ``-a`` keeps modes and times (the quick check), ``--delete`` removes files gone locally,
-    ``--copy-unsafe-links`` turns symlinks that leave the tree (a ``--symlink-install`` build)
-    into the files they point to, ``--link-dest`` hard-links what is unchanged in ``current``,
-    ``--stats`` reports the bytes moved.
+    ``-a`` keeps modes and times (the quick check), ``-s`` (``--protect-args``) hands paths and
+    options to the remote rsync as they are instead of through the remote shell, ``--delete``
+    removes files gone locally, ``--copy-unsafe-links`` turns symlinks that leave the tree (read-only
+    project volumes) into the files they point to (sync checked first that they stay in the project),
+    ``--link-dest`` hard-links what is unchanged in ``current``, ``--stats`` reports the bytes moved.
+    The operands follow ``--``.
     """
     return [
         "rsync",
         "-a",
         "-R",
+        "-s",
         "--delete",
         "--copy-unsafe-links",
         "--stats",
@@ -220,8 +235,9 @@ def rsync_argv(item: ComponentSync, host: Host, rsh: str, *, io_timeout: int = 6
         f"--link-dest={item.current}/",
         "-e",
         rsh,
+        "--",
         *(s.rsync_arg for s in item.sources),
-        f"{host.user}@{host.ip}:{item.staging}/",
+        remote_path(host, f"{item.staging}/"),
     ]
 
 
