@@ -19,7 +19,8 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ValidationError
 
-from robocore.config.checks import check_parts, check_robot, did_you_mean, salvage
+from robocore.config.checks import check_parts, check_robot, salvage
+from robocore.config.hints import did_you_mean
 from robocore.config.model import PATTERN_HELP, Robot
 from robocore.errors import ConfigError, Problem
 

@@ -7,13 +7,14 @@ live in :mod:`robocore.config.checks` so that every problem carries its own key 
 from __future__ import annotations
 
 import ipaddress
-import posixpath
-import re
 from enum import Enum
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from robocore.config.mappings import is_project_path as is_project_path
+from robocore.config.mappings import port_pattern as port_pattern
+from robocore.config.mappings import read_only_project_path as read_only_project_path
 from robocore.config.sources import (
     DEFAULT_GIT_URL,
     DEFAULT_PROTOCOLS,
@@ -54,12 +55,6 @@ PATTERN_HELP: dict[str, str] = {
     NAME_PATTERN: "a letter, then letters, digits, '_' or '-' (at most 63)",
     USER_PATTERN: "a Linux user name: lower case, digits, '_', '-' or '.'",
 }
-
-_PORT_RE = re.compile(
-    r"^(?:(?P<ip>[0-9.]+|\[[0-9a-fA-F:]+\]):)?(?P<host>\d{1,5})(?:-(?P<host_end>\d{1,5}))?"
-    r":(?P<cont>\d{1,5})(?:-(?P<cont_end>\d{1,5}))?(?:/(?P<proto>tcp|udp|sctp))?$"
-)
-
 
 class Strict(BaseModel):
     """Base for every robot.yaml model: frozen, unknown keys are errors."""
@@ -167,8 +162,9 @@ def _url_rules(schema: dict[str, Any], key: str) -> None:
     """Tie the URL form to ``allow_protocol`` in the JSON Schema, as validate does."""
     options: list[Any] = [{"properties": {key: {"pattern": schema_pattern(DEFAULT_GIT_URL)}}}]
     for protocol in OPT_IN_PROTOCOLS:
+        pattern = schema_pattern(url_pattern(protocol))
         options.append({
-            "properties": {"allow_protocol": {"const": protocol}, key: {"pattern": schema_pattern(url_pattern(protocol))}},
+            "properties": {"allow_protocol": {"const": protocol}, key: {"pattern": pattern}},
             "required": ["allow_protocol"],
         })
     schema["anyOf"] = options
@@ -390,22 +386,3 @@ def is_loopback_address(address: str) -> bool:
         return ipaddress.ip_address(address.strip("[]")).is_loopback
     except ValueError:
         return False
-
-
-def is_project_path(source: str) -> bool:
-    """Whether a volume source is relative to the project folder (else absolute, or a named volume)."""
-    return source.startswith(("./", "../")) or source in {".", ".."}
-
-
-def read_only_project_path(volume: str) -> str | None:
-    """The normalized project-relative path (``config/params``) of a read-only project volume
-    (``./config/params:/params:ro``), which sync copies to remote hosts; None for any other volume."""
-    parts = volume.split(":")
-    if len(parts) < 3 or parts[2] != "ro" or not is_project_path(parts[0]):
-        return None
-    return posixpath.normpath(parts[0])
-
-
-def port_pattern() -> re.Pattern[str]:
-    """The regular expression that port mappings must match."""
-    return _PORT_RE

@@ -59,7 +59,8 @@ def url_pattern(protocol: str) -> str:
 
 
 def git_protocol(url: str) -> str:
-    """The protocol git would use for ``url`` (https, ssh, http, git, file or ext); ValueError if robocore refuses it."""
+    """The protocol git would use for ``url`` (https, ssh, http, git, file or ext); ValueError when robocore
+    refuses the URL."""
     if len(url) <= 2048:
         for protocol, regex in URL_FORMS.values():
             if re.fullmatch(regex, url):
