@@ -22,14 +22,23 @@ from pydantic import BaseModel, ValidationError
 from robocore.config.checks import check_parts, check_robot, salvage
 from robocore.config.hints import did_you_mean
 from robocore.config.model import PATTERN_HELP, Robot
+from robocore.config.risks import risky_settings
+from robocore.config.values import printable
+from robocore.config.values import shown as shown
 from robocore.errors import ConfigError, Problem
 
 KeyPath = tuple[str | int, ...]
 
 ROBOT_FILE = "robot.yaml"
 
-#: Longest rendering of a user's value inside a message.
-MAX_SHOWN = 60
+#: Largest robot.yaml read; a real one is a few kilobytes, and anything bigger is refused before parsing.
+MAX_FILE_BYTES = 1_000_000
+#: Deepest nesting of mappings and lists; robot.yaml itself needs 6.
+MAX_DEPTH = 50
+#: Problems reported one per line; the rest are counted in a last line.
+MAX_PROBLEMS = 200
+#: Longest message of one problem.
+MAX_MESSAGE = 300
 
 _PLAIN_KEY = re.compile(r"^[A-Za-z0-9_\-.]+$")
 
@@ -47,16 +56,12 @@ def format_path(path: Iterable[object]) -> str:
     return out
 
 
-def shown(value: object) -> str:
-    """A short one-line ``repr`` of a user's value."""
-    text = repr(value)
-    if len(text) > MAX_SHOWN:
-        text = text[: MAX_SHOWN - 3] + "..."
+def _one_line(text: str, limit: int | None = None) -> str:
+    """``text`` on one line, non-printable characters escaped, at most ``limit`` characters."""
+    text = printable(" ".join(text.splitlines()).strip())
+    if limit is not None and len(text) > limit:
+        text = text[: limit - 3] + "..."
     return text
-
-
-def _one_line(text: str) -> str:
-    return " ".join(text.splitlines()).strip()
 
 
 class LineMap:
@@ -219,9 +224,11 @@ def _field_problems(exc: ValidationError, file: str, lines: LineMap) -> list[Pro
     return problems
 
 
-def problem(file: str, line: int | None, path: str, message: str) -> Problem:
-    """A :class:`Problem` whose text is guaranteed to be one line."""
-    return Problem(_one_line(file) or ROBOT_FILE, line, _one_line(path), _one_line(message) or "invalid")
+def problem(file: str, line: int | None, path: str, message: str, *, severity: str = "error") -> Problem:
+    """A :class:`Problem` whose text is one line of printable characters, its message at most
+    :data:`MAX_MESSAGE` long."""
+    return Problem(_one_line(file) or ROBOT_FILE, line, _one_line(path, MAX_MESSAGE),
+                   _one_line(message, MAX_MESSAGE) or "invalid", severity=severity)
 
 
 # --- reading -----------------------------------------------------------------------------------
@@ -274,14 +281,86 @@ def _check_size(root: yaml.Node, file: str) -> None:
     size(root)
 
 
+class _DepthLimit(yaml.composer.Composer):
+    """PyYAML's composer with a nesting limit: composing nodes is recursive, and a deep document
+    would otherwise end in RecursionError (or worse) instead of a message."""
+
+    file = ROBOT_FILE
+    depth = 0
+
+    def compose_node(self, parent: yaml.Node | None, index: int) -> yaml.Node | None:
+        """Compose one node, refusing documents nested more than :data:`MAX_DEPTH` levels."""
+        self.depth += 1
+        try:
+            if self.depth > MAX_DEPTH:
+                line = self.peek_event().start_mark.line + 1  # type: ignore[attr-defined]
+                raise ConfigError([problem(self.file, line, "", f"YAML is nested more than {MAX_DEPTH} levels deep")])
+            return super().compose_node(parent, index)
+        finally:
+            self.depth -= 1
+
+
+class _Loader(_DepthLimit, yaml.SafeLoader):
+    """The safe loader, all in Python: the reference for error messages."""
+
+    def __init__(self, stream: str, file: str) -> None:
+        yaml.SafeLoader.__init__(self, stream)
+        self.file = file
+
+
+def _fast_loader() -> Any:
+    """A loader class whose scanning and parsing are libyaml's (7x faster on large files) and whose composing
+    stays in Python (with the depth limit); None without libyaml."""
+    base: Any = getattr(yaml, "CSafeLoader", None)
+    if base is None:
+        return None
+
+    class _CLoader(_DepthLimit, base):  # type: ignore[misc]
+        def __init__(self, stream: str, file: str) -> None:
+            base.__init__(self, stream)
+            yaml.composer.Composer.__init__(self)
+            self.file = file
+
+    return _CLoader
+
+
+_FastLoader: Any = _fast_loader()
+
+
+def _compose(text: str, file: str) -> tuple[Any, yaml.Node | None]:
+    """A loader and the document's root node. libyaml's parser when it is there; when it finds the text
+    wrong (or cannot take it), PyYAML's own parser reads it again, for its clearer messages."""
+    if _FastLoader is not None:
+        loader = _FastLoader(text, file)
+        try:
+            return loader, loader.get_single_node()
+        except ConfigError:
+            loader.dispose()
+            raise
+        except Exception:
+            loader.dispose()
+    loader = _Loader(text, file)
+    try:
+        return loader, loader.get_single_node()
+    except BaseException:
+        loader.dispose()
+        raise
+
+
+def _too_big(size: int, file: str) -> ConfigError:
+    what = f"file is larger than 1 MB ({size:,} bytes); a robot.yaml is a few kilobytes"
+    return ConfigError([problem(file, None, "", what)])
+
+
 def _read(text: str, file: str) -> tuple[Any, LineMap]:
     """Compose and load ``text``; raise a one-problem ConfigError when it is not YAML."""
+    if len(text) > MAX_FILE_BYTES or len(text.encode("utf-8", errors="replace")) > MAX_FILE_BYTES:
+        raise _too_big(len(text.encode("utf-8", errors="replace")), file)
     if "\x00" in text:
         raise ConfigError([problem(file, None, "", "not a text file (contains NUL bytes)")])
     try:
-        loader = yaml.SafeLoader(text)
+        loader, node = _compose(text, file)
         try:
-            node = loader.get_single_node()
             if node is None:
                 raise ConfigError([problem(file, None, "", "file is empty; see 'robocore schema' for its keys")])
             _check_size(node, file)
@@ -372,8 +451,12 @@ def parse_robot_text(text: str, *, file: str = ROBOT_FILE, project: Path | None 
 
 
 def _ordered(problems: list[Problem]) -> list[Problem]:
-    unique = list(dict.fromkeys(problems))
-    return sorted(unique, key=lambda p: p.line if p.line is not None else 0)
+    """Problems without repeats, sorted by line; past :data:`MAX_PROBLEMS`, one last line counts the rest."""
+    unique = sorted(dict.fromkeys(problems), key=lambda p: p.line if p.line is not None else 0)
+    if len(unique) <= MAX_PROBLEMS:
+        return unique
+    rest = len(unique) - MAX_PROBLEMS
+    return [*unique[:MAX_PROBLEMS], problem(unique[0].file, None, "", f"... and {rest} more problems")]
 
 
 def display_path(path: Path) -> str:
@@ -398,7 +481,11 @@ def load_robot(project: Path, *, file_name: str = ROBOT_FILE) -> Robot:
         )
         raise ConfigError([problem(shown_path, None, "", what)])
     try:
-        raw = path.read_bytes()
+        with path.open("rb") as stream:
+            raw = stream.read(MAX_FILE_BYTES + 1)
+            if len(raw) > MAX_FILE_BYTES:
+                stream.seek(0, os.SEEK_END)
+                raise _too_big(stream.tell(), shown_path)
     except OSError as exc:
         raise ConfigError([problem(shown_path, None, "", f"cannot read file: {exc.strerror or exc}")]) from None
     try:
@@ -417,7 +504,27 @@ def located(path: Path, found: Iterable[tuple[KeyPath, str]]) -> ConfigError:
     lines are omitted when the file cannot be read again.
     """
     shown_path = display_path(path)
+    lines = _lines_of(path, shown_path)
+    return ConfigError(_ordered([problem(shown_path, lines.line_of(p), format_path(p), m) for p, m in found]))
+
+
+def _lines_of(path: Path, shown_path: str) -> LineMap:
     lines = LineMap()
     with contextlib.suppress(OSError, UnicodeDecodeError, ConfigError):
         _, lines = _read(path.read_text(encoding="utf-8"), shown_path)
-    return ConfigError(_ordered([problem(shown_path, lines.line_of(p), format_path(p), m) for p, m in found]))
+    return lines
+
+
+def robot_warnings(path: Path, robot: Robot, project: Path | None = None) -> list[Problem]:
+    """One warning per dangerous but allowed setting of ``robot`` (privileged, the host's root or Docker
+    socket mounted, disks as devices, ...), each with its line in ``path``, so that a reviewer sees them.
+
+    ``project`` (the project folder) adds the checks that look at files (volumes that leave the project).
+    """
+    found = risky_settings(robot, project.resolve() if project is not None else None)
+    if not found:
+        return []
+    shown_path = display_path(path)
+    lines = _lines_of(path, shown_path)
+    warnings = [problem(shown_path, lines.line_of(p), format_path(p), m, severity="warning") for p, m in found]
+    return sorted(dict.fromkeys(warnings), key=lambda p: p.line if p.line is not None else 0)
