@@ -10,7 +10,6 @@ Each check yields ``(key path, message)``; the loader adds file and line.
 
 from __future__ import annotations
 
-import re
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -245,11 +244,6 @@ def check_port(value: str) -> str | None:
     return port_problem(value)
 
 
-def _is_env_name(key: str) -> bool:
-    """A POSIX environment variable name: ASCII letters, digits and '_', not starting with a digit."""
-    return re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]{0,255}", key) is not None
-
-
 def _components(parts: Parts) -> Iterator[Found]:
     for index, comp in parts.components:
         base: KeyPath = ("components", index)
@@ -272,11 +266,6 @@ def _components(parts: Parts) -> Iterator[Found]:
                 yield (*base, "ports", i), problem
         if comp.ports and comp.network == "host":
             yield (*base, "ports"), "ports are ignored with network: host; remove them or use network: bridge"
-        for key in comp.environment:
-            if not _is_env_name(key):
-                yield ((*base, "environment", key),
-                       f"{shown(key)} is not a valid environment variable name (letters, digits and '_', "
-                       "not starting with a digit)")
     for index, pkg in parts.common_packages:
         if pkg.folder is None and pkg.repo is None:
             yield ("common_packages", index), "needs a folder or a repo"

@@ -28,8 +28,10 @@ from robocore.config.sources import (
     url_pattern,
 )
 from robocore.config.values import (
+    ENV_NAME,
     MULTI_LINE,
     AptPackage,
+    EnvName,
     HostAddress,
     ImagePrefix,
     ImageRef,
@@ -275,13 +277,11 @@ class Component(Strict):
     ports: list[OneLine] = Field(
         default_factory=list, description="[ip:]host:container[/proto]; only used off host networking."
     )
-    environment: dict[str, MultiLine] = Field(
+    environment: dict[EnvName, MultiLine] = Field(
         default_factory=dict,
         description="Environment variables of the container (POSIX names); numbers and booleans are written as "
         "text; values may span lines but hold no other control characters.",
-        json_schema_extra={"additionalProperties": {
-            "type": ["string", "number", "boolean"], "pattern": schema_pattern(MULTI_LINE),
-        }},
+        json_schema_extra=lambda schema: _environment_schema(schema),
     )
     volumes: list[OneLine] = Field(
         default_factory=list, description="host_path:container_path[:ro|rw]. Mounting / or the Docker socket "
@@ -321,6 +321,13 @@ class Component(Strict):
     def has_workspace(self) -> bool:
         """True when the component has a local workspace to build."""
         return self.folder is not None
+
+
+def _environment_schema(schema: dict[str, Any]) -> None:
+    """Names are POSIX names; values are text, numbers or booleans (robocore writes them as text)."""
+    schema.pop("patternProperties", None)
+    schema["propertyNames"] = {"pattern": schema_pattern(ENV_NAME)}
+    schema["additionalProperties"] = {"type": ["string", "number", "boolean"], "pattern": schema_pattern(MULTI_LINE)}
 
 
 def _scalar_text(value: object) -> object:

@@ -292,6 +292,23 @@ PipRequirement = Annotated[str, AfterValidator(pip_requirement), pattern_field(
 )]
 
 
+# --- environment ------------------------------------------------------------------------------------
+
+#: A POSIX environment variable name.
+ENV_NAME = r"[A-Za-z_][A-Za-z0-9_]{0,255}"
+
+
+def env_name(value: str) -> str:
+    """``value`` if it is a POSIX environment variable name (letters, digits, ``_``; no leading digit)."""
+    if re.fullmatch(ENV_NAME, value):
+        return value
+    raise ValueError(f"{shown(value)} is not a valid environment variable name (letters, digits and '_', "
+                     "not starting with a digit)")
+
+
+EnvName = Annotated[str, AfterValidator(env_name), pattern_field(ENV_NAME)]
+
+
 # --- free text ----------------------------------------------------------------------------------------
 
 #: One line of text: no control characters at all.
