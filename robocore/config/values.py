@@ -264,7 +264,9 @@ _SPECIFIER = (
 )
 #: The editor's view of a pip entry: name, extras, version specifiers, no spaces. robocore itself
 #: accepts every PEP 508 requirement (markers, URLs), which is more than a pattern can say.
-PIP_SIMPLE = rf"{_PEP508_NAME}(?:\[{_PEP508_NAME}(?:,{_PEP508_NAME})*\])?(?:{_SPECIFIER}(?:,{_SPECIFIER})*)?"
+PIP_SIMPLE = (
+    rf"(?=.{{1,1000}}$){_PEP508_NAME}(?:\[{_PEP508_NAME}(?:,{_PEP508_NAME})*\])?(?:{_SPECIFIER}(?:,{_SPECIFIER})*)?"
+)
 
 
 def pip_requirement(value: str) -> str:
