@@ -10,6 +10,7 @@ Each check yields ``(key path, message)``; the loader adds file and line.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,7 +30,7 @@ from robocore.config.model import (
     Robot,
 )
 from robocore.config.sources import checkout_folder_problem, protocol_problem
-from robocore.config.values import is_ipv6, shown
+from robocore.config.values import IMAGE_PATH, IMAGE_PREFIX, is_ipv6, shown
 
 KeyPath = tuple[str | int, ...]
 Found = tuple[KeyPath, str]
@@ -51,6 +52,8 @@ class Parts:
     #: Every ``name`` written in each named section, validated or not, with its index; a section
     #: that is not a list at all is left out (its names are unknown, so references are not checked).
     names: dict[str, list[tuple[int, str]]] = field(default_factory=dict)
+    #: ``image_prefix`` when it is valid (None when it is not: image names are then not checked).
+    image_prefix: str | None = ""
 
     @classmethod
     def of(cls, robot: Robot) -> Parts:
@@ -65,6 +68,7 @@ class Parts:
                 "components": [(i, c.name) for i, c in enumerate(robot.components)],
                 "common_packages": [(i, p.name) for i, p in enumerate(robot.common_packages)],
             },
+            image_prefix=robot.image_prefix,
         )
 
     @property
@@ -87,7 +91,12 @@ def salvage(data: Mapping[str, Any]) -> Parts:
         common_packages=_salvage_list(data.get("common_packages"), CommonPackage),
         servers=_salvage_list(servers, DiscoveryServer),
         names={section: _raw_names(data[section]) for section in NAMED_SECTIONS if isinstance(data.get(section), list)},
+        image_prefix=_valid_prefix(data.get("image_prefix", "")),
     )
+
+
+def _valid_prefix(value: object) -> str | None:
+    return value if isinstance(value, str) and re.fullmatch(IMAGE_PREFIX, value) else None
 
 
 def _raw_names(items: list[Any]) -> list[tuple[int, str]]:
@@ -138,6 +147,7 @@ def check_parts(parts: Parts, project: Path | None) -> list[Found]:
     found += _hosts(parts)
     found += _ipv6_discovery(parts)
     found += _components(parts)
+    found += _image_names(parts)
     found += _git_sources(parts)
     if project is not None:
         root = project.resolve()
@@ -395,3 +405,20 @@ def outside_target(project: Path, volume: str) -> Path | None:
         return None
     target = (project / relative).resolve()
     return None if target == project or target.is_relative_to(project) else target
+
+
+#: Stands for the default image prefix (the project folder's name and '-') when robot.yaml sets none.
+_DEFAULT_PREFIX = "robot-"
+
+
+def _image_names(parts: Parts) -> Iterator[Found]:
+    """A component that robocore builds an image for names that image (``<image_prefix><name>``): Docker
+    takes lower-case names only, with one separator between letters and digits."""
+    if parts.image_prefix is None:
+        return
+    prefix = parts.image_prefix or _DEFAULT_PREFIX
+    for index, comp in parts.components:
+        if comp.image is None and not re.fullmatch(IMAGE_PATH, prefix + comp.name):
+            yield (("components", index, "name"),
+                   f"{comp.name!r} would name the image {prefix + comp.name!r}, which Docker refuses: use lower case, "
+                   "with one '.', '_', '__' or '-' between letters and digits")

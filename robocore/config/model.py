@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import ipaddress
 from enum import Enum
-from typing import Annotated, Any, Literal
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
@@ -37,26 +37,17 @@ from robocore.config.values import (
     ImageRef,
     MountRoot,
     MultiLine,
+    Name,
     OneLine,
     PipRequirement,
     Registry,
+    UserName,
     schema_pattern,
 )
-
-NAME_PATTERN = r"^[A-Za-z][A-Za-z0-9_\-]{0,62}$"
-Name = Annotated[
-    str, Field(pattern=NAME_PATTERN, description="Identifier: a letter, then letters, digits, '_' or '-'.")
-]
 
 #: ROS 2 distributions robocore knows, with the Fast DDS line each ships.
 FASTDDS_LINE: dict[str, int] = {"humble": 2, "jazzy": 2, "kilted": 3, "rolling": 3}
 
-USER_PATTERN = r"^[a-z_][a-z0-9_\-.]{0,31}$"
-#: What each pattern means, for error messages.
-PATTERN_HELP: dict[str, str] = {
-    NAME_PATTERN: "a letter, then letters, digits, '_' or '-' (at most 63)",
-    USER_PATTERN: "a Linux user name: lower case, digits, '_', '-' or '.'",
-}
 
 class Strict(BaseModel):
     """Base for every robot.yaml model: frozen, unknown keys are errors."""
@@ -111,7 +102,7 @@ class Host(Strict):
 
     name: Name
     ip: HostAddress
-    user: str = Field(default="root", pattern=USER_PATTERN, description="SSH user.")
+    user: UserName = Field(default="root", description="SSH user.")
     arch: Arch = Arch.amd64
     docker: DockerAccess | None = Field(
         default=None,

@@ -77,6 +77,36 @@ def _refuse_common(value: str, what: str) -> None:
         raise ValueError(f"must be {what} without leading or trailing spaces (got {shown(value)})")
 
 
+# --- names -------------------------------------------------------------------------------------------
+
+#: Names of hosts, components, common packages (and the hosts ``runs_on`` names).
+NAME = r"[A-Za-z][A-Za-z0-9_-]{0,62}"
+#: A Linux user name.
+USER = r"[a-z_][a-z0-9_.-]{0,31}"
+
+
+def name(value: str) -> str:
+    """``value`` if it is a robocore name: a letter, then letters, digits, ``_`` or ``-`` (at most 63)."""
+    if re.fullmatch(NAME, value):
+        return value
+    raise ValueError(f"{shown(value)} is not a valid value here (expected a letter, then letters, digits, '_' or '-' "
+                     "(at most 63))")
+
+
+def user_name(value: str) -> str:
+    """``value`` if it is a Linux user name (lower case, digits, ``_``, ``-``, ``.``; at most 32)."""
+    if re.fullmatch(USER, value):
+        return value
+    raise ValueError(f"{shown(value)} is not a valid value here (expected a Linux user name: lower case, digits, "
+                     "'_', '-' or '.')")
+
+
+Name = Annotated[str, AfterValidator(name), pattern_field(
+    NAME, "Identifier: a letter, then letters, digits, '_' or '-'.",
+)]
+UserName = Annotated[str, AfterValidator(user_name), pattern_field(USER)]
+
+
 # --- host addresses -----------------------------------------------------------------------------
 
 _OCTET = r"(?:25[0-5]|2[0-4][0-9]|1[0-9]{2}|[1-9]?[0-9])"
@@ -182,7 +212,9 @@ _PORT = r"[0-9]{1,5}"
 _DOMAIN = (
     rf"(?:(?:{_DOMAIN_COMPONENT}(?:\.{_DOMAIN_COMPONENT})+|localhost)(?::{_PORT})?|{_DOMAIN_COMPONENT}:{_PORT})"
 )
-_NAME = rf"(?:{_DOMAIN}/)?{_PATH_COMPONENT}(?:/{_PATH_COMPONENT})*"
+#: The path of an image name (no registry, tag or digest): lower-case components separated by '/'.
+IMAGE_PATH = rf"{_PATH_COMPONENT}(?:/{_PATH_COMPONENT})*"
+_NAME = rf"(?:{_DOMAIN}/)?{IMAGE_PATH}"
 _TAG = r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}"
 _DIGEST = r"[A-Za-z][A-Za-z0-9]*(?:[-_+.][A-Za-z][A-Za-z0-9]*)*:[0-9a-fA-F]{32,}"
 #: Docker's reference grammar: ``[registry[:port]/]path[:tag][@digest]``, path in lower case, 255 characters at most.
