@@ -6,7 +6,8 @@ line of output), the wall-clock time and its ratio to the 5 s goal, side by side
 
 - 6,000 hosts and 6,000 components whose ``runs_on`` names no host (every reference unknown);
 - the same robot with every ``runs_on`` right (an accepted file of that size);
-- a file just under 1 MB with as many components as fit, and one just over 1 MB;
+- a file just under 1 MB with as many components as fit; the same with every component wrong, and
+  with a YAML syntax error on its last line (PyYAML then reads it again for its message); one just over 1 MB;
 - deep nesting (``[`` a million times), a billion-laughs alias bomb, a 100,000-character host address.
 
     python bench/validate_scale.py [--keep DIR]
@@ -55,6 +56,23 @@ def just_under_a_megabyte() -> str:
     return "".join(parts)
 
 
+def every_component_wrong() -> str:
+    """Just under 1 MB of components whose every value is refused (field errors, salvage, sorting)."""
+    head = HEAD + "hosts:\n  - {name: main, ip: 192.168.1.10}\ncomponents:\n"
+    line = "  - {{name: c{0}, runs_on: nowhere{0}, image: 'Bad Image', pip_packages: ['--index-url=x']}}\n"
+    parts, size, index = [head], len(head), 0
+    while size + len(line.format(index)) < MEGABYTE:
+        parts.append(line.format(index))
+        size += len(line.format(index))
+        index += 1
+    return "".join(parts)
+
+
+def syntax_error_at_the_end() -> str:
+    """Just under 1 MB of valid components, then a YAML syntax error on the last line."""
+    return just_under_a_megabyte()[:-200] + "  - {name: broken, runs_on: [main\n"
+
+
 def just_over_a_megabyte() -> str:
     """A valid file padded with a comment to just over 1 MB (refused before parsing)."""
     text = HEAD + "hosts:\n  - {name: main, ip: 192.168.1.10}\n"
@@ -85,6 +103,8 @@ CASES: dict[str, Callable[[], str]] = {
     "6,000 hosts + 6,000 components, unknown runs_on": lambda: many_hosts(6000, known=False),
     "6,000 hosts + 6,000 components, all valid": lambda: many_hosts(6000, known=True),
     "just under 1 MB, as many components as fit": just_under_a_megabyte,
+    "just under 1 MB, every component wrong": every_component_wrong,
+    "just under 1 MB, YAML syntax error at the end": syntax_error_at_the_end,
     "just over 1 MB": just_over_a_megabyte,
     "deep nesting (a million '[')": deep_nesting,
     "billion-laughs alias bomb": alias_bomb,

@@ -184,6 +184,11 @@ def _fast_loader() -> Any:
 _FastLoader: Any = _fast_loader()
 
 
+#: Above this size, a syntax error libyaml found is reported as libyaml words it (reading the file again
+#: with PyYAML, for its clearer message, would take seconds).
+REREAD_LIMIT = 100_000
+
+
 def _compose(text: str, file: str) -> tuple[Any, yaml.Node | None]:
     """A loader and the document's root node. libyaml's parser when it is there; when it finds the text
     wrong (or cannot take it), PyYAML's own parser reads it again, for its clearer messages."""
@@ -194,6 +199,10 @@ def _compose(text: str, file: str) -> tuple[Any, yaml.Node | None]:
         except ConfigError:
             loader.dispose()
             raise
+        except yaml.MarkedYAMLError:
+            loader.dispose()
+            if len(text) > REREAD_LIMIT:
+                raise
         except Exception:
             loader.dispose()
     loader = _Loader(text, file)
