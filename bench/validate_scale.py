@@ -7,7 +7,7 @@ line of output), the wall-clock time and its ratio to the 5 s goal, side by side
 - 6,000 hosts and 6,000 components whose ``runs_on`` names no host (every reference unknown);
 - the same robot with every ``runs_on`` right (an accepted file of that size);
 - a file just under 1 MB with as many components as fit; the same with every component wrong, and
-  with a YAML syntax error on its last line (PyYAML then reads it again for its message); one just over 1 MB;
+  with a YAML syntax error on its last line; just under 1 MB of unknown keys; one just over 1 MB;
 - deep nesting (``[`` a million times), a billion-laughs alias bomb, a 100,000-character host address.
 
     python bench/validate_scale.py [--keep DIR]
@@ -68,6 +68,16 @@ def every_component_wrong() -> str:
     return "".join(parts)
 
 
+def unknown_keys() -> str:
+    """Just under 1 MB of unknown top-level keys (one pydantic error each)."""
+    parts, size, index = [HEAD], len(HEAD), 0
+    while size + len(f"key{index}: 1\n") < MEGABYTE - 100:
+        parts.append(f"key{index}: 1\n")
+        size += len(parts[-1])
+        index += 1
+    return "".join(parts) + "hosts:\n  - {name: main, ip: 192.168.1.10}\n"
+
+
 def syntax_error_at_the_end() -> str:
     """Just under 1 MB of valid components, then a YAML syntax error on the last line."""
     return just_under_a_megabyte()[:-200] + "  - {name: broken, runs_on: [main\n"
@@ -105,6 +115,7 @@ CASES: dict[str, Callable[[], str]] = {
     "just under 1 MB, as many components as fit": just_under_a_megabyte,
     "just under 1 MB, every component wrong": every_component_wrong,
     "just under 1 MB, YAML syntax error at the end": syntax_error_at_the_end,
+    "just under 1 MB of unknown keys": unknown_keys,
     "just over 1 MB": just_over_a_megabyte,
     "deep nesting (a million '[')": deep_nesting,
     "billion-laughs alias bomb": alias_bomb,

@@ -19,7 +19,7 @@ from typing import Any
 from pydantic import BaseModel, ValidationError
 
 from robocore.config.checks import check_parts, check_robot, salvage
-from robocore.config.hints import did_you_mean
+from robocore.config.hints import MAX_SUGGESTIONS, did_you_mean
 from robocore.config.model import Robot
 from robocore.config.risks import risky_settings
 from robocore.config.values import shown as shown
@@ -84,7 +84,7 @@ def _kind_of(value: object) -> str:
     return shown(value)
 
 
-def _friendly(error: ErrorDict) -> str:
+def _friendly(error: ErrorDict, *, suggest: bool = True) -> str:
     kind = str(error.get("type", ""))
     ctx = error.get("ctx") or {}
     value = error.get("input")
@@ -97,7 +97,8 @@ def _friendly(error: ErrorDict) -> str:
         return f"keys must be text, not {shown(value)}"
     if kind in ("enum", "literal_error"):
         expected = str(ctx.get("expected", "")).replace(" or ", ", ").replace("'", "")
-        return f"{shown(value)} is not one of: {expected}{did_you_mean(str(value), expected.split(', '))}"
+        hint = did_you_mean(str(value), expected.split(", ")) if suggest else ""
+        return f"{shown(value)} is not one of: {expected}{hint}"
     if kind == "string_pattern_mismatch":
         pattern = str(ctx.get("pattern", "?"))
         return f"{shown(value)} is not a valid value here (expected to match {pattern})"
@@ -147,19 +148,22 @@ def _model_in(annotation: Any) -> type[BaseModel] | None:
 
 
 def _field_problems(exc: ValidationError, file: str, lines: LineMap) -> list[Problem]:
+    """One problem per pydantic error; only the first :data:`MAX_SUGGESTIONS` get a "did you mean"."""
     problems: list[Problem] = []
-    for error in exc.errors():
+    for count, error in enumerate(exc.errors()):
+        suggest = count < MAX_SUGGESTIONS
         loc = tuple(part for part in error["loc"] if part != "[key]")
-        message = _friendly(dict(error))
+        message = _friendly(dict(error), suggest=suggest)
         if error.get("type") == "extra_forbidden":
             allowed = _allowed_keys(Robot, loc)
             if allowed:
-                message += did_you_mean(str(loc[-1]), allowed) + f" (allowed: {', '.join(allowed)})"
+                hint = did_you_mean(str(loc[-1]), allowed) if suggest else ""
+                message += hint + f" (allowed: {', '.join(allowed)})"
         problems.append(problem(file, lines.line_of(loc), format_path(loc), message))
     return problems
 
 
-# --- reading -----------------------------------------------------------------------------------
+# --- loading -----------------------------------------------------------------------------------
 
 
 def parse_robot_text(text: str, *, file: str = ROBOT_FILE, project: Path | None = None) -> Robot:
