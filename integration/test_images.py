@@ -300,7 +300,7 @@ def deps_project(docker_client: Any, tmp_path_factory: pytest.TempPathFactory) -
         "common_packages": [{"name": "it_common_util", "folder": "common/it_common_util"}],
         "components": [
             {"name": "alpha", "runs_on": "devmachine", "folder": "components/alpha",
-             "repositories": [{"url": upstream.as_uri(), "version": "main"}],
+             "repositories": [{"url": upstream.as_uri(), "version": "main", "allow_protocol": "file"}],
              "postinstall": ["python -c 'import it_dep_util' && touch /etc/alpha-postinstall-ran"]},
             {"name": "beta", "runs_on": "devmachine", "folder": "components/beta", "pip_packages": ["six"]},
         ],
