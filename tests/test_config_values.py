@@ -206,6 +206,11 @@ def test_git_urls_and_their_protocols(url: str, protocol: str) -> None:
     assert protocol_problem(url, protocol) is None
 
 
+def test_allowed_protocols_are_the_defaults_plus_the_opt_in() -> None:
+    assert sources.allowed_protocols(None) == ("https", "ssh")
+    assert sources.allowed_protocols("file") == ("https", "ssh", "file")
+
+
 @pytest.mark.parametrize("url, reason", [
     ("--upload-pack=id", "not an option"),
     ("-u id", "not an option"),

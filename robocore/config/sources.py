@@ -104,6 +104,11 @@ def git_url(value: str) -> str:
     return value
 
 
+def allowed_protocols(allow: str | None) -> tuple[str, ...]:
+    """The git protocols an entry with ``allow_protocol: allow`` may use (for git's ``protocol.<name>.allow``)."""
+    return (*DEFAULT_PROTOCOLS, allow) if allow and allow not in DEFAULT_PROTOCOLS else DEFAULT_PROTOCOLS
+
+
 def protocol_problem(url: str, allow: str | None) -> str | None:
     """Why ``url`` may not be fetched with ``allow_protocol: allow`` (None when it may)."""
     protocol = git_protocol(url)
