@@ -22,7 +22,7 @@ from typing import Any
 
 import pytest
 
-from robocore.config.model import Component, Repository
+from robocore.config.model import Component
 from robocore.plan import naming
 from robocore.project import Project
 
@@ -312,9 +312,8 @@ def deps_project(docker_client: Any, tmp_path_factory: pytest.TempPathFactory) -
                  ["-c", "user.name=t", "-c", "user.email=t@t", "commit", "-q", "-m", "init"]):
         subprocess.run(["git", *args], cwd=upstream, check=True, capture_output=True)
     daemon, port = _git_daemon(root.parent)
-    repository = {"url": f"git://127.0.0.1:{port}/{upstream.name}", "version": "main"}
-    if "allow_protocol" in Repository.model_fields:  # where robot.yaml must opt in to plain git://
-        repository["allow_protocol"] = "git"
+    # plain git:// (unencrypted) needs robot.yaml's opt-in
+    repository = {"url": f"git://127.0.0.1:{port}/{upstream.name}", "version": "main", "allow_protocol": "git"}
     _ament_python_pkg(root / "common" / "it_common_util", "it_common_util", "VALUE = 'from common'\n")
     for comp in ("alpha", "beta"):
         _ament_python_pkg(root / "components" / comp / "src" / f"it_{comp}_code", f"it_{comp}_code", "SECRET = 1\n")

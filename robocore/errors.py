@@ -37,10 +37,13 @@ class Problem:
     line: int | None
     path: str
     message: str
+    #: ``error`` (the file is refused) or ``warning`` (allowed, but worth a reviewer's look).
+    severity: str = "error"
 
     def __str__(self) -> str:
         where = f"{self.file}:{self.line}" if self.line is not None else self.file
-        return f"{where}: {self.path}: {self.message}" if self.path else f"{where}: {self.message}"
+        message = f"warning: {self.message}" if self.severity == "warning" else self.message
+        return f"{where}: {self.path}: {message}" if self.path else f"{where}: {message}"
 
 
 class ConfigError(RobocoreError):

@@ -158,7 +158,10 @@ CASES = [
     ),
     Case("bad-arch", edit({8: "    arch: armhf"}), 8, "hosts[0].arch: 'armhf' is not one of: amd64, arm64"),
     Case(
-        "ip-with-space", edit({6: "    ip: 192.168.1.20 extra"}), 6, "hosts[0].ip: must be an IP address or a hostname"
+        "ip-with-space",
+        edit({6: "    ip: 192.168.1.20 extra"}),
+        6,
+        "hosts[0].ip: must be an IP address or a host name (got '192.168.1.20 extra')",
     ),
     Case("bad-user", edit({7: "    user: Robot User"}), 7, "hosts[0].user: 'Robot User' is not a valid value here"),
     Case(

@@ -59,11 +59,18 @@ def test_loopback_addresses(address: str, loopback: bool) -> None:
         ("root", None, "/root/robocore"),
         ("robot", None, "/home/robot/robocore"),
         ("robot", "/srv/robocore/", "/srv/robocore"),
-        ("robot", "/", "/"),
+        ("robot", "/srv/robocore", "/srv/robocore"),
     ],
 )
 def test_deploy_root(user: str, mount_root: str | None, root: str) -> None:
     assert host(user=user, mount_root=mount_root).deploy_root == root
+
+
+@pytest.mark.parametrize("mount_root", ["/", "//", "relative", "/srv/../etc", "/srv//x", "/srv/./x", "/srv/x\n",
+                                        "/srv/$(id)", "/srv/a b"])
+def test_mount_root_is_a_normalised_folder_below_the_root(mount_root: str) -> None:
+    with pytest.raises(ValidationError):
+        host(mount_root=mount_root)
 
 
 def test_models_are_frozen_and_reject_unknown_keys() -> None:

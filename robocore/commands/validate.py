@@ -14,18 +14,23 @@ def run(options: Options) -> None:
         return
     project = options.load()
     robot = project.robot
-    from robocore.config.loader import located
+    from robocore.config.loader import located, robot_warnings
     from robocore.plan.dockerfiles import wheels_problems
 
     found = wheels_problems(robot)
     if found:
         raise located(project.robot_file, found)
+    for warning in robot_warnings(project.robot_file, robot, project.root):
+        out.print(str(warning), soft_wrap=True, markup=False)
     lines = [
         f"{project.robot_file}: ok — ROS 2 {robot.ros_distro.value}, {len(robot.hosts)} host(s), "
         f"{len(robot.components)} component(s), base {robot.base.kind.value}"
     ]
+    by_host: dict[str, list[str]] = {}
+    for comp in robot.components:
+        by_host.setdefault(comp.runs_on, []).append(comp.name)
     for host in robot.hosts:
-        names = ", ".join(c.name for c in robot.components_on(host.name)) or "no components"
+        names = ", ".join(by_host.get(host.name, [])) or "no components"
         lines.append(f"  {host.name} ({host.ip}, {host.arch.value}, docker via {host.access.value}): {names}")
     servers = ", ".join(f"{s.host}:{s.port}" for s in robot.discovery_servers)
     lines.append(f"  discovery server: {servers}")

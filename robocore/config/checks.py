@@ -10,14 +10,17 @@ Each check yields ``(key path, message)``; the loader adds file and line.
 
 from __future__ import annotations
 
-import difflib
-from collections.abc import Iterable, Iterator, Mapping
+import re
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
 from pydantic import BaseModel, ValidationError
 
+from robocore.config.hints import Unknown, known_list
+from robocore.config.hints import did_you_mean as did_you_mean
+from robocore.config.mappings import device_problem, port_problem, read_only_project_path, volume_problem
 from robocore.config.model import (
     CommonPackage,
     Component,
@@ -25,9 +28,9 @@ from robocore.config.model import (
     DockerAccess,
     Host,
     Robot,
-    port_pattern,
-    read_only_project_path,
 )
+from robocore.config.sources import checkout_folder_problem, protocol_problem
+from robocore.config.values import IMAGE_PATH, IMAGE_PREFIX, is_ipv6, shown
 
 KeyPath = tuple[str | int, ...]
 Found = tuple[KeyPath, str]
@@ -49,6 +52,8 @@ class Parts:
     #: Every ``name`` written in each named section, validated or not, with its index; a section
     #: that is not a list at all is left out (its names are unknown, so references are not checked).
     names: dict[str, list[tuple[int, str]]] = field(default_factory=dict)
+    #: ``image_prefix`` when it is valid (None when it is not: image names are then not checked).
+    image_prefix: str | None = ""
 
     @classmethod
     def of(cls, robot: Robot) -> Parts:
@@ -63,6 +68,7 @@ class Parts:
                 "components": [(i, c.name) for i, c in enumerate(robot.components)],
                 "common_packages": [(i, p.name) for i, p in enumerate(robot.common_packages)],
             },
+            image_prefix=robot.image_prefix,
         )
 
     @property
@@ -85,7 +91,12 @@ def salvage(data: Mapping[str, Any]) -> Parts:
         common_packages=_salvage_list(data.get("common_packages"), CommonPackage),
         servers=_salvage_list(servers, DiscoveryServer),
         names={section: _raw_names(data[section]) for section in NAMED_SECTIONS if isinstance(data.get(section), list)},
+        image_prefix=_valid_prefix(data.get("image_prefix", "")),
     )
+
+
+def _valid_prefix(value: object) -> str | None:
+    return value if isinstance(value, str) and re.fullmatch(IMAGE_PREFIX, value) else None
 
 
 def _raw_names(items: list[Any]) -> list[tuple[int, str]]:
@@ -134,31 +145,16 @@ def check_parts(parts: Parts, project: Path | None) -> list[Found]:
     found += _discovery_reachable(parts)
     found += _remote_project_volumes(parts)
     found += _hosts(parts)
+    found += _ipv6_discovery(parts)
     found += _components(parts)
+    found += _image_names(parts)
+    found += _git_sources(parts)
     if project is not None:
         root = project.resolve()
         found += _folders(parts, root)
         found += _tls_files(parts, root)
+        found += _project_volumes(parts, root)
     return found
-
-
-def known_list(names: Iterable[str]) -> str:
-    """``a, b, c`` or ``none``."""
-    shown = ", ".join(names)
-    return shown or "none"
-
-
-def did_you_mean(word: str, choices: Iterable[str]) -> str:
-    """`` did you mean 'x'?`` for a near miss, else an empty string."""
-    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
-    return f"; did you mean {close[0]!r}?" if close else ""
-
-
-def unknown(kind: str, name: str, known: list[str]) -> str:
-    """The message for a reference to something that is not defined."""
-    known = list(dict.fromkeys(known))
-    hint = did_you_mean(name, known) if len(known) > 1 else ""
-    return f"unknown {kind} {name!r} (known: {known_list(known)}){hint}"
 
 
 def _unique_names(parts: Parts) -> Iterator[Found]:
@@ -174,14 +170,14 @@ def _unique_names(parts: Parts) -> Iterator[Found]:
 def _references(parts: Parts) -> Iterator[Found]:
     if "hosts" not in parts.names:
         return
-    hosts = parts.host_names
+    hosts = Unknown("host", parts.host_names)
     for index, comp in parts.components:
         if comp.runs_on not in hosts:
-            yield ("components", index, "runs_on"), unknown("host", comp.runs_on, hosts)
+            yield ("components", index, "runs_on"), hosts.message(comp.runs_on)
     seen: dict[tuple[str, int], int] = {}
     for index, server in parts.servers:
         if server.host not in hosts:
-            yield ("discovery", "servers", index, "host"), unknown("host", server.host, hosts)
+            yield ("discovery", "servers", index, "host"), hosts.message(server.host)
         endpoint = (server.host, server.port)
         if endpoint in seen:
             yield (("discovery", "servers", index),
@@ -250,46 +246,12 @@ def _hosts(parts: Parts) -> Iterator[Found]:
 
 def check_mapping(value: str, *, kind: str) -> str | None:
     """Why a ``devices`` (kind ``device``) or ``volumes`` entry is malformed, or None."""
-    parts = value.split(":")
-    if kind == "device":
-        if not 1 <= len(parts) <= 3 or not parts[0].startswith("/"):
-            return f"{value!r} is not host_path[:container_path[:rwm]] (host path must be absolute)"
-        if len(parts) >= 2 and not parts[1].startswith("/"):
-            return f"{value!r}: container path must be absolute"
-        if len(parts) == 3 and (not parts[2] or set(parts[2]) - set("rwm")):
-            return f"{value!r}: permissions must be letters of 'rwm'"
-        return None
-    if not 2 <= len(parts) <= 3 or not parts[0] or not parts[1].startswith("/"):
-        return f"{value!r} is not host_path:container_path[:ro|rw] (container path must be absolute)"
-    if len(parts) == 3 and parts[2] not in {"ro", "rw"}:
-        return f"{value!r}: mode must be ro or rw"
-    return None
+    return device_problem(value) if kind == "device" else volume_problem(value)
 
 
 def check_port(value: str) -> str | None:
     """Why a ``ports`` entry is malformed, or None."""
-    match = port_pattern().match(value)
-    if not match:
-        return f"{value!r} is not [ip:]host_port:container_port[/tcp|udp]"
-    numbers = [match.group(g) for g in ("host", "host_end", "cont", "cont_end") if match.group(g)]
-    if any(not 1 <= int(n) <= 65535 for n in numbers):
-        return f"{value!r}: ports must be between 1 and 65535"
-    host_end, cont_end = match.group("host_end"), match.group("cont_end")
-    if host_end and int(host_end) < int(match.group("host")):
-        return f"{value!r}: port range ends before it starts"
-    if cont_end and int(cont_end) < int(match.group("cont")):
-        return f"{value!r}: port range ends before it starts"
-    if (host_end or cont_end) and (
-        int(host_end or match.group("host")) - int(match.group("host"))
-        != int(cont_end or match.group("cont")) - int(match.group("cont"))
-    ):
-        return f"{value!r}: host and container port ranges differ in length"
-    return None
-
-
-def _is_env_name(key: str) -> bool:
-    return bool(key) and (key[0].isalpha() or key[0] == "_") and all(ch.isalnum() or ch == "_" for ch in key) \
-        and key.isascii()
+    return port_problem(value)
 
 
 def _components(parts: Parts) -> Iterator[Found]:
@@ -314,18 +276,6 @@ def _components(parts: Parts) -> Iterator[Found]:
                 yield (*base, "ports", i), problem
         if comp.ports and comp.network == "host":
             yield (*base, "ports"), "ports are ignored with network: host; remove them or use network: bridge"
-        for key in comp.environment:
-            if not _is_env_name(key):
-                yield (*base, "environment", key), f"{key!r} is not a valid environment variable name"
-        folders: dict[str, int] = {}
-        for i, repo in enumerate(comp.repositories):
-            if not repo.folder:
-                continue
-            if repo.folder in folders:
-                yield ((*base, "repositories", i, "folder"),
-                       f"two repositories use folder {repo.folder!r} (also repositories[{folders[repo.folder]}])")
-            else:
-                folders[repo.folder] = i
     for index, pkg in parts.common_packages:
         if pkg.folder is None and pkg.repo is None:
             yield ("common_packages", index), "needs a folder or a repo"
@@ -378,3 +328,97 @@ def _tls_files(parts: Parts, project: Path) -> Iterator[Found]:
                 path = project / path
             if not path.is_file():
                 yield ("hosts", index, "tls", key), f"file {value!r} not found"
+
+
+def discovery_hosts(parts: Parts) -> set[str]:
+    """Names of the hosts that run a discovery server (the explicit ones, else the first host)."""
+    if parts.servers:
+        return {server.host for _, server in parts.servers}
+    if parts.hosts and parts.hosts[0][0] == 0:
+        return {parts.hosts[0][1].name}
+    return set()
+
+
+def _ipv6_discovery(parts: Parts) -> Iterator[Found]:
+    """Fast DDS locators and ROS_DISCOVERY_SERVER are written as IPv4 ``address:port``: a host in use with
+    an IPv6 address cannot take part in discovery."""
+    servers = discovery_hosts(parts)
+    running = {c.runs_on for _, c in parts.components}
+    for index, host in parts.hosts:
+        if not is_ipv6(host.ip) or host.name not in servers | running:
+            continue
+        role = "runs a discovery server" if host.name in servers else "runs components"
+        yield (("hosts", index, "ip"),
+               f"{host.ip!r} is an IPv6 address, and DDS discovery over IPv6 is not supported yet ({host.name} "
+               f"{role}); use its IPv4 address or a host name")
+
+
+def _git_sources(parts: Parts) -> Iterator[Found]:
+    """Protocols that need an opt-in, and checkout folders (given or derived from the URL) that are unsafe or shared."""
+    for index, pkg in parts.common_packages:
+        if pkg.repo is not None:
+            problem = protocol_problem(pkg.repo, pkg.allow_protocol)
+            if problem:
+                yield ("common_packages", index, "repo"), problem
+    for index, comp in parts.components:
+        folders: dict[str, int] = {}
+        for i, repo in enumerate(comp.repositories):
+            base: KeyPath = ("components", index, "repositories", i)
+            problem = protocol_problem(repo.url, repo.allow_protocol)
+            if problem:
+                yield (*base, "url"), problem
+            folder = repo.checkout_folder
+            if repo.folder is None and checkout_folder_problem(folder) is not None:
+                yield ((*base, "url"),
+                       f"the checkout folder taken from this URL, {shown(folder)}, is not a safe folder name; "
+                       "set folder: to a relative folder under src/")
+                continue
+            if folder in folders:
+                key = "folder" if repo.folder is not None else "url"
+                yield ((*base, key),
+                       f"two repositories use folder {folder!r} (also repositories[{folders[folder]}])")
+            else:
+                folders[folder] = i
+
+
+def _project_volumes(parts: Parts, project: Path) -> Iterator[Found]:
+    """A read-only project volume is copied to the component's host by sync: one that leads outside the
+    project through a symlink (to ~/.ssh, say) needs ``allow_outside_project: true`` on its component."""
+    for index, comp in parts.components:
+        if comp.allow_outside_project:
+            continue
+        for i, volume in enumerate(comp.volumes):
+            target = outside_target(project, volume)
+            if target is not None:
+                source = volume.split(":")[0]
+                yield (("components", index, "volumes", i),
+                       f"{shown(source)} leads outside the project (to {shown(str(target))}), and sync would copy "
+                       f"that to {comp.runs_on}; point it inside the project, or set allow_outside_project: true "
+                       "on this component")
+
+
+def outside_target(project: Path, volume: str) -> Path | None:
+    """Where a read-only project volume that stays inside the project by name resolves, when that is outside
+    ``project`` (a resolved project folder); None for any other volume."""
+    relative = read_only_project_path(volume)
+    if relative is None or relative == "." or relative.split("/")[0] == "..":
+        return None
+    target = (project / relative).resolve()
+    return None if target == project or target.is_relative_to(project) else target
+
+
+#: Stands for the default image prefix (the project folder's name and '-') when robot.yaml sets none.
+_DEFAULT_PREFIX = "robot-"
+
+
+def _image_names(parts: Parts) -> Iterator[Found]:
+    """A component that robocore builds an image for names that image (``<image_prefix><name>``): Docker
+    takes lower-case names only, with one separator between letters and digits."""
+    if parts.image_prefix is None:
+        return
+    prefix = parts.image_prefix or _DEFAULT_PREFIX
+    for index, comp in parts.components:
+        if comp.image is None and not re.fullmatch(IMAGE_PATH, prefix + comp.name):
+            yield (("components", index, "name"),
+                   f"{comp.name!r} would name the image {prefix + comp.name!r}, which Docker refuses: use lower case, "
+                   "with one '.', '_', '__' or '-' between letters and digits")

@@ -16,19 +16,20 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-import yaml
 from pydantic import BaseModel, ValidationError
 
-from robocore.config.checks import check_parts, check_robot, did_you_mean, salvage
-from robocore.config.model import PATTERN_HELP, Robot
+from robocore.config.checks import check_parts, check_robot, salvage
+from robocore.config.hints import MAX_SUGGESTIONS, did_you_mean
+from robocore.config.model import Robot
+from robocore.config.risks import risky_settings
+from robocore.config.values import shown as shown
+from robocore.config.yamltext import MAX_FILE_BYTES as MAX_FILE_BYTES
+from robocore.config.yamltext import ROBOT_FILE as ROBOT_FILE
+from robocore.config.yamltext import KeyPath, LineMap, problem, read_yaml, too_big
 from robocore.errors import ConfigError, Problem
 
-KeyPath = tuple[str | int, ...]
-
-ROBOT_FILE = "robot.yaml"
-
-#: Longest rendering of a user's value inside a message.
-MAX_SHOWN = 60
+#: Problems reported one per line; the rest are counted in a last line.
+MAX_PROBLEMS = 200
 
 _PLAIN_KEY = re.compile(r"^[A-Za-z0-9_\-.]+$")
 
@@ -44,66 +45,6 @@ def format_path(path: Iterable[object]) -> str:
         else:
             out += f"[{shown(part)}]"
     return out
-
-
-def shown(value: object) -> str:
-    """A short one-line ``repr`` of a user's value."""
-    text = repr(value)
-    if len(text) > MAX_SHOWN:
-        text = text[: MAX_SHOWN - 3] + "..."
-    return text
-
-
-def _one_line(text: str) -> str:
-    return " ".join(text.splitlines()).strip()
-
-
-class LineMap:
-    """Line numbers (1-based) of every key path in a YAML document."""
-
-    def __init__(self) -> None:
-        self.lines: dict[KeyPath, int] = {}
-        self.duplicates: list[tuple[KeyPath, int]] = []
-
-    def add(self, node: yaml.Node, path: KeyPath = ()) -> None:
-        """Record ``node`` and its children under ``path``."""
-        self.lines.setdefault(path, node.start_mark.line + 1)
-        if isinstance(node, yaml.MappingNode):
-            seen: set[str] = set()
-            for key_node, value_node in node.value:
-                key = key_node.value if isinstance(key_node, yaml.ScalarNode) else f"<{key_node.tag}>"
-                child = (*path, key)
-                if key in seen and key != "<<":
-                    self.duplicates.append((child, key_node.start_mark.line + 1))
-                seen.add(key)
-                self.lines.setdefault(child, key_node.start_mark.line + 1)
-                self.add_value(value_node, child)
-        elif isinstance(node, yaml.SequenceNode):
-            for index, item in enumerate(node.value):
-                self.add(item, (*path, index))
-
-    def add_value(self, node: yaml.Node, path: KeyPath) -> None:
-        """Record the children of a mapping value without moving the key's own line."""
-        if isinstance(node, (yaml.MappingNode, yaml.SequenceNode)):
-            keep = self.lines[path]
-            self.add(node, path)
-            self.lines[path] = keep
-
-    def line_of(self, path: Sequence[object]) -> int | None:
-        """The line of ``path``, or of its nearest ancestor that is in the file."""
-        probe: KeyPath = ()
-        line = self.lines.get(())
-        for part in path:
-            candidates: list[str | int] = [part] if isinstance(part, (str, int)) and not isinstance(part, bool) else []
-            candidates += [str(part), str(part).lower()]
-            for candidate in candidates:
-                if (*probe, candidate) in self.lines:
-                    probe = (*probe, candidate)
-                    line = self.lines[probe]
-                    break
-            else:
-                break
-        return line
 
 
 # --- pydantic errors as user messages ----------------------------------------------------------
@@ -143,7 +84,7 @@ def _kind_of(value: object) -> str:
     return shown(value)
 
 
-def _friendly(error: ErrorDict) -> str:
+def _friendly(error: ErrorDict, *, suggest: bool = True) -> str:
     kind = str(error.get("type", ""))
     ctx = error.get("ctx") or {}
     value = error.get("input")
@@ -156,10 +97,11 @@ def _friendly(error: ErrorDict) -> str:
         return f"keys must be text, not {shown(value)}"
     if kind in ("enum", "literal_error"):
         expected = str(ctx.get("expected", "")).replace(" or ", ", ").replace("'", "")
-        return f"{shown(value)} is not one of: {expected}{did_you_mean(str(value), expected.split(', '))}"
+        hint = did_you_mean(str(value), expected.split(", ")) if suggest else ""
+        return f"{shown(value)} is not one of: {expected}{hint}"
     if kind == "string_pattern_mismatch":
         pattern = str(ctx.get("pattern", "?"))
-        return f"{shown(value)} is not a valid value here (expected {PATTERN_HELP.get(pattern, 'to match ' + pattern)})"
+        return f"{shown(value)} is not a valid value here (expected to match {pattern})"
     if kind == "too_short" and isinstance(value, list):
         return f"needs at least {ctx.get('min_length', 1)} item(s)"
     if kind in ("string_too_short", "too_short"):
@@ -206,140 +148,22 @@ def _model_in(annotation: Any) -> type[BaseModel] | None:
 
 
 def _field_problems(exc: ValidationError, file: str, lines: LineMap) -> list[Problem]:
+    """One problem per pydantic error; only the first :data:`MAX_SUGGESTIONS` get a "did you mean"."""
     problems: list[Problem] = []
-    for error in exc.errors():
+    for count, error in enumerate(exc.errors()):
+        suggest = count < MAX_SUGGESTIONS
         loc = tuple(part for part in error["loc"] if part != "[key]")
-        message = _friendly(dict(error))
+        message = _friendly(dict(error), suggest=suggest)
         if error.get("type") == "extra_forbidden":
             allowed = _allowed_keys(Robot, loc)
             if allowed:
-                message += did_you_mean(str(loc[-1]), allowed) + f" (allowed: {', '.join(allowed)})"
+                hint = did_you_mean(str(loc[-1]), allowed) if suggest else ""
+                message += hint + f" (allowed: {', '.join(allowed)})"
         problems.append(problem(file, lines.line_of(loc), format_path(loc), message))
     return problems
 
 
-def problem(file: str, line: int | None, path: str, message: str) -> Problem:
-    """A :class:`Problem` whose text is guaranteed to be one line."""
-    return Problem(_one_line(file) or ROBOT_FILE, line, _one_line(path), _one_line(message) or "invalid")
-
-
-# --- reading -----------------------------------------------------------------------------------
-
-
-def _yaml_error(exc: yaml.YAMLError, file: str) -> ConfigError:
-    mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
-    line = mark.line + 1 if mark is not None else None
-    if isinstance(exc, yaml.reader.ReaderError):
-        what = f"character {exc.character!r} is not allowed in YAML"
-        line = None
-    else:
-        what = getattr(exc, "problem", None) or str(exc)
-        context = getattr(exc, "context", None)
-        if context:
-            what = f"{context}, {what}"
-    label = "YAML error" if isinstance(exc, yaml.constructor.ConstructorError) else "YAML syntax error"
-    return ConfigError([problem(file, line, "", f"{label}: {what}")])
-
-
-#: Most values a robot.yaml may expand to (aliases included); far above any real robot.
-MAX_VALUES = 200_000
-
-
-def _check_size(root: yaml.Node, file: str) -> None:
-    """Refuse recursive aliases and alias bombs before anything walks the document."""
-    sizes: dict[int, int] = {}
-    active: set[int] = set()
-
-    def size(node: yaml.Node) -> int:
-        key = id(node)
-        if key in sizes:
-            return sizes[key]
-        if key in active:
-            line = node.start_mark.line + 1
-            raise ConfigError([problem(file, line, "", "an alias refers to itself (recursive anchor)")])
-        active.add(key)
-        total = 1
-        if isinstance(node, yaml.MappingNode):
-            total += sum(size(k) + size(v) for k, v in node.value)
-        elif isinstance(node, yaml.SequenceNode):
-            total += sum(size(item) for item in node.value)
-        active.discard(key)
-        if total > MAX_VALUES:
-            what = f"document expands to more than {MAX_VALUES} values (aliases?)"
-            raise ConfigError([problem(file, None, "", what)])
-        sizes[key] = total
-        return total
-
-    size(root)
-
-
-def _read(text: str, file: str) -> tuple[Any, LineMap]:
-    """Compose and load ``text``; raise a one-problem ConfigError when it is not YAML."""
-    if "\x00" in text:
-        raise ConfigError([problem(file, None, "", "not a text file (contains NUL bytes)")])
-    try:
-        loader = yaml.SafeLoader(text)
-        try:
-            node = loader.get_single_node()
-            if node is None:
-                raise ConfigError([problem(file, None, "", "file is empty; see 'robocore schema' for its keys")])
-            _check_size(node, file)
-            lines = LineMap()
-            lines.add(node)
-            data = _construct(loader, node, file)
-        finally:
-            loader.dispose()
-    except yaml.YAMLError as exc:
-        raise _yaml_error(exc, file) from None
-    except RecursionError:
-        raise ConfigError([problem(file, None, "", "YAML is nested too deeply")]) from None
-    return data, lines
-
-
-def _construct(loader: yaml.SafeLoader, node: yaml.Node, file: str) -> Any:
-    """Build Python values from ``node``.
-
-    PyYAML's constructors raise assorted exceptions on malformed tagged values (an empty
-    ``!!timestamp`` raises AttributeError, a bad date ValueError); every one of them is a
-    problem of the file, not of robocore.
-    """
-    try:
-        return loader.construct_document(node)
-    except (yaml.YAMLError, RecursionError, ConfigError):
-        raise
-    except Exception as exc:
-        culprit = _culprit(node)
-        if culprit is None:
-            raise ConfigError([problem(file, None, "", f"YAML value could not be read: {exc}")]) from None
-        bad, why = culprit
-        tag = bad.tag.rsplit(":", 1)[-1]
-        reason = str(why) if isinstance(why, (ValueError, yaml.YAMLError)) else "malformed value"
-        message = f"YAML value {shown(bad.value)} could not be read as {tag}: {reason}"
-        raise ConfigError([problem(file, bad.start_mark.line + 1, "", message)]) from None
-
-
-def _culprit(root: yaml.Node) -> tuple[yaml.ScalarNode, Exception] | None:
-    """The first scalar that cannot be constructed on its own, with its exception."""
-    stack = [root]
-    seen: set[int] = set()
-    while stack:
-        node = stack.pop()
-        if id(node) in seen:
-            continue
-        seen.add(id(node))
-        if isinstance(node, yaml.ScalarNode):
-            probe = yaml.SafeLoader("")
-            try:
-                probe.construct_object(node)
-            except Exception as exc:
-                return node, exc
-            finally:
-                probe.dispose()
-        elif isinstance(node, yaml.MappingNode):
-            stack.extend(item for pair in reversed(node.value) for item in reversed(pair))
-        elif isinstance(node, yaml.SequenceNode):
-            stack.extend(reversed(node.value))
-    return None
+# --- loading -----------------------------------------------------------------------------------
 
 
 def parse_robot_text(text: str, *, file: str = ROBOT_FILE, project: Path | None = None) -> Robot:
@@ -347,7 +171,7 @@ def parse_robot_text(text: str, *, file: str = ROBOT_FILE, project: Path | None 
 
     Raises :class:`ConfigError` with every problem found, sorted by line.
     """
-    data, lines = _read(text, file)
+    data, lines = read_yaml(text, file)
     if not isinstance(data, dict):
         raise ConfigError([
             problem(file, lines.line_of(()), "",
@@ -371,8 +195,12 @@ def parse_robot_text(text: str, *, file: str = ROBOT_FILE, project: Path | None 
 
 
 def _ordered(problems: list[Problem]) -> list[Problem]:
-    unique = list(dict.fromkeys(problems))
-    return sorted(unique, key=lambda p: p.line if p.line is not None else 0)
+    """Problems without repeats, sorted by line; past :data:`MAX_PROBLEMS`, one last line counts the rest."""
+    unique = sorted(dict.fromkeys(problems), key=lambda p: p.line if p.line is not None else 0)
+    if len(unique) <= MAX_PROBLEMS:
+        return unique
+    rest = len(unique) - MAX_PROBLEMS
+    return [*unique[:MAX_PROBLEMS], problem(unique[0].file, None, "", f"... and {rest} more problems")]
 
 
 def display_path(path: Path) -> str:
@@ -397,7 +225,11 @@ def load_robot(project: Path, *, file_name: str = ROBOT_FILE) -> Robot:
         )
         raise ConfigError([problem(shown_path, None, "", what)])
     try:
-        raw = path.read_bytes()
+        with path.open("rb") as stream:
+            raw = stream.read(MAX_FILE_BYTES + 1)
+            if len(raw) > MAX_FILE_BYTES:
+                stream.seek(0, os.SEEK_END)
+                raise too_big(stream.tell(), shown_path)
     except OSError as exc:
         raise ConfigError([problem(shown_path, None, "", f"cannot read file: {exc.strerror or exc}")]) from None
     try:
@@ -416,7 +248,27 @@ def located(path: Path, found: Iterable[tuple[KeyPath, str]]) -> ConfigError:
     lines are omitted when the file cannot be read again.
     """
     shown_path = display_path(path)
+    lines = _lines_of(path, shown_path)
+    return ConfigError(_ordered([problem(shown_path, lines.line_of(p), format_path(p), m) for p, m in found]))
+
+
+def _lines_of(path: Path, shown_path: str) -> LineMap:
     lines = LineMap()
     with contextlib.suppress(OSError, UnicodeDecodeError, ConfigError):
-        _, lines = _read(path.read_text(encoding="utf-8"), shown_path)
-    return ConfigError(_ordered([problem(shown_path, lines.line_of(p), format_path(p), m) for p, m in found]))
+        _, lines = read_yaml(path.read_text(encoding="utf-8"), shown_path)
+    return lines
+
+
+def robot_warnings(path: Path, robot: Robot, project: Path | None = None) -> list[Problem]:
+    """One warning per dangerous but allowed setting of ``robot`` (privileged, the host's root or Docker
+    socket mounted, disks as devices, ...), each with its line in ``path``, so that a reviewer sees them.
+
+    ``project`` (the project folder) adds the checks that look at files (volumes that leave the project).
+    """
+    found = risky_settings(robot, project.resolve() if project is not None else None)
+    if not found:
+        return []
+    shown_path = display_path(path)
+    lines = _lines_of(path, shown_path)
+    warnings = [problem(shown_path, lines.line_of(p), format_path(p), m, severity="warning") for p, m in found]
+    return sorted(dict.fromkeys(warnings), key=lambda p: p.line if p.line is not None else 0)

@@ -7,41 +7,46 @@ live in :mod:`robocore.config.checks` so that every problem carries its own key 
 from __future__ import annotations
 
 import ipaddress
-import posixpath
-import re
 from enum import Enum
-from typing import Annotated, Literal
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-NAME_PATTERN = r"^[A-Za-z][A-Za-z0-9_\-]{0,62}$"
-Name = Annotated[
-    str, Field(pattern=NAME_PATTERN, description="Identifier: a letter, then letters, digits, '_' or '-'.")
-]
+from robocore.config.mappings import is_project_path as is_project_path
+from robocore.config.mappings import port_pattern as port_pattern
+from robocore.config.mappings import read_only_project_path as read_only_project_path
+from robocore.config.sources import (
+    DEFAULT_GIT_URL,
+    DEFAULT_PROTOCOLS,
+    OPT_IN_PROTOCOLS,
+    CheckoutFolder,
+    GitOptIn,
+    GitRef,
+    GitUrl,
+    default_folder,
+    git_protocol,
+    url_pattern,
+)
+from robocore.config.values import (
+    ENV_NAME,
+    MULTI_LINE,
+    AptPackage,
+    EnvName,
+    HostAddress,
+    ImagePrefix,
+    ImageRef,
+    MountRoot,
+    MultiLine,
+    Name,
+    OneLine,
+    PipRequirement,
+    Registry,
+    UserName,
+    schema_pattern,
+)
 
 #: ROS 2 distributions robocore knows, with the Fast DDS line each ships.
 FASTDDS_LINE: dict[str, int] = {"humble": 2, "jazzy": 2, "kilted": 3, "rolling": 3}
-
-APT_PATTERN = r"^[a-z0-9][a-z0-9+.\-]*(=[A-Za-z0-9.+:~\-]+)?$"
-PIP_PATTERN = r"^[^\s;]+$"
-USER_PATTERN = r"^[a-z_][a-z0-9_\-.]{0,31}$"
-IMAGE_PREFIX_PATTERN = r"^[a-z0-9._\-/]*$"
-#: What each pattern means, for error messages.
-PATTERN_HELP: dict[str, str] = {
-    NAME_PATTERN: "a letter, then letters, digits, '_' or '-' (at most 63)",
-    APT_PATTERN: "a Debian package name (lower case), optionally =version",
-    PIP_PATTERN: "a pip requirement without spaces or ';'",
-    USER_PATTERN: "a Linux user name: lower case, digits, '_', '-' or '.'",
-    IMAGE_PREFIX_PATTERN: "lower-case letters, digits, '.', '_', '-' or '/'",
-}
-
-AptPackage = Annotated[str, Field(pattern=APT_PATTERN)]
-PipPackage = Annotated[str, Field(min_length=1, pattern=PIP_PATTERN)]
-
-_PORT_RE = re.compile(
-    r"^(?:(?P<ip>[0-9.]+|\[[0-9a-fA-F:]+\]):)?(?P<host>\d{1,5})(?:-(?P<host_end>\d{1,5}))?"
-    r":(?P<cont>\d{1,5})(?:-(?P<cont_end>\d{1,5}))?(?:/(?P<proto>tcp|udp|sctp))?$"
-)
 
 
 class Strict(BaseModel):
@@ -87,21 +92,17 @@ class DockerAccess(str, Enum):
 class TlsFiles(Strict):
     """Client certificate files for a Docker daemon served over TLS."""
 
-    ca_cert: str = Field(description="CA certificate that signed the daemon's certificate.")
-    client_cert: str = Field(description="Client certificate.")
-    client_key: str = Field(description="Client private key (kept on the dev machine, never copied).")
+    ca_cert: OneLine = Field(description="CA certificate that signed the daemon's certificate.")
+    client_cert: OneLine = Field(description="Client certificate.")
+    client_key: OneLine = Field(description="Client private key (kept on the dev machine, never copied).")
 
 
 class Host(Strict):
     """A machine of the robot (or the dev machine) that runs components."""
 
     name: Name
-    ip: str = Field(
-        min_length=1,
-        description="Address or hostname used for SSH, rsync and Docker.",
-        json_schema_extra={"pattern": r"^[^\s/]+$"},
-    )
-    user: str = Field(default="root", pattern=USER_PATTERN, description="SSH user.")
+    ip: HostAddress
+    user: UserName = Field(default="root", description="SSH user.")
     arch: Arch = Arch.amd64
     docker: DockerAccess | None = Field(
         default=None,
@@ -114,26 +115,7 @@ class Host(Strict):
     ssh_port: int = Field(default=22, ge=1, le=65535)
     tls: TlsFiles | None = None
     insecure: bool = Field(default=False, description="Allow plain unauthenticated TCP to this host's daemon.")
-    mount_root: str | None = Field(
-        default=None,
-        description="Absolute folder on the host that receives synced install trees "
-        "(default /home/<user>/robocore, /root/robocore for root).",
-        json_schema_extra={"pattern": "^/"},
-    )
-
-    @field_validator("ip")
-    @classmethod
-    def _no_spaces(cls, value: str) -> str:
-        if any(ch.isspace() for ch in value) or "/" in value:
-            raise ValueError("must be an IP address or a hostname")
-        return value
-
-    @field_validator("mount_root")
-    @classmethod
-    def _absolute(cls, value: str | None) -> str | None:
-        if value is not None and not value.startswith("/"):
-            raise ValueError("must be an absolute path")
-        return value
+    mount_root: MountRoot | None = None
 
     @property
     def is_local(self) -> bool:
@@ -162,34 +144,62 @@ class Host(Strict):
         return "/root/robocore" if self.user == "root" else f"/home/{self.user}/robocore"
 
 
+_ALLOW_PROTOCOL = (
+    f"Fetch this URL although it is not {' or '.join(DEFAULT_PROTOCOLS)}: http and git (unencrypted, "
+    "unauthenticated), file (a local path or file:// URL: this machine's files) or ext (ext:: runs a command on "
+    "this machine; validate warns)."
+)
+
+
+def _url_rules(schema: dict[str, Any], key: str) -> None:
+    """Tie the URL form to ``allow_protocol`` in the JSON Schema, as validate does."""
+    options: list[Any] = [{"properties": {key: {"pattern": schema_pattern(DEFAULT_GIT_URL)}}}]
+    for protocol in OPT_IN_PROTOCOLS:
+        pattern = schema_pattern(url_pattern(protocol))
+        options.append({
+            "properties": {"allow_protocol": {"const": protocol}, key: {"pattern": pattern}},
+            "required": ["allow_protocol"],
+        })
+    schema["anyOf"] = options
+
+
 class CommonPackage(Strict):
     """A ROS package shared by every component, built into the base image."""
 
+    model_config = ConfigDict(json_schema_extra=lambda schema: _url_rules(schema, "repo"))
+
     name: Name
-    folder: str | None = Field(default=None, description="Local folder of the package (inside the project).")
-    repo: str | None = Field(default=None, description="Git URL, fetched on the dev machine.")
-    branch: str | None = Field(default=None, description="Branch, tag or commit of repo.")
+    folder: OneLine | None = Field(default=None, description="Local folder of the package (inside the project).")
+    repo: GitUrl | None = Field(default=None, description="Git URL, fetched on the dev machine.")
+    branch: GitRef | None = Field(default=None, description="Branch, tag or commit of repo.")
+    allow_protocol: GitOptIn | None = Field(default=None, description=_ALLOW_PROTOCOL)
+
+    @property
+    def repo_protocol(self) -> str | None:
+        """The protocol git uses for ``repo`` (https, ssh, or an allowed one), None without a repo."""
+        return git_protocol(self.repo) if self.repo else None
 
 
 class Repository(Strict):
     """A source dependency in vcstool's .repos terms."""
 
-    url: str = Field(min_length=1)
-    version: str | None = None
-    folder: str | None = Field(
-        default=None,
-        description="Folder name under the workspace's src/ (default: from the URL).",
-        # the same rule as _inside_src, for editors (pydantic's own patterns cannot look ahead)
-        json_schema_extra={"pattern": r"^(?!/)(?!\.\.(/|$))(?!.*/\.\.(/|$)).+$"},
-    )
-    type: Literal["git"] = "git"
+    model_config = ConfigDict(json_schema_extra=lambda schema: _url_rules(schema, "url"))
 
-    @field_validator("folder")
-    @classmethod
-    def _inside_src(cls, value: str | None) -> str | None:
-        if value is not None and (not value or value.startswith("/") or ".." in value.split("/")):
-            raise ValueError(f"{value!r} must be a relative folder under src/ (no '..')")
-        return value
+    url: GitUrl
+    version: GitRef | None = None
+    folder: CheckoutFolder | None = None
+    type: Literal["git"] = "git"
+    allow_protocol: GitOptIn | None = Field(default=None, description=_ALLOW_PROTOCOL)
+
+    @property
+    def protocol(self) -> str:
+        """The protocol git uses for ``url`` (https, ssh, or the allowed one)."""
+        return git_protocol(self.url)
+
+    @property
+    def checkout_folder(self) -> str:
+        """The folder under the deps source tree: ``folder``, else the URL's last segment without ``.git``."""
+        return self.folder or default_folder(self.url)
 
 
 class BaseKind(str, Enum):
@@ -206,7 +216,7 @@ class BaseImage(Strict):
         default=BaseKind.official,
         description="official: ros:<distro>-ros-base; wheels: Debian 12 + ROS 2 from PyPI.",
     )
-    image: str | None = Field(
+    image: ImageRef | None = Field(
         default=None, description="Override of the FROM image (official) or of the root image (wheels)."
     )
 
@@ -235,30 +245,44 @@ class Component(Strict):
 
     name: Name
     runs_on: Name
-    folder: str | None = Field(
+    folder: OneLine | None = Field(
         default=None, description="The component's ROS workspace (packages under it, or under its src/)."
     )
-    image: str | None = Field(
+    image: ImageRef | None = Field(
         default=None, description="A pre-built image; excludes folder, apt_packages and repositories."
     )
-    apt_packages: list[AptPackage] = Field(default_factory=list, description="Debian packages (name or name=version).")
-    pip_packages: list[PipPackage] = Field(default_factory=list, description="pip requirement specifiers.")
+    apt_packages: list[AptPackage] = Field(
+        default_factory=list, description="Debian packages (name, name=version or name/release)."
+    )
+    pip_packages: list[PipRequirement] = Field(default_factory=list, description="pip requirements (PEP 508).")
     repositories: list[Repository] = Field(default_factory=list)
-    postinstall: list[str] = Field(
+    postinstall: list[MultiLine] = Field(
         default_factory=list, description="Shell commands run in the image after dependencies are installed."
     )
-    entrypoint: str | None = Field(default=None, description="Command run at container start, ROS sourced.")
-    launch_args: str | None = Field(default=None, description="Arguments appended to entrypoint.")
-    devices: list[str] = Field(default_factory=list, description="host_path[:container_path[:permissions]]")
-    ports: list[str] = Field(
+    entrypoint: OneLine | None = Field(default=None, description="Command run at container start, ROS sourced.")
+    launch_args: OneLine | None = Field(default=None, description="Arguments appended to entrypoint.")
+    devices: list[OneLine] = Field(
+        default_factory=list, description="/dev/host_path[:container_path[:permissions]]; block devices (disks) "
+        "and all of /dev are allowed, and validate warns."
+    )
+    ports: list[OneLine] = Field(
         default_factory=list, description="[ip:]host:container[/proto]; only used off host networking."
     )
-    environment: dict[str, str] = Field(
+    environment: dict[EnvName, MultiLine] = Field(
         default_factory=dict,
-        description="Environment variables of the container; numbers and booleans are written as text.",
-        json_schema_extra={"additionalProperties": {"type": ["string", "number", "boolean"]}},
+        description="Environment variables of the container (POSIX names); numbers and booleans are written as "
+        "text; values may span lines but hold no other control characters.",
+        json_schema_extra=lambda schema: _environment_schema(schema),
     )
-    volumes: list[str] = Field(default_factory=list, description="host_path:container_path[:ro|rw]")
+    volumes: list[OneLine] = Field(
+        default_factory=list, description="host_path:container_path[:ro|rw]. Mounting / or the Docker socket "
+        "is allowed, and validate warns."
+    )
+    allow_outside_project: bool = Field(
+        default=False,
+        description="Let read-only project volumes (./path:/x:ro) lead outside the project through a symlink; "
+        "sync then copies what they point to onto the host (validate warns).",
+    )
     network: Literal["host", "bridge"] | None = Field(
         default=None,
         description="host (default; DDS across hosts needs it) or bridge "
@@ -267,7 +291,8 @@ class Component(Strict):
     restart: Literal["no", "always", "unless-stopped", "on-failure"] = "unless-stopped"
     nvidia: bool = False
     gui: bool = False
-    privileged: bool = False
+    privileged: bool = Field(default=False, description="Full access to the host's devices and kernel "
+                             "(validate warns).")
 
     @field_validator("environment", mode="before")
     @classmethod
@@ -289,6 +314,13 @@ class Component(Strict):
         return self.folder is not None
 
 
+def _environment_schema(schema: dict[str, Any]) -> None:
+    """Names are POSIX names; values are text, numbers or booleans (robocore writes them as text)."""
+    schema.pop("patternProperties", None)
+    schema["propertyNames"] = {"pattern": schema_pattern(ENV_NAME)}
+    schema["additionalProperties"] = {"type": ["string", "number", "boolean"], "pattern": schema_pattern(MULTI_LINE)}
+
+
 def _scalar_text(value: object) -> object:
     if isinstance(value, bool):
         return "true" if value else "false"
@@ -302,10 +334,8 @@ class Robot(Strict):
 
     ros_distro: RosDistro
     ros_domain_id: int = Field(default=0, ge=0, le=232, description="DDS domain id (0-232).")
-    registry: str | None = Field(
-        default=None, description="Registry images are pushed to; without one, images are streamed to hosts."
-    )
-    image_prefix: str = Field(default="", pattern=IMAGE_PREFIX_PATTERN, description="Prefix of every image name.")
+    registry: Registry | None = None
+    image_prefix: ImagePrefix = ""
     base: BaseImage = Field(default_factory=BaseImage)
     discovery: Discovery = Field(default_factory=Discovery)
     hosts: list[Host] = Field(min_length=1)
@@ -354,22 +384,3 @@ def is_loopback_address(address: str) -> bool:
         return ipaddress.ip_address(address.strip("[]")).is_loopback
     except ValueError:
         return False
-
-
-def is_project_path(source: str) -> bool:
-    """Whether a volume source is relative to the project folder (else absolute, or a named volume)."""
-    return source.startswith(("./", "../")) or source in {".", ".."}
-
-
-def read_only_project_path(volume: str) -> str | None:
-    """The normalized project-relative path (``config/params``) of a read-only project volume
-    (``./config/params:/params:ro``), which sync copies to remote hosts; None for any other volume."""
-    parts = volume.split(":")
-    if len(parts) < 3 or parts[2] != "ro" or not is_project_path(parts[0]):
-        return None
-    return posixpath.normpath(parts[0])
-
-
-def port_pattern() -> re.Pattern[str]:
-    """The regular expression that port mappings must match."""
-    return _PORT_RE

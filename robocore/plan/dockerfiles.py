@@ -214,11 +214,9 @@ def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequ
 
 
 def repo_folder(repo: Repository) -> str:
-    """The folder of a repository under the deps source tree (``folder``, else from the URL)."""
-    if repo.folder:
-        return repo.folder
-    tail = repo.url.rstrip("/").rsplit("/", 1)[-1].rsplit(":", 1)[-1]
-    return tail[:-4] if tail.endswith(".git") else tail or "repo"
+    """The folder of a repository under the deps source tree (``folder``, else from the URL; validate
+    refuses unsafe ones)."""
+    return repo.checkout_folder
 
 
 def component_dockerfile(

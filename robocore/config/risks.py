@@ -1,0 +1,82 @@
+"""Settings that are allowed but hand a container (or a file's author) power over a machine.
+
+``privileged: true``, a volume of the host's ``/`` or of the Docker socket, a disk as a device,
+an ``ext::`` or local git source, a read-only project volume that leads out of the project: each
+has real uses, so none is refused. ``robocore validate`` prints one warning line for each, so that
+whoever reviews a robot.yaml (from a colleague, a template, a pull request) sees them.
+"""
+
+from __future__ import annotations
+
+import posixpath
+from collections.abc import Iterator
+from pathlib import Path
+
+from robocore.config.checks import outside_target
+from robocore.config.mappings import exposes_docker_socket, is_block_device
+from robocore.config.model import Component, Robot
+from robocore.config.values import shown
+
+KeyPath = tuple[str | int, ...]
+Found = tuple[KeyPath, str]
+
+
+def risky_settings(robot: Robot, project: Path | None = None) -> list[Found]:
+    """One ``(key path, warning)`` per dangerous but allowed setting; ``project`` (resolved) adds the
+    volumes that lead outside it."""
+    found: list[Found] = []
+    for index, comp in enumerate(robot.components):
+        base: KeyPath = ("components", index)
+        found += [((*base, *key), message) for key, message in _component(comp)]
+        if project is not None and comp.allow_outside_project:
+            found += [((*base, *key), message) for key, message in _outside_project(comp, project)]
+        for i, repo in enumerate(comp.repositories):
+            message = _git_warning(repo.protocol, repo.url)
+            if message:
+                found.append(((*base, "repositories", i, "url"), message))
+    for index, pkg in enumerate(robot.common_packages):
+        protocol = pkg.repo_protocol
+        message = _git_warning(protocol, pkg.repo) if protocol and pkg.repo else None
+        if message:
+            found.append((("common_packages", index, "repo"), message))
+    return found
+
+
+def _component(comp: Component) -> Iterator[Found]:
+    host = comp.runs_on
+    if comp.privileged:
+        yield ("privileged",), f"{comp.name} runs privileged: every device and kernel feature of {host}"
+    for i, volume in enumerate(comp.volumes):
+        source = volume.split(":")[0]
+        if not source.startswith("/"):
+            continue
+        source = posixpath.normpath(source)
+        if source == "/":
+            yield ("volumes", i), f"mounts the whole file system of {host} ({shown(volume)})"
+        elif exposes_docker_socket(source):
+            yield (("volumes", i),
+                   f"mounts the Docker socket of {host} ({shown(volume)}): the container controls {host}'s Docker, "
+                   f"and so {host}")
+    for i, device in enumerate(comp.devices):
+        path = device.split(":")[0]
+        if path == "/dev":
+            yield ("devices", i), f"passes every device of {host}, its disks included ({shown(device)})"
+        elif is_block_device(path):
+            yield ("devices", i), f"passes a disk of {host} ({shown(device)}): the container can read and rewrite it"
+
+
+def _outside_project(comp: Component, project: Path) -> Iterator[Found]:
+    for i, volume in enumerate(comp.volumes):
+        target = outside_target(project, volume)
+        if target is not None:
+            yield (("volumes", i),
+                   f"{shown(volume.split(':')[0])} leads outside the project, to {shown(str(target))}; sync copies "
+                   f"it to {comp.runs_on} (allow_outside_project: true)")
+
+
+def _git_warning(protocol: str, url: str) -> str | None:
+    if protocol == "ext":
+        return f"{shown(url)} runs a command on this machine at every fetch (allow_protocol: ext)"
+    if protocol == "file":
+        return f"{shown(url)} copies files of this machine into the image (allow_protocol: file)"
+    return None

@@ -1,0 +1,289 @@
+"""robot.yaml text to Python values, with the line of every key, and nothing a file can use to hang,
+exhaust or crash the reader.
+
+A file over 1 MB is refused before parsing; nesting deeper than :data:`MAX_DEPTH` levels, aliases
+that refer to themselves and alias bombs are refused while composing, each with one message.
+PyYAML's safe loader builds the values; libyaml scans and parses when it is installed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import yaml
+
+from robocore.config.values import printable, shown
+from robocore.errors import ConfigError, Problem
+
+KeyPath = tuple[str | int, ...]
+
+ROBOT_FILE = "robot.yaml"
+
+#: Largest robot.yaml read; a real one is a few kilobytes, and anything bigger is refused before parsing.
+MAX_FILE_BYTES = 1_000_000
+#: Deepest nesting of mappings and lists; robot.yaml itself needs 6.
+MAX_DEPTH = 50
+#: Longest message of one problem.
+MAX_MESSAGE = 300
+
+
+def _one_line(text: str, limit: int | None = None) -> str:
+    """``text`` on one line, non-printable characters escaped, at most ``limit`` characters."""
+    text = printable(" ".join(text.splitlines()).strip())
+    if limit is not None and len(text) > limit:
+        text = text[: limit - 3] + "..."
+    return text
+
+
+class LineMap:
+    """Line numbers (1-based) of every key path in a YAML document."""
+
+    def __init__(self) -> None:
+        self.lines: dict[KeyPath, int] = {}
+        self.duplicates: list[tuple[KeyPath, int]] = []
+
+    def add(self, node: yaml.Node, path: KeyPath = ()) -> None:
+        """Record ``node`` and its children under ``path``."""
+        self.lines.setdefault(path, node.start_mark.line + 1)
+        if isinstance(node, yaml.MappingNode):
+            seen: set[str] = set()
+            for key_node, value_node in node.value:
+                key = key_node.value if isinstance(key_node, yaml.ScalarNode) else f"<{key_node.tag}>"
+                child = (*path, key)
+                if key in seen and key != "<<":
+                    self.duplicates.append((child, key_node.start_mark.line + 1))
+                seen.add(key)
+                self.lines.setdefault(child, key_node.start_mark.line + 1)
+                self.add_value(value_node, child)
+        elif isinstance(node, yaml.SequenceNode):
+            for index, item in enumerate(node.value):
+                self.add(item, (*path, index))
+
+    def add_value(self, node: yaml.Node, path: KeyPath) -> None:
+        """Record the children of a mapping value without moving the key's own line."""
+        if isinstance(node, (yaml.MappingNode, yaml.SequenceNode)):
+            keep = self.lines[path]
+            self.add(node, path)
+            self.lines[path] = keep
+
+    def line_of(self, path: Sequence[object]) -> int | None:
+        """The line of ``path``, or of its nearest ancestor that is in the file."""
+        probe: KeyPath = ()
+        line = self.lines.get(())
+        for part in path:
+            candidates: list[str | int] = [part] if isinstance(part, (str, int)) and not isinstance(part, bool) else []
+            candidates += [str(part), str(part).lower()]
+            for candidate in candidates:
+                if (*probe, candidate) in self.lines:
+                    probe = (*probe, candidate)
+                    line = self.lines[probe]
+                    break
+            else:
+                break
+        return line
+
+
+def problem(file: str, line: int | None, path: str, message: str, *, severity: str = "error") -> Problem:
+    """A :class:`Problem` whose text is one line of printable characters, its message at most
+    :data:`MAX_MESSAGE` long."""
+    return Problem(_one_line(file) or ROBOT_FILE, line, _one_line(path, MAX_MESSAGE),
+                   _one_line(message, MAX_MESSAGE) or "invalid", severity=severity)
+
+
+def _yaml_error(exc: yaml.YAMLError, file: str) -> ConfigError:
+    mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
+    line = mark.line + 1 if mark is not None else None
+    if isinstance(exc, yaml.reader.ReaderError):
+        what = f"character {exc.character!r} is not allowed in YAML"
+        line = None
+    else:
+        what = getattr(exc, "problem", None) or str(exc)
+        context = getattr(exc, "context", None)
+        if context:
+            what = f"{context}, {what}"
+    label = "YAML error" if isinstance(exc, yaml.constructor.ConstructorError) else "YAML syntax error"
+    return ConfigError([problem(file, line, "", f"{label}: {what}")])
+
+
+#: Most values a robot.yaml may expand to (aliases included); far above any real robot.
+MAX_VALUES = 200_000
+
+
+def _check_size(root: yaml.Node, file: str) -> None:
+    """Refuse recursive aliases and alias bombs before anything walks the document."""
+    sizes: dict[int, int] = {}
+    active: set[int] = set()
+
+    def size(node: yaml.Node) -> int:
+        key = id(node)
+        if key in sizes:
+            return sizes[key]
+        if key in active:
+            line = node.start_mark.line + 1
+            raise ConfigError([problem(file, line, "", "an alias refers to itself (recursive anchor)")])
+        active.add(key)
+        total = 1
+        if isinstance(node, yaml.MappingNode):
+            total += sum(size(k) + size(v) for k, v in node.value)
+        elif isinstance(node, yaml.SequenceNode):
+            total += sum(size(item) for item in node.value)
+        active.discard(key)
+        if total > MAX_VALUES:
+            what = f"document expands to more than {MAX_VALUES} values (aliases?)"
+            raise ConfigError([problem(file, None, "", what)])
+        sizes[key] = total
+        return total
+
+    size(root)
+
+
+class _DepthLimit(yaml.composer.Composer):
+    """PyYAML's composer with a nesting limit: composing nodes is recursive, and a deep document
+    would otherwise end in RecursionError (or worse) instead of a message."""
+
+    file = ROBOT_FILE
+    depth = 0
+
+    def compose_node(self, parent: yaml.Node | None, index: int) -> yaml.Node | None:
+        """Compose one node, refusing documents nested more than :data:`MAX_DEPTH` levels."""
+        self.depth += 1
+        try:
+            if self.depth > MAX_DEPTH:
+                line = self.peek_event().start_mark.line + 1  # type: ignore[attr-defined]
+                raise ConfigError([problem(self.file, line, "", f"YAML is nested more than {MAX_DEPTH} levels deep")])
+            return super().compose_node(parent, index)
+        finally:
+            self.depth -= 1
+
+
+class _Loader(_DepthLimit, yaml.SafeLoader):
+    """The safe loader, all in Python: the reference for error messages."""
+
+    def __init__(self, stream: str, file: str) -> None:
+        yaml.SafeLoader.__init__(self, stream)
+        self.file = file
+
+
+def _fast_loader() -> Any:
+    """A loader class whose scanning and parsing are libyaml's (7x faster on large files) and whose composing
+    stays in Python (with the depth limit); None without libyaml."""
+    base: Any = getattr(yaml, "CSafeLoader", None)
+    if base is None:
+        return None
+
+    class _CLoader(_DepthLimit, base):  # type: ignore[misc]
+        def __init__(self, stream: str, file: str) -> None:
+            base.__init__(self, stream)
+            yaml.composer.Composer.__init__(self)
+            self.file = file
+
+    return _CLoader
+
+
+_FastLoader: Any = _fast_loader()
+
+
+#: Above this size, a syntax error libyaml found is reported as libyaml words it (reading the file again
+#: with PyYAML, for its clearer message, would take seconds).
+REREAD_LIMIT = 100_000
+
+
+def _compose(text: str, file: str) -> tuple[Any, yaml.Node | None]:
+    """A loader and the document's root node. libyaml's parser when it is there; when it finds the text
+    wrong (or cannot take it), PyYAML's own parser reads it again, for its clearer messages."""
+    if _FastLoader is not None:
+        loader = _FastLoader(text, file)
+        try:
+            return loader, loader.get_single_node()
+        except ConfigError:
+            loader.dispose()
+            raise
+        except yaml.MarkedYAMLError:
+            loader.dispose()
+            if len(text) > REREAD_LIMIT:
+                raise
+        except Exception:
+            loader.dispose()
+    loader = _Loader(text, file)
+    try:
+        return loader, loader.get_single_node()
+    except BaseException:
+        loader.dispose()
+        raise
+
+
+def too_big(size: int, file: str) -> ConfigError:
+    """The one-line refusal of a file of ``size`` bytes (over :data:`MAX_FILE_BYTES`)."""
+    what = f"file is larger than 1 MB ({size:,} bytes); a robot.yaml is a few kilobytes"
+    return ConfigError([problem(file, None, "", what)])
+
+
+def read_yaml(text: str, file: str) -> tuple[Any, LineMap]:
+    """Compose and load ``text``; raise a one-problem ConfigError when it is not YAML."""
+    if len(text) > MAX_FILE_BYTES or len(text.encode("utf-8", errors="replace")) > MAX_FILE_BYTES:
+        raise too_big(len(text.encode("utf-8", errors="replace")), file)
+    if "\x00" in text:
+        raise ConfigError([problem(file, None, "", "not a text file (contains NUL bytes)")])
+    try:
+        loader, node = _compose(text, file)
+        try:
+            if node is None:
+                raise ConfigError([problem(file, None, "", "file is empty; see 'robocore schema' for its keys")])
+            _check_size(node, file)
+            lines = LineMap()
+            lines.add(node)
+            data = _construct(loader, node, file)
+        finally:
+            loader.dispose()
+    except yaml.YAMLError as exc:
+        raise _yaml_error(exc, file) from None
+    except RecursionError:
+        raise ConfigError([problem(file, None, "", "YAML is nested too deeply")]) from None
+    return data, lines
+
+
+def _construct(loader: Any, node: yaml.Node, file: str) -> Any:
+    """Build Python values from ``node``.
+
+    PyYAML's constructors raise assorted exceptions on malformed tagged values (an empty
+    ``!!timestamp`` raises AttributeError, a bad date ValueError); every one of them is a
+    problem of the file, not of robocore.
+    """
+    try:
+        return loader.construct_document(node)
+    except (yaml.YAMLError, RecursionError, ConfigError):
+        raise
+    except Exception as exc:
+        culprit = _culprit(node)
+        if culprit is None:
+            raise ConfigError([problem(file, None, "", f"YAML value could not be read: {exc}")]) from None
+        bad, why = culprit
+        tag = bad.tag.rsplit(":", 1)[-1]
+        reason = str(why) if isinstance(why, (ValueError, yaml.YAMLError)) else "malformed value"
+        message = f"YAML value {shown(bad.value)} could not be read as {tag}: {reason}"
+        raise ConfigError([problem(file, bad.start_mark.line + 1, "", message)]) from None
+
+
+def _culprit(root: yaml.Node) -> tuple[yaml.ScalarNode, Exception] | None:
+    """The first scalar that cannot be constructed on its own, with its exception."""
+    stack = [root]
+    seen: set[int] = set()
+    while stack:
+        node = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        if isinstance(node, yaml.ScalarNode):
+            probe = yaml.SafeLoader("")
+            try:
+                probe.construct_object(node)
+            except Exception as exc:
+                return node, exc
+            finally:
+                probe.dispose()
+        elif isinstance(node, yaml.MappingNode):
+            stack.extend(item for pair in reversed(node.value) for item in reversed(pair))
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend(reversed(node.value))
+    return None
