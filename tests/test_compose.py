@@ -12,6 +12,7 @@ import yaml
 from robocore.commands.composefiles import write_compose_files
 from robocore.config.model import Robot
 from robocore.plan import compose, containers
+from robocore.plan.discovery import fastdds
 from robocore.project import Project
 
 GOLDEN = Path(__file__).parent / "golden" / "compose"
@@ -96,7 +97,7 @@ def test_discovery_server_is_in_its_hosts_file_only() -> None:
     assert "discovery-0" in ipc and "discovery-1" not in ipc
     assert "discovery-1" in jetson and "discovery-0" not in jetson
     assert jetson["discovery-1"]["command"][4:] == ["fastdds", "discovery", "-l", "0.0.0.0", "-p", "11900",
-                                                    "-x", containers.DISCOVERY_PROFILE]
+                                                    "-x", fastdds.DISCOVERY_PROFILE]
     assert jetson["perception"]["depends_on"] == ["discovery-1"]
     assert ipc["driver"]["environment"]["ROS_DISCOVERY_SERVER"] == "10.1.0.2:11811;10.1.0.3:11900"
 

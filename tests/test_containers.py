@@ -10,8 +10,9 @@ import pytest
 
 from robocore.commands.run import Action, Existing, decide
 from robocore.config.model import Robot, read_only_project_path
-from robocore.plan import containers, dds, naming
+from robocore.plan import containers, naming
 from robocore.plan.containers import ContainerSpec, component_spec, discovery_spec, docker_ports, host_specs
+from robocore.plan.discovery import fastdds as dds
 
 ROOT = Path("/srv/myrobot")
 
@@ -183,12 +184,12 @@ def test_discovery_spec() -> None:
     assert spec.image == "myrobot-base:latest"
     assert spec.entrypoint == (naming.ENTRYPOINT,)
     assert spec.command is not None
-    assert spec.command[:2] == ("sh", "-c") and spec.command[2] == containers.DISCOVERY_SCRIPT
+    assert spec.command[:2] == ("sh", "-c") and spec.command[2] == dds.DISCOVERY_SCRIPT
     assert spec.command[4:] == ("fastdds", "discovery", "-i", "0", "-l", "0.0.0.0", "-p", "12000",
-                                "-x", containers.DISCOVERY_PROFILE)
+                                "-x", dds.DISCOVERY_PROFILE)
     assert spec.env["ROBOCORE_DS_HOLD"] == str(dds.restart_hold_seconds(p.robot))
     assert spec.env["ROBOCORE_DS_XML"] == dds.server_profile_xml(p.robot)
-    assert [(m.source, m.target) for m in spec.mounts] == [("myrobot-discovery-0-state", containers.DISCOVERY_STATE)]
+    assert [(m.source, m.target) for m in spec.mounts] == [("myrobot-discovery-0-state", dds.DISCOVERY_STATE)]
     assert spec.network_mode == "host"
     assert spec.labels[naming.LABEL_ROLE] == "discovery"
     assert spec.env["ROS_DISCOVERY_SERVER"] == ";192.168.1.10:11811"  # linked to server 1, own slot empty

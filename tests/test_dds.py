@@ -1,4 +1,4 @@
-"""robocore.plan.dds: discovery-server environment, XML profiles and server argv per Fast DDS line."""
+"""robocore.plan.discovery.fastdds: discovery-server environment, XML profiles and server argv per Fast DDS line."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from robocore.config.model import Robot
-from robocore.plan import dds
+from robocore.plan.discovery import fastdds as dds
 
 
 def robot(distro: str = "jazzy", servers: list[dict[str, Any]] | None = None, hosts: int = 3,
@@ -185,7 +185,7 @@ def test_3x_super_client_xml_lists_bare_locators() -> None:
 
 
 def test_server_prefix_of_id_above_15_is_two_hex_digits() -> None:
-    endpoint = dds.ServerEndpoint(index=26, host="h", address="a", port=11811)
+    endpoint = dds.FastDdsServer(index=26, host="h", address="a", port=11811)
     assert endpoint.guid_prefix.split(".")[2] == "1a"
 
 

@@ -9,8 +9,9 @@ from pathlib import Path
 import pytest
 
 from robocore.adapters import x11
-from robocore.plan import dds, naming
 from robocore.plan import devshell as plan
+from robocore.plan import naming
+from robocore.plan.discovery import fastdds as dds
 from robocore.project import Project
 
 ROBOT = """\

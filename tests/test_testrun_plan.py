@@ -6,7 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from robocore.plan import dds, naming, testrun
+from robocore.plan import naming, testrun
+from robocore.plan.discovery import fastdds as dds
 from robocore.plan.testrun import TestRun
 from robocore.project import Project
 

@@ -1,30 +1,31 @@
-"""Write the per-host compose files (``.robocore/compose/<host>.yaml``) and the DDS profiles."""
+"""Write the per-host compose files (``.robocore/compose/<host>.yaml``) and the discovery files (DDS profiles)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from robocore.files import PRIVATE, write_atomic
-from robocore.plan import compose, dds
+from robocore.plan import compose, discovery
 from robocore.project import Project
 
 
 def dds_dir(project: Project) -> Path:
-    """``.robocore/dds/``: the generated Fast DDS profiles, mounted at naming.CONTAINER_DDS."""
+    """``.robocore/dds/``: the files of the robot's discovery kind (DDS profiles), mounted at naming.CONTAINER_DDS."""
     return project.state_dir / "dds"
 
 
 def write_dds_profiles(project: Project) -> list[Path]:
-    """Write every DDS profile file; remove stale ones robocore wrote before; return the paths."""
+    """Write every file of the robot's discovery kind; remove stale ones robocore wrote before; return the paths."""
     folder = dds_dir(project)
-    files = dds.profile_files(project.robot)
+    files = discovery.for_robot(project.robot).files()
+    folder.mkdir(parents=True, exist_ok=True)  # mounted by every component, even when the kind has no files
     paths = []
     for name, text in files.items():
         path = folder / name
         write_atomic(path, text)
         paths.append(path)
-    for stale in folder.glob("*.xml"):
-        if stale.name not in files:
+    for stale in folder.iterdir():  # hidden files are other writers' temp files
+        if stale.is_file() and not stale.name.startswith(".") and stale.name not in files:
             stale.unlink()
     return paths
 

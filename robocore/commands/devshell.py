@@ -29,8 +29,8 @@ from robocore.adapters.docker_hosts import local_client
 from robocore.commands.context import Options
 from robocore.errors import DockerError, ToolMissing, UsageError
 from robocore.files import write_atomic
-from robocore.plan import dds, naming
 from robocore.plan import devshell as plan
+from robocore.plan import discovery, naming
 from robocore.project import Project
 
 if TYPE_CHECKING:
@@ -64,7 +64,8 @@ def run(options: Options, *, component: str, cmd: str | None, new: bool, devices
     machine = gather_machine(project, request, uid=uid, gid=gid,
                              nvidia=False if client is None else nvidia_runtime(client))
     existing = frozenset(m.source for m in plan.volume_mounts(project, comp)[0] if Path(m.source).exists())
-    spec = plan.plan_shell(project, request, machine, dds_env=dds.client_environment(project.robot, super_client=True),
+    spec = plan.plan_shell(project, request, machine,
+                           dds_env=discovery.for_robot(project.robot).observer_environment(),
                            existing_paths=existing)
     stdin_tty = sys.stdin.isatty()
     argv = plan.exec_argv(spec, cmd=cmd, stdin_tty=stdin_tty)
@@ -217,7 +218,7 @@ def _write_files(project: Project, spec: plan.ShellSpec) -> None:
     source = resources.files("robocore.resources").joinpath("shell")
     for name in plan.SHELL_FILES:
         write_atomic(folder / name, source.joinpath(name).read_bytes(), mode=0o644)
-    for name, text in dds.profile_files(project.robot).items():
+    for name, text in discovery.for_robot(project.robot).files().items():
         write_atomic(plan.dds_dir(project) / name, text)
     owner = (spec.uid, spec.gid)
     for mount in spec.mounts:

@@ -19,7 +19,7 @@ from robocore.commands.run import connect as connect_host
 from robocore.commands.run import for_each_host, managed_containers, print_table, select_hosts
 from robocore.config.model import DockerAccess, Host
 from robocore.errors import DockerError, GroupError, RobocoreError, UsageError
-from robocore.plan import dds, naming
+from robocore.plan import discovery, naming
 from robocore.plan.addresses import url_host
 from robocore.plan.containers import discovery_service
 from robocore.project import Project
@@ -32,7 +32,6 @@ if TYPE_CHECKING:
 GRAPH_SPIN_SECONDS = 3.0
 #: Read timeout of log streams: a quiet component may print nothing for a long time.
 LOG_STREAM_TIMEOUT = 7 * 24 * 3600
-_PROFILE_VARS = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
 
 
 # --------------------------------------------------------------------------- status
@@ -75,7 +74,7 @@ def _rows(project: Project, host: Host) -> list[Row]:
         found = {c.labels.get(naming.LABEL_COMPONENT, c.name): c for c in managed_containers(client, project.name)}
     finally:
         client.close()
-    planned = [discovery_service(s.index) for s in dds.servers(project.robot) if s.host == host.name]
+    planned = [discovery_service(s.index) for s in discovery.for_robot(project.robot).servers_on(host.name)]
     planned += [c.name for c in project.robot.components_on(host.name)]
     rows = []
     for name in planned + sorted(set(found) - set(planned)):
@@ -96,21 +95,19 @@ def _rows(project: Project, host: Host) -> list[Row]:
     return rows
 
 
-def super_client_exec_env(project: Project) -> dict[str, str]:
-    """Super-client environment for a container without the DDS profiles mounted (env override only)."""
-    env = dds.client_environment(project.robot, super_client=True)
-    for key in _PROFILE_VARS:
-        env.pop(key, None)
-    return env
+def super_client_exec_env(project: Project, host: str | None = None) -> dict[str, str]:
+    """Observer environment for a container without the discovery files mounted (a server container on ``host``)."""
+    return discovery.for_robot(project.robot).observer_environment(host, files=discovery.no_files)
 
 
 def ros_nodes(project: Project) -> tuple[list[str] | None, str]:
     """Names of the ROS nodes alive in the graph, and where they were asked (None when no server answered).
 
-    Runs ``ros2 node list`` as a super client inside a running discovery-server container.
+    Runs the discovery kind's node listing (``ros2 node list``) as an observer inside a running server container.
     """
     notes = []
-    for server in dds.servers(project.robot):
+    kind = discovery.for_robot(project.robot)
+    for server in kind.servers():
         host = project.robot.host(server.host)
         where = f"{discovery_service(server.index)} on {host.name}"
         try:
@@ -123,16 +120,15 @@ def ros_nodes(project: Project) -> tuple[list[str] | None, str]:
             if container is None:
                 notes.append(f"{where}: not running")
                 continue
-            argv = [naming.ENTRYPOINT, "ros2", "node", "list", "--no-daemon", "--spin-time", str(GRAPH_SPIN_SECONDS)]
-            code, output = container.exec_run(argv, environment=super_client_exec_env(project), demux=False)
+            argv = kind.node_list_argv(GRAPH_SPIN_SECONDS)
+            code, output = container.exec_run(argv, environment=super_client_exec_env(project, host.name), demux=False)
         finally:
             client.close()
         text = (output or b"").decode(errors="replace")
         if code != 0:
             notes.append(f"{where}: `ros2 node list` exited {code}: {text.strip().splitlines()[-1:] or ''}")
             continue
-        names = sorted({line.strip() for line in text.splitlines() if line.strip().startswith("/")})
-        return [n for n in names if not n.split("/")[-1].startswith("_")], where
+        return kind.nodes_from_output(text), where
     return None, "; ".join(notes) or "no discovery server"
 
 
@@ -303,7 +299,7 @@ def connect(options: Options, *, component: str, cmd: str | None) -> int:
     comp = project.component(component)
     host = project.host(comp.runs_on)
     name = naming.container_name(project.name, comp.name)
-    env = dds.client_environment(project.robot, super_client=True)
+    env = discovery.for_robot(project.robot).observer_environment(host.name)
     command = _SHELL if cmd is None else ["sh", "-c", cmd]
     if options.dry_run:
         entry = None if comp.image else [naming.ENTRYPOINT]

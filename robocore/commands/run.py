@@ -23,13 +23,13 @@ from robocore.adapters.docker_hosts import is_connection_error
 from robocore.commands.context import DRY_RUN_UNKNOWN, Options
 from robocore.config.model import Host
 from robocore.errors import DockerError, GroupError, HostError, RobocoreError, UsageError
-from robocore.plan import dds, naming
+from robocore.plan import discovery, naming
 from robocore.plan.containers import (
     ROLE_COMPONENT,
     ROLE_DISCOVERY,
     ContainerSpec,
-    discovery_state_volume,
     host_specs,
+    state_volumes,
 )
 from robocore.project import Project
 from robocore.ui import console, stdout
@@ -308,8 +308,10 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
         if dry_run:
             return outcome
         by_name = {s.name: s for s in specs}
+        ready = discovery.for_robot(project.robot).readiness
         for action in actions:
-            _apply(client, action, by_name.get(action.name), containers.get(action.name), host, quiet=quiet)
+            _apply(client, action, by_name.get(action.name), containers.get(action.name), host, quiet=quiet,
+                   ready=ready)
     finally:
         client.close()
         if local is not None:
@@ -346,7 +348,7 @@ def _check_name_conflicts(client: docker.DockerClient, specs: Sequence[Container
 
 
 def _apply(client: docker.DockerClient, action: Action, spec: ContainerSpec | None, container: Any, host: Host, *,
-           quiet: bool) -> None:
+           quiet: bool, ready: discovery.ReadinessCheck) -> None:
     from docker.errors import APIError
     from rich.markup import escape
 
@@ -370,7 +372,7 @@ def _apply(client: docker.DockerClient, action: Action, spec: ContainerSpec | No
             created = client.containers.create(**spec.docker_kwargs())
             created.start()
             if spec.role == ROLE_DISCOVERY:
-                wait_server_ready(created, spec, host)
+                wait_server_ready(created, spec, host, ready)
             say(f"{'recreated' if action.verb == 'replace' else 'created'} {action.name}"
                 + (f" ({action.reason})" if action.reason else ""))
     except APIError as exc:
@@ -381,35 +383,27 @@ def _apply(client: docker.DockerClient, action: Action, spec: ContainerSpec | No
         raise DockerError(f"host {host.name}: {action.verb} {action.name} failed: {text}", hint=hint) from None
 
 
-#: What a discovery server container logs once it serves (Fast DDS 2.x, 3.x) or while it holds after a restart.
-_SERVER_READY = ("Server is running", "Server started", "robocore: discovery server restarted")
 SERVER_READY_TIMEOUT = 20.0
 
 
-def wait_server_ready(container: Any, spec: ContainerSpec, host: Host, timeout: float = SERVER_READY_TIMEOUT) -> None:
-    """Wait until a discovery server container serves; DockerError with its last log line if it stops instead.
-
-    The usual cause is another server (another project) holding the same UDP port on that host.
-    """
-    import re
+def wait_server_ready(container: Any, spec: ContainerSpec, host: Host, check: discovery.ReadinessCheck,
+                      timeout: float = SERVER_READY_TIMEOUT) -> None:
+    """Wait until a discovery server container serves, as ``check`` (its discovery kind's readiness) reads its
+    log and state; DockerError with the reason (its last error line) if it fails or ``timeout`` passes first."""
     import time
 
     deadline = time.monotonic() + timeout
     while True:
-        text = re.sub(r"\x1b\[[0-9;]*m", "", container.logs(tail=50).decode(errors="replace"))
+        text = container.logs(tail=50).decode(errors="replace")
         container.reload()
-        restarted = int(container.attrs.get("RestartCount", 0)) > 0  # it already failed once
-        if not restarted and any(marker in text for marker in _SERVER_READY):
+        restarts = int(container.attrs.get("RestartCount", 0))
+        state = discovery.ServerState(container.status, restarts, timed_out=time.monotonic() > deadline)
+        verdict = check(text, state)
+        if verdict.ready:
             return
-        if restarted or container.status in {"exited", "dead", "restarting"} or time.monotonic() > deadline:
-            lines = [line.strip() for line in text.splitlines() if line.strip()]
-            errors = [line for line in lines if "rror" in line or "failed" in line]
-            last = (errors or lines or ["no output"])[-1]
-            raise DockerError(
-                f"host {host.name}: discovery server {spec.service} did not start ({container.status}): {last[-200:]}",
-                hint="is another discovery server using its UDP port on that host? "
-                "choose another port in robot.yaml (discovery.servers[].port)",
-            )
+        if verdict.failed:
+            raise DockerError(f"host {host.name}: discovery server {spec.service} did not start ({container.status}): "
+                              f"{verdict.reason}", hint=verdict.hint)
         time.sleep(0.3)
 
 
@@ -524,11 +518,9 @@ def stop_host(project: Project, host: Host, *, dry_run: bool, quiet: bool, forge
                 if not quiet:
                     console().print(f"[bold]{host.name}[/]: removed {escape(container.name)}")
         if forget_servers and not dry_run:
-            for server in dds.servers(project.robot):
-                if server.host != host.name:
-                    continue
+            for volume in state_volumes(project, host.name):
                 with contextlib.suppress(NotFound):
-                    client.volumes.get(discovery_state_volume(project.name, server.index)).remove(force=True)
+                    client.volumes.get(volume).remove(force=True)
     finally:
         client.close()
     return outcome

@@ -222,7 +222,7 @@ class BaseImage(Strict):
 
 
 class DiscoveryServer(Strict):
-    """One Fast DDS discovery server."""
+    """One discovery server (fastdds: a Fast DDS discovery server)."""
 
     host: Name
     port: int = Field(default=11811, ge=1024, le=65535)
@@ -231,6 +231,10 @@ class DiscoveryServer(Strict):
 class Discovery(Strict):
     """How nodes find each other."""
 
+    kind: Literal["fastdds"] = Field(
+        default="fastdds",
+        description="fastdds: Fast DDS discovery servers; every node is a client of all of them.",
+    )
     servers: list[DiscoveryServer] = Field(
         default_factory=list, description="Default: one server on the first host."
     )

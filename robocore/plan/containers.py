@@ -1,10 +1,11 @@
 """Container specs: what each deployed container is, as data.
 
-One :class:`ContainerSpec` per component and per discovery server, built by pure functions
-from the project. The same spec renders to docker-py ``containers.create`` keyword arguments
-(what ``run`` does) and to a compose service (what ``.robocore/compose/<host>.yaml`` holds),
-so the two can never disagree. The spec's hash is stored as a label; ``run`` recreates a
-container only when that hash (or the image behind the tag) changed.
+One :class:`ContainerSpec` per component and per discovery server (what the robot's discovery
+kind, :mod:`robocore.plan.discovery`, says they run), built by pure functions from the project.
+The same spec renders to docker-py ``containers.create`` keyword arguments (what ``run`` does)
+and to a compose service (what ``.robocore/compose/<host>.yaml`` holds), so the two can never
+disagree. The spec's hash is stored as a label; ``run`` recreates a container only when that
+hash (or the image behind the tag) changed.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from pathlib import PurePosixPath
 from typing import Any
 
 from robocore.config.model import Component, Host, is_project_path, port_pattern, read_only_project_path
-from robocore.plan import dds, layout, naming
+from robocore.plan import discovery, layout, naming
 from robocore.plan.layout import host_paths
 from robocore.project import Project
 
@@ -62,7 +63,7 @@ class ContainerSpec:
     command: tuple[str, ...] | None  # None: the image's own
     environment: tuple[tuple[str, str], ...]  # sorted by name
     network_mode: str  # host | bridge
-    ipc_mode: str | None = None  # "host" when same-host containers share memory (Fast DDS SHM)
+    ipc_mode: str | None = None  # "host" when same-host containers share memory (discovery.Transport)
     ports: tuple[str, ...] = ()  # only on bridge
     devices: tuple[str, ...] = ()
     mounts: tuple[Mount, ...] = ()
@@ -236,23 +237,13 @@ def _user_mount(text: str, base: PurePosixPath, *, remote: bool = False) -> Moun
     return Mount(source=source, target=target, read_only=read_only)
 
 
-def ipc_mode(project: Project) -> str | None:
-    """``host`` when the robot uses shared memory between containers, else private IPC.
-
-    Applies to host-networked containers only: on a bridge network Fast DDS does not see
-    the others as local and uses UDP anyway. Containers with host networking look co-located
-    to Fast DDS, which then sends data through shared memory: without a shared IPC namespace
-    they discover each other and receive nothing.
-    """
-    return "host" if project.robot.discovery.transport == "shm" else None
-
-
 def component_spec(project: Project, component: Component, *, tag: str | None = None) -> ContainerSpec:
     """The container of ``component`` on its host."""
     robot = project.robot
     host: Host = robot.host(component.runs_on)
     paths = host_paths(project, host, component.name)
-    env = dds.client_environment(robot)
+    kind = discovery.for_robot(robot)
+    env = kind.client_environment(host.name)
     mounts: list[Mount] = []
     if component.has_workspace:
         mounts.append(Mount(paths.install, naming.CONTAINER_INSTALL, read_only=True))
@@ -270,7 +261,6 @@ def component_spec(project: Project, component: Component, *, tag: str | None = 
         image = image_ref(project, naming.component_image(robot, project.name, component.name), tag)
         entrypoint = (naming.ENTRYPOINT,)
     network = component.network_mode
-    servers_here = [s.index for s in dds.servers(robot) if s.host == host.name]
     return ContainerSpec(
         name=naming.container_name(project.name, component.name),
         service=component.name,
@@ -282,14 +272,14 @@ def component_spec(project: Project, component: Component, *, tag: str | None = 
         command=component_command(component),
         environment=tuple(sorted(env.items())),
         network_mode=network,
-        ipc_mode=ipc_mode(project) if network == "host" else None,
+        ipc_mode=kind.transport.ipc_mode(network),
         ports=tuple(component.ports) if network == "bridge" else (),
         devices=tuple(component.devices),
         mounts=tuple(mounts),
         gpus=component.nvidia,
         privileged=component.privileged,
         restart=component.restart,
-        depends_on=tuple(discovery_service(i) for i in servers_here),
+        depends_on=tuple(discovery_service(s.index) for s in kind.servers_on(host.name)),
     )
 
 
@@ -298,37 +288,20 @@ def discovery_service(index: int) -> str:
     return f"discovery-{index}"
 
 
-#: In a discovery server container: the state volume (a marker that the server ran before) and its profile.
-DISCOVERY_STATE = "/robocore/discovery"
-DISCOVERY_PROFILE = "/tmp/robocore-discovery.xml"
-#: The discovery container's command (argv: this script, then ``fastdds discovery ...``). A restart (the
-#: marker exists in the state volume) waits ROBOCORE_DS_HOLD seconds first: see dds.restart_hold_seconds.
-#: Fixed text: the values come from the environment, nothing is interpolated.
-DISCOVERY_SCRIPT = (
-    f'marker="{DISCOVERY_STATE}/started"; '
-    'if [ -e "$marker" ] && [ "${ROBOCORE_DS_HOLD:-0}" -gt 0 ]; then '
-    'echo "robocore: discovery server restarted; silent for ${ROBOCORE_DS_HOLD} s so that clients drop '
-    'the previous instance"; sleep "$ROBOCORE_DS_HOLD"; fi; '
-    'touch "$marker"; '
-    f'printf "%s\\n" "$ROBOCORE_DS_XML" > {DISCOVERY_PROFILE}; '
-    'exec "$@"'
-)
-
-
 def discovery_state_volume(project_name: str, index: int) -> str:
-    """The named volume that remembers that discovery server ``index`` ran before (removed by a full ``down``)."""
+    """The named volume that keeps discovery server ``index``'s state across restarts (a full ``down`` removes it)."""
     return f"{project_name}-discovery-{index}-state"
 
 
 def discovery_spec(project: Project, index: int, *, tag: str | None = None) -> ContainerSpec:
-    """The container of discovery server ``index``: the base image running ``fastdds discovery``."""
+    """The container of discovery server ``index``: the base image running what the robot's discovery kind says."""
     robot = project.robot
-    endpoint = dds.servers(robot)[index]
-    env = dds.server_environment(robot, index)
-    env["ROBOCORE_DS_XML"] = dds.server_profile_xml(robot)
-    env["ROBOCORE_DS_HOLD"] = str(dds.restart_hold_seconds(robot))
-    command = ("sh", "-c", DISCOVERY_SCRIPT, "robocore-discovery", *dds.server_command(robot, index),
-               "-x", DISCOVERY_PROFILE)
+    kind = discovery.for_robot(robot)
+    endpoint = kind.servers()[index]
+    process = kind.server_process(index)
+    mounts: tuple[Mount, ...] = ()
+    if process.state_dir is not None:
+        mounts = (Mount(discovery_state_volume(project.name, index), process.state_dir),)
     return ContainerSpec(
         name=naming.discovery_container_name(project.name, index),
         service=discovery_service(index),
@@ -337,19 +310,26 @@ def discovery_spec(project: Project, index: int, *, tag: str | None = None) -> C
         project=project.name,
         image=image_ref(project, naming.base_image(robot, project.name), tag),
         entrypoint=(naming.ENTRYPOINT,),
-        command=command,
-        environment=tuple(sorted(env.items())),
+        command=process.command,
+        environment=tuple(sorted(process.environment.items())),
         network_mode="host",
-        ipc_mode=ipc_mode(project),
-        mounts=(Mount(discovery_state_volume(project.name, index), DISCOVERY_STATE),),
+        ipc_mode=kind.transport.ipc_mode("host"),
+        mounts=mounts,
         restart="unless-stopped",
     )
+
+
+def state_volumes(project: Project, host: str) -> list[str]:
+    """The named volumes of the discovery servers on ``host``: what a full ``down`` removes, so that the next
+    start is a first start."""
+    specs = [discovery_spec(project, s.index) for s in discovery.for_robot(project.robot).servers_on(host)]
+    return [m.source for spec in specs for m in spec.mounts if m.is_named_volume]
 
 
 def host_specs(project: Project, host: str, *, tag: str | None = None) -> list[ContainerSpec]:
     """Every container of ``host``: its discovery servers first, then its components in file order."""
     robot = project.robot
-    specs = [discovery_spec(project, s.index, tag=tag) for s in dds.servers(robot) if s.host == host]
+    specs = [discovery_spec(project, s.index, tag=tag) for s in discovery.for_robot(robot).servers_on(host)]
     specs += [component_spec(project, c, tag=tag) for c in robot.components_on(host)]
     return specs
 

@@ -248,8 +248,8 @@ def plan_shell(
 ) -> ShellSpec:
     """The dev container of ``request.component`` for the developer described by ``machine``.
 
-    ``dds_env`` is the SUPER_CLIENT environment (from :mod:`robocore.plan.dds`); None leaves
-    DDS at its defaults apart from the domain id. ``existing_paths``, when given, is the set of
+    ``dds_env`` is the observer environment of the robot's discovery kind (:mod:`robocore.plan.discovery`);
+    None leaves DDS at its defaults apart from the domain id. ``existing_paths``, when given, is the set of
     component volume sources that exist on the dev machine; the others are skipped with a note.
     """
     robot = project.robot
@@ -282,7 +282,7 @@ def plan_shell(
         env["COLCON_LOG_PATH"] = CONTAINER_LOG
     workdir = naming.CONTAINER_WS if workspace is not None else home
 
-    # DDS: a super client of the robot's discovery servers sees the whole graph.
+    # Discovery: an observer (Fast DDS: a super client of the discovery servers) sees the whole graph.
     if dds_env is not None:
         env.update(dds_env)
         mounts.append(Mount(str(dds_dir(project)), naming.CONTAINER_DDS, read_only=True))

@@ -18,8 +18,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from robocore.config.model import DockerAccess, Robot
-from robocore.plan import containers, dds, naming
-from robocore.plan.containers import ContainerSpec, Mount
+from robocore.plan import containers, discovery, naming
+from robocore.plan.containers import ContainerSpec
 from robocore.project import Project
 
 LABEL_RUN = "dev.robocore.testrun"
@@ -94,24 +94,21 @@ def isolated_robot(robot: Robot, addresses: Mapping[str, str], domain_id: int) -
     return robot.model_copy(update={"hosts": hosts, "ros_domain_id": domain_id})
 
 
-def probe_robot(robot: Robot) -> Robot:
-    """The robot as the test process sees it: UDP only (it cannot share the containers' memory)."""
-    discovery = robot.discovery.model_copy(update={"transport": "udp"})
-    return robot.model_copy(update={"discovery": discovery})
+def probe_discovery(robot: Robot) -> discovery.Discovery:
+    """The robot's discovery as the test process sees it: UDP only (it cannot share the containers' memory)."""
+    return discovery.for_robot(robot, discovery.UDP)
 
 
 def probe_environment(robot: Robot, profile_path: str) -> dict[str, str]:
-    """Environment of the test process's super client; its profile is the file at ``profile_path``."""
-    env = dds.client_environment(probe_robot(robot), super_client=True)
-    for key in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"):
-        if key in env:
-            env[key] = profile_path
-    return env
+    """Environment of the test process's observer node; its profile (:func:`probe_profile`) is the file at
+    ``profile_path``."""
+    return probe_discovery(robot).observer_environment(files=lambda _name: profile_path)
 
 
 def probe_profile(robot: Robot) -> str:
-    """The XML profile of the test process's super client."""
-    return dds.super_client_xml(probe_robot(robot))
+    """The one file the test process's observer node reads (empty when the discovery kind gives observers none)."""
+    kind = probe_discovery(robot)
+    return kind.files()[kind.observer_file] if kind.observer_file else ""
 
 
 def host_spec(run: TestRun, project: Project, host: str) -> ContainerSpec:
@@ -155,7 +152,7 @@ def _in_host(run: TestRun, spec: ContainerSpec, *, name: str, dds_dir: str, shar
 
 def component_specs(run: TestRun, project: Project, dds_dir: str) -> dict[str, ContainerSpec]:
     """Component name -> its container in the run (``project`` is the isolated one)."""
-    share = containers.ipc_mode(project) == "host"
+    share = discovery.Transport.of(project.robot).shared_memory
     out = {}
     for component in project.robot.components:
         spec = containers.component_spec(project, component)
@@ -166,10 +163,12 @@ def component_specs(run: TestRun, project: Project, dds_dir: str) -> dict[str, C
 
 def server_specs(run: TestRun, project: Project, dds_dir: str) -> list[ContainerSpec]:
     """The run's discovery servers, in id order, each with its own state volume."""
-    share = containers.ipc_mode(project) == "host"
+    share = discovery.Transport.of(project.robot).shared_memory
     out = []
-    for server in dds.servers(project.robot):
+    for server in discovery.for_robot(project.robot).servers():
         spec = containers.discovery_spec(project, server.index)
-        spec = dataclasses.replace(spec, mounts=(Mount(run.server_volume(server.index), containers.DISCOVERY_STATE),))
+        mounts = tuple(dataclasses.replace(m, source=run.server_volume(server.index)) if m.is_named_volume else m
+                       for m in spec.mounts)
+        spec = dataclasses.replace(spec, mounts=mounts)
         out.append(_in_host(run, spec, name=run.server_container(server.index), dds_dir=dds_dir, share_ipc=share))
     return out

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from robocore.errors import RobocoreError
-from robocore.plan import dds, testrun
+from robocore.plan import discovery, testrun
 from robocore.plan.containers import ContainerSpec
 from robocore.plan.testrun import TestRun
 from robocore.project import Project
@@ -365,18 +365,20 @@ def _start(robot: RobotUnderTest, source: Project, *, servers: bool) -> None:
     robot.project = Project(root=source.root, robot=testrun.isolated_robot(source.robot, addresses, run.domain_id))
     dds_dir = robot.run_dir / "dds"
     dds_dir.mkdir(parents=True, exist_ok=True)
-    for name, text in dds.profile_files(robot.project.robot).items():
+    kind = discovery.for_robot(robot.project.robot)
+    for name, text in kind.files().items():
         (dds_dir / name).write_text(text)
     (robot.run_dir / "probe.xml").write_text(testrun.probe_profile(robot.project.robot))
     if servers:
         for spec in testrun.server_specs(run, robot.project, str(dds_dir)):
-            volume = spec.mounts[0].source
-            robot.client.volumes.create(volume, labels=run.labels)
+            for volume in (m.source for m in spec.mounts if m.is_named_volume):
+                robot.client.volumes.create(volume, labels=run.labels)
             wrapper = _testcontainer(spec)
             robot.containers[spec.service] = wrapper
             robot.specs[spec.service] = spec
             wrapper.start()
-            wait_server_ready(wrapper.get_wrapped_container(), spec, robot.project.robot.host(spec.host))
+            wait_server_ready(wrapper.get_wrapped_container(), spec, robot.project.robot.host(spec.host),
+                              kind.readiness)
     for name, spec in testrun.component_specs(run, robot.project, str(dds_dir)).items():
         wrapper = _testcontainer(spec)
         robot.containers[name] = wrapper

@@ -1,11 +1,12 @@
-"""Fast DDS discovery-server configuration: environment, XML profiles and server argv.
+"""The Fast DDS discovery server: server containers, environment, XML profiles and readiness.
 
-Pure functions of a :class:`~robocore.config.model.Robot`. Two Fast DDS lines matter
-(see the robot's ``fastdds_line``):
+The ``fastdds`` discovery kind (robot.yaml's default ``discovery.kind``). Two Fast DDS lines
+matter (see the robot's ``fastdds_line``); their differences stay in this module:
 
 * **2.x** (Humble, Jazzy): a server's *position* in ``ROS_DISCOVERY_SERVER`` is its id;
   the server is started with ``-i <id>``; XML lists servers as ``<RemoteServer prefix=...>``;
-  the profile file is read from ``FASTRTPS_DEFAULT_PROFILES_FILE``.
+  the profile file is read from ``FASTRTPS_DEFAULT_PROFILES_FILE``; a restarted server holds
+  back before serving (:func:`restart_hold_seconds`).
 * **3.x** (Kilted, Rolling): servers are matched by locator only; XML lists bare
   ``<locator>`` elements; the profile file is read from ``FASTDDS_DEFAULT_PROFILES_FILE``.
 
@@ -13,6 +14,9 @@ Profiles are named by ``FASTDDS_DEFAULT_PROFILES_FILE`` on both lines, plus
 ``FASTRTPS_DEFAULT_PROFILES_FILE`` on 2.x (3.x warns about that old name).
 Server ids are the indexes of ``robot.discovery_servers``; several servers are redundant:
 every participant lists all of them, and servers list each other.
+
+The module functions take the robot (and, where it matters, a transport other than the robot's);
+:class:`FastDds` is the same behind the :class:`~robocore.plan.discovery.base.Discovery` interface.
 """
 
 from __future__ import annotations
@@ -21,11 +25,26 @@ from dataclasses import dataclass
 from xml.sax.saxutils import escape
 
 from robocore.config.model import Robot
-from robocore.plan.naming import CONTAINER_DDS
+from robocore.plan.discovery.base import (
+    IN_CONTAINERS,
+    READY,
+    STOPPED,
+    WAITING,
+    Discovery,
+    FileLocator,
+    Readiness,
+    ServerEndpoint,
+    ServerProcess,
+    ServerState,
+    Transport,
+    last_error_line,
+    plain_text,
+)
+from robocore.plan.naming import ENTRYPOINT
 
 RMW = "rmw_fastrtps_cpp"
 
-#: Profile files robocore writes to ``.robocore/dds/`` (mounted at ``CONTAINER_DDS``).
+#: Profile files robocore writes to ``.robocore/dds/`` (mounted at ``naming.CONTAINER_DDS``).
 SUPER_CLIENT_PROFILE = "super_client.xml"
 CLIENT_PROFILE = "client.xml"
 
@@ -34,18 +53,8 @@ _NS = {2: "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles", 3: "http://www
 
 
 @dataclass(frozen=True)
-class ServerEndpoint:
-    """Where discovery server ``index`` listens: its host's address and a UDP port."""
-
-    index: int
-    host: str  # host name in robot.yaml
-    address: str  # the host's ip (address or DNS name)
-    port: int
-
-    @property
-    def locator(self) -> str:
-        """``address:port`` as written in ROS_DISCOVERY_SERVER."""
-        return f"{self.address}:{self.port}"
+class FastDdsServer(ServerEndpoint):
+    """A discovery server's endpoint, with the GUID prefix Fast DDS 2.x derives from its id."""
 
     @property
     def guid_prefix(self) -> str:
@@ -53,12 +62,12 @@ class ServerEndpoint:
         return f"44.53.{self.index:02x}.{_PREFIX_TAIL}"
 
 
-def servers(robot: Robot) -> list[ServerEndpoint]:
+def servers(robot: Robot) -> list[FastDdsServer]:
     """Every discovery server of the robot, in id order (default: one on the first host)."""
     out = []
     for index, server in enumerate(robot.discovery_servers):
         host = robot.host(server.host)
-        out.append(ServerEndpoint(index=index, host=host.name, address=host.ip, port=server.port))
+        out.append(FastDdsServer(index=index, host=host.name, address=host.ip, port=server.port))
     return out
 
 
@@ -77,45 +86,77 @@ def discovery_server_value(robot: Robot, *, exclude: int | None = None) -> str:
     return ";".join(slots)
 
 
-def _profile_env(robot: Robot, file_name: str) -> dict[str, str]:
+def _profile_env(robot: Robot, path: str | None) -> dict[str, str]:
     """2.x reads FASTRTPS_DEFAULT_PROFILES_FILE (both are set, as on 3.x); 3.x reads FASTDDS_DEFAULT_PROFILES_FILE
-    and warns that the FASTRTPS_ name is deprecated (verified with Kilted's rmw_fastrtps), so it gets only that."""
-    path = f"{CONTAINER_DDS}/{file_name}"
+    and warns that the FASTRTPS_ name is deprecated (verified with Kilted's rmw_fastrtps), so it gets only that.
+    ``path`` None (the process has no copy of the profile): neither."""
+    if path is None:
+        return {}
     if robot.fastdds_line >= 3:
         return {"FASTDDS_DEFAULT_PROFILES_FILE": path}
     return {"FASTRTPS_DEFAULT_PROFILES_FILE": path, "FASTDDS_DEFAULT_PROFILES_FILE": path}
 
 
-def transport_environment(robot: Robot) -> dict[str, str]:
-    """Transport settings shared by clients and servers (UDP only when asked)."""
-    if robot.discovery.transport == "udp":
-        return {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
-    return {}
+@dataclass(frozen=True)
+class TransportSettings:
+    """How Fast DDS is told the transport: an environment variable and the XML blocks of UDP only."""
+
+    environment: dict[str, str]
+    descriptors: str  # <transport_descriptors> block of a profile
+    rtps: str  # participant <rtps> lines that use those descriptors only
 
 
-def client_environment(robot: Robot, *, super_client: bool = False) -> dict[str, str]:
+def transport_settings(transport: Transport) -> TransportSettings:
+    """The environment and XML that give Fast DDS ``transport``: its defaults with shared memory, else UDPv4 only.
+
+    Humble's Fast DDS 2.6 has no ``FASTDDS_BUILTIN_TRANSPORTS``, so the profiles say it too.
+    """
+    if transport.shared_memory:
+        return TransportSettings({}, "", "")
+    descriptors = (
+        "    <transport_descriptors>\n"
+        "      <transport_descriptor>\n"
+        "        <transport_id>robocore_udp</transport_id>\n"
+        "        <type>UDPv4</type>\n"
+        "      </transport_descriptor>\n"
+        "    </transport_descriptors>\n"
+    )
+    rtps = (
+        "        <userTransports><transport_id>robocore_udp</transport_id></userTransports>\n"
+        "        <useBuiltinTransports>false</useBuiltinTransports>\n"
+    )
+    return TransportSettings({"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}, descriptors, rtps)
+
+
+def _transport(robot: Robot, transport: Transport | None) -> TransportSettings:
+    return transport_settings(Transport.of(robot) if transport is None else transport)
+
+
+def client_environment(robot: Robot, *, super_client: bool = False, transport: Transport | None = None,
+                       files: FileLocator = IN_CONTAINERS) -> dict[str, str]:
     """Environment of a ROS participant: a component (client) or a tool (``super_client``).
 
     A super client sees the whole graph (``ros2 node list``, connect, shell); it gets both
     ``ROS_SUPER_CLIENT`` and the SUPER_CLIENT XML profile, which lists the same servers. A plain
     client gets the client profile (:func:`client_xml`): discovery timing, and the transport on
     Humble; it leaves the discovery protocol alone, so ``ROS_DISCOVERY_SERVER`` still applies.
+    ``transport`` defaults to the robot's; ``files`` says where the process finds the profiles.
     """
     env = {
         "ROS_DOMAIN_ID": str(robot.ros_domain_id),
         "RMW_IMPLEMENTATION": RMW,
         "ROS_DISCOVERY_SERVER": discovery_server_value(robot),
     }
-    env.update(transport_environment(robot))
+    env.update(_transport(robot, transport).environment)
     if super_client:
         env["ROS_SUPER_CLIENT"] = "TRUE"
-        env.update(_profile_env(robot, SUPER_CLIENT_PROFILE))
+        env.update(_profile_env(robot, files(SUPER_CLIENT_PROFILE)))
     else:
-        env.update(_profile_env(robot, CLIENT_PROFILE))
+        env.update(_profile_env(robot, files(CLIENT_PROFILE)))
     return env
 
 
-def server_environment(robot: Robot, index: int) -> dict[str, str]:
+def server_environment(robot: Robot, index: int, *, transport: Transport | None = None) -> dict[str, str]:
     """Environment of discovery server ``index``: the other servers (redundancy), own slot empty.
 
     Servers need no profile file: clients restricted to UDP simply use the server's UDP locators.
@@ -124,7 +165,7 @@ def server_environment(robot: Robot, index: int) -> dict[str, str]:
     others = discovery_server_value(robot, exclude=index)
     if others.strip(";"):
         env["ROS_DISCOVERY_SERVER"] = others
-    env.update(transport_environment(robot))
+    env.update(_transport(robot, transport).environment)
     return env
 
 
@@ -198,9 +239,10 @@ def server_profile_xml(robot: Robot) -> str:
     )
 
 
-def profile_files(robot: Robot) -> dict[str, str]:
+def profile_files(robot: Robot, *, transport: Transport | None = None) -> dict[str, str]:
     """The XML profiles to write to ``.robocore/dds/``: file name -> XML text."""
-    return {SUPER_CLIENT_PROFILE: super_client_xml(robot), CLIENT_PROFILE: client_xml(robot)}
+    return {SUPER_CLIENT_PROFILE: super_client_xml(robot, transport=transport),
+            CLIENT_PROFILE: client_xml(robot, transport=transport)}
 
 
 def _locator(address: str, port: int, indent: str) -> str:
@@ -208,25 +250,6 @@ def _locator(address: str, port: int, indent: str) -> str:
         f"{indent}<locator><udpv4><address>{escape(address)}</address>"
         f"<port>{port}</port></udpv4></locator>\n"
     )
-
-
-def _udp_transport(robot: Robot) -> tuple[str, str]:
-    """(descriptors block, participant rtps block) for UDP-only, or empty strings."""
-    if robot.discovery.transport != "udp":
-        return "", ""
-    descriptors = (
-        "    <transport_descriptors>\n"
-        "      <transport_descriptor>\n"
-        "        <transport_id>robocore_udp</transport_id>\n"
-        "        <type>UDPv4</type>\n"
-        "      </transport_descriptor>\n"
-        "    </transport_descriptors>\n"
-    )
-    rtps = (
-        "        <userTransports><transport_id>robocore_udp</transport_id></userTransports>\n"
-        "        <useBuiltinTransports>false</useBuiltinTransports>\n"
-    )
-    return descriptors, rtps
 
 
 def _document(robot: Robot, descriptors: str, participant: str) -> str:
@@ -242,9 +265,9 @@ def _document(robot: Robot, descriptors: str, participant: str) -> str:
     )
 
 
-def super_client_xml(robot: Robot) -> str:
+def super_client_xml(robot: Robot, *, transport: Transport | None = None) -> str:
     """The SUPER_CLIENT participant profile (default profile) listing every server."""
-    descriptors, transport = _udp_transport(robot)
+    settings = _transport(robot, transport)
     entries = []
     for server in servers(robot):
         if robot.fastdds_line >= 3:
@@ -260,7 +283,7 @@ def super_client_xml(robot: Robot) -> str:
     participant = (
         '    <participant profile_name="robocore_super_client" is_default_profile="true">\n'
         "      <rtps>\n"
-        f"{transport}"
+        f"{settings.rtps}"
         "        <builtin>\n"
         "          <discovery_config>\n"
         "            <discoveryProtocol>SUPER_CLIENT</discoveryProtocol>\n"
@@ -273,17 +296,17 @@ def super_client_xml(robot: Robot) -> str:
         "      </rtps>\n"
         "    </participant>\n"
     )
-    return _document(robot, descriptors, participant)
+    return _document(robot, settings.descriptors, participant)
 
 
-def client_xml(robot: Robot) -> str:
+def client_xml(robot: Robot, *, transport: Transport | None = None) -> str:
     """The plain client profile: discovery timing (and UDP only when asked); the servers still come
     from ``ROS_DISCOVERY_SERVER``, because the profile leaves the discovery protocol alone."""
-    descriptors, transport = _udp_transport(robot)
+    settings = _transport(robot, transport)
     participant = (
         '    <participant profile_name="robocore_client" is_default_profile="true">\n'
         "      <rtps>\n"
-        f"{transport}"
+        f"{settings.rtps}"
         "        <builtin>\n"
         "          <discovery_config>\n"
         f"{_timing('            ', CLIENT_ANNOUNCEMENT_MS, initial=True)}"
@@ -292,4 +315,89 @@ def client_xml(robot: Robot) -> str:
         "      </rtps>\n"
         "    </participant>\n"
     )
-    return _document(robot, descriptors, participant)
+    return _document(robot, settings.descriptors, participant)
+
+
+# --------------------------------------------------------------------------- the server container
+
+#: In a discovery server container: the state volume (a marker that the server ran before) and its profile.
+DISCOVERY_STATE = "/robocore/discovery"
+DISCOVERY_PROFILE = "/tmp/robocore-discovery.xml"
+#: The discovery container's command (argv: this script, then ``fastdds discovery ...``). A restart (the
+#: marker exists in the state volume) waits ROBOCORE_DS_HOLD seconds first: see :func:`restart_hold_seconds`.
+#: Fixed text: the values come from the environment, nothing is interpolated.
+DISCOVERY_SCRIPT = (
+    f'marker="{DISCOVERY_STATE}/started"; '
+    'if [ -e "$marker" ] && [ "${ROBOCORE_DS_HOLD:-0}" -gt 0 ]; then '
+    'echo "robocore: discovery server restarted; silent for ${ROBOCORE_DS_HOLD} s so that clients drop '
+    'the previous instance"; sleep "$ROBOCORE_DS_HOLD"; fi; '
+    'touch "$marker"; '
+    f'printf "%s\\n" "$ROBOCORE_DS_XML" > {DISCOVERY_PROFILE}; '
+    'exec "$@"'
+)
+
+#: What a discovery server container logs once it serves (Fast DDS 2.x, 3.x) or while it holds after a restart.
+SERVER_READY = ("Server is running", "Server started", "robocore: discovery server restarted")
+#: The usual reason a server stops at start.
+PORT_HINT = ("is another discovery server using its UDP port on that host? "
+             "choose another port in robot.yaml (discovery.servers[].port)")
+
+
+def server_process(robot: Robot, index: int, *, transport: Transport | None = None) -> ServerProcess:
+    """What server ``index`` runs: :data:`DISCOVERY_SCRIPT` (restart hold, own profile), then ``fastdds discovery``."""
+    env = server_environment(robot, index, transport=transport)
+    env["ROBOCORE_DS_XML"] = server_profile_xml(robot)
+    env["ROBOCORE_DS_HOLD"] = str(restart_hold_seconds(robot))
+    command = ("sh", "-c", DISCOVERY_SCRIPT, "robocore-discovery", *server_command(robot, index),
+               "-x", DISCOVERY_PROFILE)
+    return ServerProcess(command=command, environment=env, state_dir=DISCOVERY_STATE)
+
+
+def readiness(log_text: str, state: ServerState) -> Readiness:
+    """Ready once the server says it serves (or holds after a restart); failed once it stopped or restarted.
+
+    A restart count above zero means the first start already failed (usually the port is taken);
+    the reason is the log's last error line.
+    """
+    text = plain_text(log_text)
+    restarted = state.restart_count > 0
+    if not restarted and any(marker in text for marker in SERVER_READY):
+        return READY
+    if restarted or state.status in STOPPED or state.timed_out:
+        return Readiness("failed", last_error_line(text)[-200:], hint=PORT_HINT)
+    return WAITING
+
+
+class FastDds(Discovery):
+    """Fast DDS discovery servers (robot.yaml ``discovery.kind: fastdds``): every node a client of them."""
+
+    kind = "fastdds"
+    observer_file = SUPER_CLIENT_PROFILE
+
+    def servers(self) -> list[FastDdsServer]:
+        """Every discovery server, in id order."""
+        return servers(self.robot)
+
+    def server_process(self, index: int) -> ServerProcess:
+        """``fastdds discovery`` for server ``index``, behind the restart hold."""
+        return server_process(self.robot, index, transport=self.transport)
+
+    def client_environment(self, host: str, files: FileLocator = IN_CONTAINERS) -> dict[str, str]:
+        """A client of every server (the host does not matter to Fast DDS)."""
+        return client_environment(self.robot, transport=self.transport, files=files)
+
+    def observer_environment(self, host: str | None = None, files: FileLocator = IN_CONTAINERS) -> dict[str, str]:
+        """A super client of every server."""
+        return client_environment(self.robot, super_client=True, transport=self.transport, files=files)
+
+    def files(self) -> dict[str, str]:
+        """The client and super-client profiles."""
+        return profile_files(self.robot, transport=self.transport)
+
+    def readiness(self, log_text: str, state: ServerState) -> Readiness:
+        """See :func:`readiness`."""
+        return readiness(log_text, state)
+
+    def node_list_argv(self, spin_seconds: float) -> list[str]:
+        """``ros2 node list`` behind robocore's entrypoint, without the ROS 2 daemon."""
+        return [ENTRYPOINT, "ros2", "node", "list", "--no-daemon", "--spin-time", str(spin_seconds)]
