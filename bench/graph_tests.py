@@ -15,6 +15,7 @@ Goals: bring-up < 5 s warm; ``nox -s graph`` < 60 s warm on 2 cores; 0 failures 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import subprocess
 import sys
@@ -100,6 +101,8 @@ def main() -> int:
     parser.add_argument("--rounds", type=int, default=3, help="bring-up rounds per way (median shown)")
     parser.add_argument("--repeat", type=int, default=20, help="runs of the template's tests/graph")
     args = parser.parse_args()
+    # the template's nox sessions call robocore and pytest: those of this interpreter's environment
+    os.environ["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"
     scratch = Path(tempfile.mkdtemp(prefix="robocore-bench-graph-"))
     project = scratch / "robocore-bench-graph"
     subprocess.run([sys.executable, "-m", "robocore", "init", str(project), "--defaults", "--base", "wheels"],
