@@ -14,6 +14,9 @@ from pathlib import Path
 
 from robocore.errors import UnsafePath
 
+#: The file that describes a robot, at the top of its project folder.
+ROBOT_FILE = "robot.yaml"
+
 
 def _read_umask() -> int:
     try:

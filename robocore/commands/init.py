@@ -21,9 +21,9 @@ from typing import Any
 from robocore.adapters import origin
 from robocore.config.model import Arch, BaseKind, RosDistro, docker_arch
 from robocore.errors import UsageError
+from robocore.project import ProjectFolder
 
 #: Where the generated robot.yaml's ``yaml-language-server`` comment points (relative to the project).
-SCHEMA_FILE = Path(".robocore") / "robot.schema.json"
 
 
 @dataclass(frozen=True)
@@ -198,8 +198,8 @@ def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry
     copier_adapter.copy(request)
     console().print(template.note, markup=False, soft_wrap=True)
     if dry_run:
-        console().print(f"would write {destination / SCHEMA_FILE} and check {destination / 'robot.yaml'}",
-                        markup=False)
+        folder = ProjectFolder(destination)
+        console().print(f"would write {folder.schema_file} and check {folder.robot_file}", markup=False)
         return
     _write_schema(destination)
     _check(destination)
@@ -209,7 +209,7 @@ def _write_schema(project: Path) -> None:
     from robocore.config.schema import schema_json
     from robocore.files import write_atomic
 
-    write_atomic(project / SCHEMA_FILE, schema_json() + "\n")
+    write_atomic(ProjectFolder(project).schema_file, schema_json() + "\n")
 
 
 def _check(project: Path) -> None:
