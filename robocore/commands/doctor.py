@@ -1,4 +1,4 @@
-"""doctor: check every host and say what to fix (issue #4).
+"""doctor: check every host and say what to fix.
 
 Per host: its Docker daemon is reachable (within the connect timeout) and recent enough, its
 CPU architecture is the one robot.yaml says, the file system of ``mount_root`` has free space,
@@ -9,21 +9,20 @@ the exit code is non-zero when there is any problem.
 from __future__ import annotations
 
 import shutil
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 from robocore.adapters import ssh
 from robocore.adapters.docker_hosts import client_for, describe
 from robocore.commands.context import Options
-from robocore.config.model import DockerAccess, Host
-from robocore.errors import HostError, RobocoreError
+from robocore.commands.hosts import for_each_host, select_hosts
+from robocore.config.model import DockerAccess, Host, docker_arch
+from robocore.errors import GroupError, HostError, RobocoreError
 from robocore.project import Project
 
 #: Below this much free space on mount_root's file system, doctor complains.
 MIN_FREE_BYTES = 2 * 1024**3
 MIN_DOCKER = (20, 10)
-_ARCH = {"x86_64": "amd64", "amd64": "amd64", "aarch64": "arm64", "arm64": "arm64"}
 
 # $1 = mount_root: df of its deepest existing ancestor (POSIX df -P, 1K blocks).
 _DF_SCRIPT = """\
@@ -37,6 +36,7 @@ df -P -k -- "$d"
 class HostReport:
     """What doctor found on one host."""
 
+    kind: ClassVar[str] = "host_check"
     host: str
     facts: list[str] = field(default_factory=list)
     problems: list[tuple[str, str]] = field(default_factory=list)  # (problem, hint)
@@ -64,12 +64,12 @@ def doctor(options: Options, *, host: str | None) -> None:
     """Check hosts; print what was found; raise DoctorProblems when anything needs fixing."""
     from rich.markup import escape
 
-    from robocore.ui import console
-
     project = options.load()
-    hosts = [project.host(host)] if host else list(project.robot.hosts)
-    with ThreadPoolExecutor(max_workers=max(1, len(hosts))) as pool:
-        reports = list(pool.map(lambda h: check_host(project, h), hosts))
+    hosts = select_hosts(project, host)
+    results, failures = for_each_host(hosts, lambda h: check_host(project, h))
+    if failures:  # check_host collects problems; anything raised is not a finding about the host
+        raise GroupError(failures, list(results))
+    reports = [results[h.name] for h in hosts]
     if any(not h.is_local for h in hosts):
         local = HostReport("this machine")
         for tool, package in (("rsync", "rsync"), ("ssh", "openssh-client")):
@@ -77,10 +77,10 @@ def doctor(options: Options, *, host: str | None) -> None:
                 local.problems.append((f"{tool} is not installed (sync needs it)", f"apt-get install {package}"))
         if local.problems:
             reports.append(local)
-    out = console()
+    options.report.add(*reports)
     for report in reports:
         mark = "[green]ok[/]" if not report.problems else f"[red]{len(report.problems)} problem(s)[/]"
-        out.print(f"{report.host}: {mark}  " + escape(", ".join(report.facts)), markup=True, highlight=False)
+        options.report.info(f"{report.host}: {mark}  " + escape(", ".join(report.facts)), markup=True)
     if any(r.problems for r in reports):
         raise DoctorProblems([r for r in reports if r.problems])
 
@@ -116,7 +116,7 @@ def _check_docker(host: Host, client: Any, report: HostReport) -> None:
         report.problems.append((f"Docker {text} is older than {'.'.join(map(str, MIN_DOCKER))}",
                                 "upgrade docker (Debian/Ubuntu: apt-get install docker.io)"))
     machine = str(client.info().get("Architecture", "?"))
-    arch = _ARCH.get(machine, machine)
+    arch = docker_arch(machine)
     report.facts.append(arch)
     if arch != host.arch.value:
         report.problems.append((f"robot.yaml says arch: {host.arch.value} but the daemon runs on {machine}",
