@@ -17,7 +17,7 @@ TASKS = {"validate", "shell", "stage", "prepare-base", "prepare_base", "schema",
 
 
 def robocore(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    env = {k: v for k, v in os.environ.items() if k != "ROBOCORE_PROJECT"}
+    env = dict(os.environ)
     return subprocess.run(
         [sys.executable, "-m", "robocore", *args], capture_output=True, text=True, cwd=cwd, env=env, timeout=60
     )
