@@ -1,10 +1,10 @@
-"""shell: a dev container in a component's environment (issue #5).
+"""shell: a dev container in a component's environment.
 
 Plan (:mod:`robocore.plan.devshell`), then execute: write the shell files, the DDS profiles
 and the xauth cookie under ``.robocore/``, create and start the container (or join the
 running one), and ``docker exec`` a login bash or ``bash -lc CMD`` as the developer. When the
 last session of a container ends, the container is removed (its home and workspace live on
-the dev machine), as seed 001's ``docker run --rm`` did.
+the dev machine), as a ``docker run --rm`` shell would be.
 """
 
 from __future__ import annotations

@@ -32,6 +32,14 @@ df -P -k -- "$d"
 """
 
 
+@dataclass(frozen=True)
+class Finding:
+    """A problem doctor found, and how to fix it."""
+
+    problem: str
+    hint: str
+
+
 @dataclass
 class HostReport:
     """What doctor found on one host."""
@@ -39,7 +47,11 @@ class HostReport:
     kind: ClassVar[str] = "host_check"
     host: str
     facts: list[str] = field(default_factory=list)
-    problems: list[tuple[str, str]] = field(default_factory=list)  # (problem, hint)
+    problems: list[Finding] = field(default_factory=list)
+
+    def found(self, problem: str, hint: str) -> None:
+        """Record a problem and its hint."""
+        self.problems.append(Finding(problem, hint))
 
 
 class DoctorProblems(HostError):
@@ -54,9 +66,9 @@ class DoctorProblems(HostError):
         """``host: problem`` then ``hint: ...`` for each problem."""
         out = []
         for report in self.reports:
-            for problem, hint in report.problems:
-                out.append(f"{report.host}: {problem}")
-                out.append(f"hint: {hint}")
+            for finding in report.problems:
+                out.append(f"{report.host}: {finding.problem}")
+                out.append(f"hint: {finding.hint}")
         return out
 
 
@@ -74,7 +86,7 @@ def doctor(options: Options, *, host: str | None) -> None:
         local = HostReport("this machine")
         for tool, package in (("rsync", "rsync"), ("ssh", "openssh-client")):
             if shutil.which(tool) is None:
-                local.problems.append((f"{tool} is not installed (sync needs it)", f"apt-get install {package}"))
+                local.found(f"{tool} is not installed (sync needs it)", f"apt-get install {package}")
         if local.problems:
             reports.append(local)
     options.report.add(*reports)
@@ -92,8 +104,8 @@ def check_host(project: Project, host: Host) -> HostReport:
     try:
         client = client_for(host, timeout=20, project_root=project.root)
     except RobocoreError as exc:
-        report.problems.append((exc.message, f"is {host.name} powered and on the network? "
-                                f"try `ssh -p {host.ssh_port} {ssh.destination(host)} docker version`"))
+        report.found(exc.message, f"is {host.name} powered and on the network? "
+                     f"try `ssh -p {host.ssh_port} {ssh.destination(host)} docker version`")
         if not host.is_local and host.access is not DockerAccess.ssh:
             _check_ssh(host, report)  # sync still needs ssh when Docker is reached over TLS/TCP
         return report
@@ -113,27 +125,27 @@ def _check_docker(host: Host, client: Any, report: HostReport) -> None:
     text = str(version.get("Version", "?"))
     report.facts.append(f"docker {text}")
     if _version_tuple(text) < MIN_DOCKER:
-        report.problems.append((f"Docker {text} is older than {'.'.join(map(str, MIN_DOCKER))}",
-                                "upgrade docker (Debian/Ubuntu: apt-get install docker.io)"))
+        report.found(f"Docker {text} is older than {'.'.join(map(str, MIN_DOCKER))}",
+                     "upgrade docker (Debian/Ubuntu: apt-get install docker.io)")
     machine = str(client.info().get("Architecture", "?"))
     arch = docker_arch(machine)
     report.facts.append(arch)
     if arch != host.arch.value:
-        report.problems.append((f"robot.yaml says arch: {host.arch.value} but the daemon runs on {machine}",
-                                f"set arch: {arch} for host {host.name} in robot.yaml"))
+        report.found(f"robot.yaml says arch: {host.arch.value} but the daemon runs on {machine}",
+                     f"set arch: {arch} for host {host.name} in robot.yaml")
 
 
 def _check_ssh(host: Host, report: HostReport) -> None:
     try:
         proc = ssh.run(host, ["sh", "-c", _DF_SCRIPT, "sh", host.deploy_root], timeout=20)
     except RobocoreError as exc:
-        report.problems.append((f"ssh: {exc.message}", exc.hint or "check ssh access"))
+        report.found(f"ssh: {exc.message}", exc.hint or "check ssh access")
         return
     _disk_fact(host.deploy_root, _parse_df(proc.stdout.decode()), report)
     rsync = ssh.run(host, ["sh", "-c", "command -v rsync && rsync --version | head -n 1"], timeout=20, check=False)
     if rsync.returncode != 0:
-        report.problems.append(("rsync is not installed on the host (sync needs it)",
-                                f"on {host.name}: apt-get install rsync"))
+        report.found("rsync is not installed on the host (sync needs it)",
+                     f"on {host.name}: apt-get install rsync")
     else:
         words = rsync.stdout.decode().splitlines()[-1].split()
         report.facts.append(f"rsync {words[2] if len(words) > 2 else '?'}")
@@ -146,12 +158,12 @@ def _check_local_disk(project: Project, report: HostReport) -> None:
 
 def _disk_fact(where: str, free: int | None, report: HostReport) -> None:
     if free is None:
-        report.problems.append((f"could not read free disk space for {where}", "run `df -P` on the host"))
+        report.found(f"could not read free disk space for {where}", "run `df -P` on the host")
         return
     report.facts.append(f"{free / 1024**3:.1f} GiB free at {where}")
     if free < MIN_FREE_BYTES:
-        report.problems.append((f"only {free / 1024**2:.0f} MiB free on the file system of {where}",
-                                "free space (docker image prune, old releases) or set mount_root elsewhere"))
+        report.found(f"only {free / 1024**2:.0f} MiB free on the file system of {where}",
+                     "free space (docker image prune, old releases) or set mount_root elsewhere")
 
 
 def _parse_df(text: str) -> int | None:
