@@ -64,18 +64,19 @@ def scratch_base(project: Path) -> float:
     """The project's base Dockerfile built through robocore's builder with Docker's cache off."""
     from robocore.adapters.docker_hosts import local_client
     from robocore.adapters.image_builder import build_image
-    from robocore.commands import images
+    from robocore.commands.base_image import plan_base
+    from robocore.commands.machine import native_arch
     from robocore.plan.dockerfiles import ImagePlan
     from robocore.project import Project
 
     proj = Project.load(project)
     client = local_client(timeout=3600)
-    planned = images.plan_base(proj, client, images.native_arch())
+    planned = plan_base(proj, client, native_arch())
     plan = planned.plan
     scratch = ImagePlan(role=plan.role, name=f"{NAME}-scratch", tag="latest", arch=plan.arch,
                         dockerfile=plan.dockerfile, parent=plan.parent, context=plan.context)
     start = time.perf_counter()
-    build_image(client, scratch, planned.files, labels={}, native_arch=images.native_arch(), nocache=True)
+    build_image(client, scratch, planned.files, labels={}, native_arch=native_arch(), nocache=True)
     elapsed = time.perf_counter() - start
     client.images.remove(scratch.ref, force=True)
     return elapsed

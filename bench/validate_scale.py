@@ -135,7 +135,7 @@ def run_case(root: Path, name: str, make: Callable[[], str]) -> tuple[int, str, 
     project.mkdir(parents=True)
     text = make()
     (project / "robot.yaml").write_text(text, encoding="utf-8")
-    env = {k: v for k, v in os.environ.items() if k != "ROBOCORE_PROJECT"}
+    env = dict(os.environ)
     start = time.perf_counter()
     done = subprocess.run([*robocore_command(), "-p", str(project), "validate"], capture_output=True, text=True,
                           env=env, timeout=600, check=False)

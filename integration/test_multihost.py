@@ -242,9 +242,10 @@ def test_stage_build_sync_run_over_ssh_one_graph_across_hosts(fleet: RobotFleet,
 
     status = robocore(robot, "status", "--json")
     data = json.loads(status.stdout)
-    nodes = " ".join(data["nodes"] or [])
+    [graph] = [r for r in data["results"] if r["kind"] == "ros_graph"]
+    nodes = " ".join(graph["nodes"] or [])
     assert "talker" in nodes and "listener" in nodes, data
-    states = {row["component"]: (row["host"], row["state"]) for row in data["components"]}
+    states = {row["component"]: (row["host"], row["state"]) for row in data["results"] if row["kind"] == "container"}
     assert states["talker"] == ("robot-a", "running") and states["listener"] == ("robot-b", "running"), states
 
     # through the same ssh connections: a command in the live talker container (its output and exit code

@@ -51,7 +51,7 @@ def test_the_template_packages_pass_with_their_tests_counted(demo_project: Path,
     as_json = run_robocore(demo_project, "test", "--json")
     doc = json.loads(as_json.stdout)
     assert doc["ok"] is True
-    assert sorted((p["package"], p["tests"]) for c in doc["components"] for p in c["packages"]) == [
+    assert sorted((p["package"], p["tests"]) for c in doc["results"] for p in c["packages"]) == [
         ("demo_listener", 2), ("demo_talker", 2)]
 
 

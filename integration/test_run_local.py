@@ -71,8 +71,8 @@ def test_run_is_idempotent_and_recreates_only_what_changed(project_copy: Any, do
     out = run_robocore(root, "run", "--json")
     assert ids(docker_client, root.name) == first, "a second run with nothing changed recreated containers"
     actions = json.loads(out.stdout)
-    host = next(iter(actions))
-    assert {a["verb"] for a in actions[host]["actions"]} == {"keep"}
+    host = next(iter(actions["results"]))
+    assert {a["verb"] for a in host["actions"]} == {"keep"}
 
     data = yaml.safe_load((root / "robot.yaml").read_text())
     listener_entry = next(c for c in data["components"] if c["name"] == "listener")
@@ -174,11 +174,12 @@ def test_an_empty_never_deployed_host_is_not_contacted(project_copy: Any, docker
 
 def test_status_shows_components_and_nodes(running: Path, run_robocore: Any) -> None:
     status = json.loads(run_robocore(running, "status", "--json").stdout)
-    rows = {row["component"]: row for row in status["components"]}
+    rows = {row["component"]: row for row in status["results"] if row["kind"] == "container"}
     assert set(rows) == {"discovery-0", "talker", "listener"}
     assert {row["state"] for row in rows.values()} == {"running"}
     assert rows["talker"]["image"].endswith("-talker:latest")
-    assert "/talker" in status["nodes"] and "/listener" in status["nodes"]
+    [graph] = [r for r in status["results"] if r["kind"] == "ros_graph"]
+    assert "/talker" in graph["nodes"] and "/listener" in graph["nodes"]
     table = run_robocore(running, "status").stdout
     assert "running" in table and "/listener" in table
 
@@ -273,7 +274,7 @@ def test_compose_up_runs_the_robot_and_run_keeps_it(project_copy: Any, docker_cl
         started = ids(docker_client, root.name)
         assert set(started) == {"discovery-0", "talker", "listener"}
         out = json.loads(run_robocore(root, "run", "--json").stdout)
-        assert {a["verb"] for host in out.values() for a in host["actions"]} == {"keep"}
+        assert {a["verb"] for host in out["results"] for a in host["actions"]} == {"keep"}
         assert ids(docker_client, root.name) == started
     finally:
         subprocess.run([*compose, "down", "-v"], capture_output=True, timeout=300)
@@ -324,4 +325,4 @@ def test_edit_build_run_restarts_only_the_rebuilt_component(project_copy: Any, d
     listener = docker_client.containers.get(f"{root.name}-listener")
     assert wait_for(lambda: log_lines(listener, "rebuilt talker #"), HEAR_WITHIN), "the new code was never heard"
     again = json.loads(run_robocore(root, "run", "--json").stdout)
-    assert {a["verb"] for host in again.values() for a in host["actions"]} == {"keep"}
+    assert {a["verb"] for host in again["results"] for a in host["actions"]} == {"keep"}

@@ -1,10 +1,12 @@
 """The ``robocore`` command.
 
-``robocore [-p PROJECT] TASK [flags]``, ``robocore --project=PROJECT TASK`` and the seed's
+``robocore [-p PROJECT] TASK [flags]``, ``robocore --project=PROJECT TASK`` and the short
 form ``robocore PROJECT TASK [flags]`` run the same invoke tasks a project's ``invoke``
-runs, from any folder. Start-up stays light: only invoke and the task surface are
-imported before a task runs (pydantic, docker-py and copier load inside the tasks), and a
-command with remote steps starts its ssh connections first (:mod:`robocore.commands.warmup`).
+runs, from any folder. The project folder and the command line reach the tasks as invoke
+settings (``robocore.project``, ``robocore.argv``), at the level of command-line overrides.
+Start-up stays light: only invoke and the task surface are imported before a task runs
+(pydantic, docker-py and copier load inside the tasks), and a command with remote steps
+starts its ssh connections first (:mod:`robocore.commands.warmup`).
 """
 
 from __future__ import annotations
@@ -74,7 +76,7 @@ def split_project(argv: Sequence[str], task_names: set[str]) -> tuple[str | None
 
 
 def init_in_project(rest: list[str], project: str) -> list[str]:
-    """The seed's ``robocore DIR init`` (and ``robocore -p DIR init``): create the project in DIR."""
+    """``robocore DIR init`` (and ``robocore -p DIR init``): create the project in DIR."""
     if rest[:1] != ["init"] or any(arg == "--path" or arg.startswith("--path=") for arg in rest):
         return rest
     return ["init", f"--path={project}", *rest[1:]]
@@ -112,11 +114,17 @@ def _one_line(step: Any) -> Any:
     return wrapped
 
 
-def _program(namespace: Any) -> Any:
+def _program(namespace: Any, settings: dict[str, Any] | None = None) -> Any:
     """An invoke Program named robocore whose help documents ``-p/--project`` (instead of invoke's ``--pty``),
-    and whose command-line errors are one line with exit code 2."""
+    whose command-line errors are one line with exit code 2, and whose tasks find ``settings`` in their
+    configuration's ``robocore`` section (beside the other command-line overrides)."""
+    from invoke.config import Config, copy_dict, merge_dicts
     from invoke.parser.argument import Argument
     from invoke.program import Program
+
+    class RobocoreConfig(Config):
+        def load_overrides(self, data: dict[str, Any], merge: bool = True) -> None:
+            super().load_overrides(merge_dicts(copy_dict(data), {"robocore": settings or {}}), merge=merge)
 
     class RobocoreProgram(Program):
         parse_core = _one_line(Program.parse_core)
@@ -150,7 +158,8 @@ def _program(namespace: Any) -> Any:
             print()
             super().print_help()
 
-    return RobocoreProgram(namespace=namespace, version=__version__, name="robocore", binary="robocore")
+    return RobocoreProgram(namespace=namespace, version=__version__, name="robocore", binary="robocore",
+                           config_class=RobocoreConfig)
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -160,7 +169,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         from robocore.commands.warmup import warm_recorded
 
         warm_recorded(args)
-    from robocore.tasks import PROJECT_ENV, cli_namespace
+    from robocore.tasks import cli_namespace
 
     names = set(cli_namespace.task_names) | {n.replace("_", "-") for n in cli_namespace.task_names}
     try:
@@ -170,11 +179,13 @@ def main(argv: Sequence[str] | None = None) -> None:
 
         print(f"robocore: {clean(str(error))} (robocore -p DIR TASK, robocore DIR TASK)", file=sys.stderr)
         sys.exit(2)
+    # the steps that follow decide the ssh warm-up: only a real command line warms anything
+    settings: dict[str, Any] = {"argv": args if argv is None else []}
     if project is not None:
-        os.environ[PROJECT_ENV] = os.path.abspath(project)
+        settings["project"] = os.path.abspath(project)
         rest = init_in_project(rest, project)
     try:
-        _program(cli_namespace).run(["robocore", *rest])
+        _program(cli_namespace, settings).run(["robocore", *rest])
     except BrokenPipeError:
         # output piped into a reader that stopped early (robocore --help | head)
         devnull = os.open(os.devnull, os.O_WRONLY)

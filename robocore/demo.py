@@ -49,7 +49,7 @@ def create_project(path: Path) -> None:
 
 def heard_lines(options: Options, component: str = "listener", tail: int = 200) -> list[str]:
     """Lines of ``component``'s container log that show a received message."""
-    from robocore.commands.run import connect
+    from robocore.commands.hosts import connect
     from robocore.plan import naming
 
     project = options.load()
@@ -104,12 +104,12 @@ def main(argv: list[str] | None = None) -> int:
 
     path = Path(args.dir).resolve()
     options = Options(project_dir=path)
-    from robocore.commands import build, images, observe, run
+    from robocore.commands import base_image, build, component_images, observe, run
 
     try:
         _step(f"init {path}", lambda: create_project(path))
-        _step("prepare-base", lambda: images.prepare_base(options, force=False))
-        _step("stage", lambda: images.stage(options, refresh=False, component=None, force=False))
+        _step("prepare-base", lambda: base_image.prepare_base(options, force=False))
+        _step("stage", lambda: component_images.stage(options, refresh=False, component=None, force=False))
         _step("build", lambda: build.build(options, component=None))
         _step("run", lambda: run.run(options, host=None, tag=None))
         lines = wait_for_messages(options, args.timeout)

@@ -73,12 +73,6 @@ class UnsafePath(RobocoreError):
     exit_code = 2
 
 
-class NotImplementedYet(RobocoreError):
-    """A task whose implementation has not landed yet."""
-
-    exit_code = 3
-
-
 class ToolMissing(RobocoreError):
     """An outside program robocore needs (mmdebstrap, rsync, ssh, ...) is not installed."""
 

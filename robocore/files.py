@@ -8,11 +8,13 @@ threads create files would give those files the wrong mode.
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from robocore.errors import UnsafePath
+
+#: The file that describes a robot, at the top of its project folder.
+ROBOT_FILE = "robot.yaml"
 
 
 def _read_umask() -> int:
@@ -56,6 +58,8 @@ def write_atomic(path: Path, content: str | bytes, *, mode: int | None = None) -
     except OSError:
         pass
     path.parent.mkdir(parents=True, exist_ok=True)
+    import tempfile  # here, not at import: the command line's first steps read paths only
+
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as handle:

@@ -1,29 +1,33 @@
-"""A loaded robot project: its folder, its robot.yaml and where generated files go."""
+"""A robot project: its folder, its robot.yaml and the layout of what robocore keeps in ``.robocore/``.
+
+:class:`ProjectFolder` names every path under ``.robocore/`` (generated files, caches and the
+records commands leave for each other), and nothing else does. It needs no robot.yaml, so the
+command line's first steps (the ssh warm-up) can use it before the config model is imported;
+:class:`Project` adds the validated robot.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from robocore.config.loader import ROBOT_FILE, load_robot
-from robocore.config.model import Component, Host, Robot
 from robocore.errors import UsageError
+from robocore.files import ROBOT_FILE
+
+if TYPE_CHECKING:
+    from robocore.config.model import Component, Host, Robot
 
 STATE_DIR = ".robocore"
+#: Inside a component's build folder: the state of its last successful build (package hashes, files, copies).
+BUILD_STATE = ".robocore-build.json"
 
 
 @dataclass(frozen=True)
-class Project:
-    """A robot project folder and its validated robot.yaml."""
+class ProjectFolder:
+    """A project folder and where each generated file, cache and record of robocore is in it."""
 
     root: Path
-    robot: Robot
-
-    @classmethod
-    def load(cls, root: Path) -> Project:
-        """Load and validate ``root/robot.yaml``."""
-        root = root.resolve()
-        return cls(root=root, robot=load_robot(root))
 
     @property
     def robot_file(self) -> Path:
@@ -44,9 +48,93 @@ class Project:
         """Where colcon puts build/, install/ and log/ of ``component``."""
         return self.state_dir / "build" / component
 
+    def build_state_file(self, component: str) -> Path:
+        """The state of ``component``'s last successful build, beside its colcon folders."""
+        return self.build_dir(component) / BUILD_STATE
+
+    @property
+    def build_lock(self) -> Path:
+        """The lock file that lets one graph-test run of the project build at a time."""
+        return self.state_dir / "build.lock"
+
+    @property
+    def compose_dir(self) -> Path:
+        """Folder of the generated per-host compose files."""
+        return self.state_dir / "compose"
+
     def compose_file(self, host: str) -> Path:
         """The generated compose file of ``host``."""
-        return self.state_dir / "compose" / f"{host}.yaml"
+        return self.compose_dir / f"{host}.yaml"
+
+    @property
+    def dds_dir(self) -> Path:
+        """The generated Fast DDS profiles (mounted into every container)."""
+        return self.state_dir / "dds"
+
+    @property
+    def cache_dir(self) -> Path:
+        """Downloads kept between runs: git checkouts, the bootstrapped root file system."""
+        return self.state_dir / "cache"
+
+    def sync_state_file(self, host: str) -> Path:
+        """What was last synced to ``host``: release id and tree digest per component."""
+        return self.state_dir / "sync" / f"{host}.json"
+
+    def sync_links_dir(self, host: str, component: str) -> Path:
+        """The folder of symlinks to ``component``'s read-only project volumes, as sync sends them to ``host``."""
+        return self.state_dir / "sync" / "files" / host / component
+
+    def history_file(self, host: str) -> Path:
+        """What ``run`` deployed on ``host``, oldest first (what ``rollback`` returns to)."""
+        return self.state_dir / "history" / f"{host}.json"
+
+    @property
+    def test_results_dir(self) -> Path:
+        """The merged JUnit XML of the last ``test`` run, one folder per component."""
+        return self.state_dir / "test-results"
+
+    @property
+    def test_runs_dir(self) -> Path:
+        """One folder per graph-test run (its DDS profiles)."""
+        return self.state_dir / "test-runs"
+
+    @property
+    def ssh_hosts_record(self) -> Path:
+        """The ssh hosts the last command warmed, for the next command to warm first."""
+        return self.state_dir / "ssh-hosts.json"
+
+    @property
+    def schema_file(self) -> Path:
+        """robot.yaml's JSON Schema, for editors."""
+        return self.state_dir / "robot.schema.json"
+
+    @property
+    def shell_dir(self) -> Path:
+        """The dev shell's setup files (mounted read-only into dev containers)."""
+        return self.state_dir / "shell"
+
+    def home_dir(self, user: str) -> Path:
+        """The developer's persistent home in dev containers."""
+        return self.state_dir / "home" / user
+
+    def x11_dir(self, container: str) -> Path:
+        """The folder of a dev container's xauth cookie (a folder, so the file can be replaced atomically)."""
+        return self.state_dir / "x11" / container
+
+
+@dataclass(frozen=True)
+class Project(ProjectFolder):
+    """A robot project folder and its validated robot.yaml."""
+
+    robot: Robot
+
+    @classmethod
+    def load(cls, root: Path) -> Project:
+        """Load and validate ``root/robot.yaml``."""
+        from robocore.config.loader import load_robot
+
+        root = root.resolve()
+        return cls(root=root, robot=load_robot(root))
 
     def component(self, name: str) -> Component:
         """The component called ``name``, or a UsageError listing the known ones."""

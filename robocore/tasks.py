@@ -2,18 +2,23 @@
 
 Tasks are thin: parse flags, load the project, hand over to :mod:`robocore.commands`.
 Every :class:`~robocore.errors.RobocoreError` is translated here, and only here, into
-one line per problem on stderr and a non-zero exit code. Heavy imports (pydantic,
-docker-py, copier) happen inside the task bodies so that ``robocore --help`` stays fast.
+one line per problem on stderr and a non-zero exit code (and, with ``--json``, the one
+JSON document on stdout says so too). Heavy imports (pydantic, docker-py, copier) happen
+inside the task bodies so that ``robocore --help`` stays fast.
+
+The project folder is invoke's ``robocore.project`` setting, which ``robocore -p DIR`` sets;
+a project's own ``invoke`` runs on the current folder. The command line (which steps follow,
+for the ssh warm-up) is the ``robocore.argv`` setting that ``robocore`` sets; under a plain
+``invoke`` it is invoke's own command line.
 """
 
 from __future__ import annotations
 
 import functools
-import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from invoke.collection import Collection
 from invoke.context import Context
@@ -22,15 +27,31 @@ from invoke.tasks import task
 
 from robocore.errors import RobocoreError
 
+if TYPE_CHECKING:
+    from robocore.commands.context import Options
+
 F = TypeVar("F", bound=Callable[..., Any])
 
-PROJECT_ENV = "ROBOCORE_PROJECT"
+#: The section of invoke's configuration that ``robocore`` fills in (``project``, ``argv``).
+CONFIG_SECTION = "robocore"
+
+
+def _setting(c: Context, key: str) -> Any:
+    section = c.config.get(CONFIG_SECTION)
+    return section.get(key) if section is not None else None
 
 
 def project_dir(c: Context) -> Path:
-    """The project folder: ``-p``/``ROBOCORE_PROJECT``, else the current folder."""
-    configured = os.environ.get(PROJECT_ENV)
+    """The project folder: the ``robocore.project`` setting (``robocore -p DIR``), else the current folder."""
+    configured = _setting(c, "project")
     return Path(configured) if configured else Path.cwd()
+
+
+def command_line(c: Context) -> tuple[str, ...]:
+    """The whole command line: the ``robocore.argv`` setting (``robocore`` sets it), else invoke's own
+    (a project's ``invoke build sync run``)."""
+    configured = _setting(c, "argv")
+    return tuple(configured) if configured is not None else tuple(sys.argv[1:])
 
 
 def reported(body: F) -> F:
@@ -84,19 +105,35 @@ def _count(value: str, flag: str) -> int:
     return int(text)
 
 
-def _options(c: Context, **flags: Any) -> Any:
+def _options(c: Context, task_name: str, **flags: Any) -> Options:
     from robocore.commands.context import Options
 
-    return Options(project_dir=project_dir(c), argv=tuple(sys.argv[1:]), **flags)
+    return Options(project_dir=project_dir(c), argv=command_line(c), task=task_name, **flags)
 
 
-@task(help={"dry_run": "Only print what would be checked."})
+def _execute(options: Options, step: Callable[[], Any]) -> Any:
+    """Run a task's ``step``; its reporter then prints the JSON document (with ``--json``): the results, or
+    the error's problems with ok false. The error itself goes on to :func:`reported`."""
+    try:
+        result = step()
+    except RobocoreError as error:
+        options.report.fail(error)
+        raise
+    except KeyboardInterrupt:
+        options.report.fail(RobocoreError("interrupted"))
+        raise
+    options.report.finish()
+    return result
+
+
+@task(help={"dry_run": "Only print what would be checked.", "json": "Machine-readable result on stdout."})
 @reported
-def validate(c: Context, dry_run: bool = False) -> None:
+def validate(c: Context, dry_run: bool = False, json: bool = False) -> None:
     """Check robot.yaml: every problem, one line each, with file, line and key."""
     from robocore.commands import validate as command
 
-    command.run(_options(c, dry_run=dry_run))
+    options = _options(c, "validate", dry_run=dry_run, json=json)
+    _execute(options, lambda: command.run(options))
 
 
 @task(
@@ -138,9 +175,10 @@ def prepare_base(
     c: Context, force: bool = False, dry_run: bool = False, quiet: bool = False, json: bool = False
 ) -> None:
     """Build the base image: ROS distro + common_packages; only when its inputs changed."""
-    from robocore.commands import images
+    from robocore.commands import base_image
 
-    images.prepare_base(_options(c, dry_run=dry_run, quiet=quiet, json=json), force=force)
+    options = _options(c, "prepare-base", dry_run=dry_run, quiet=quiet, json=json)
+    _execute(options, lambda: base_image.prepare_base(options, force=force))
 
 
 @task(help={"refresh": "Only rewrite the per-host compose files.", "component": "Stage only this component.",
@@ -150,10 +188,11 @@ def prepare_base(
 def stage(c: Context, refresh: bool = False, component: str = "", force: bool = False,
           dry_run: bool = False, quiet: bool = False, json: bool = False) -> None:
     """Build one image per component (dependencies, no user code) and write compose files."""
-    from robocore.commands import images
+    from robocore.commands import component_images
 
-    images.stage(_options(c, dry_run=dry_run, quiet=quiet, json=json), refresh=refresh,
-                 component=component or None, force=force)
+    options = _options(c, "stage", dry_run=dry_run, quiet=quiet, json=json)
+    _execute(options, lambda: component_images.stage(options, refresh=refresh, component=component or None,
+                                                     force=force))
 
 
 @task(help={"component": "Build only this component.", "dry_run": "Print the plan only.",
@@ -165,7 +204,8 @@ def build(c: Context, component: str = "", full: bool = False, dry_run: bool = F
     """colcon-build each component's workspace inside its staged image."""
     from robocore.commands import build as command
 
-    command.build(_options(c, dry_run=dry_run, quiet=quiet, json=json), component=component or None, full=full)
+    options = _options(c, "build", dry_run=dry_run, quiet=quiet, json=json)
+    _execute(options, lambda: command.build(options, component=component or None, full=full))
 
 
 @task(help={"component": "Test only this component.",
@@ -178,8 +218,9 @@ def test(c: Context, component: str = "", packages_select: list[str] | None = No
     """colcon-test each component's packages inside its staged image; one result per package (exit 9 on failure)."""
     from robocore.commands import package_tests
 
-    package_tests.test(_options(c, dry_run=dry_run, quiet=quiet, json=json), component=component or None,
-                       packages=packages_select or [])
+    options = _options(c, "test", dry_run=dry_run, quiet=quiet, json=json)
+    _execute(options, lambda: package_tests.test(options, component=component or None,
+                                                 packages=packages_select or []))
 
 
 @task(help={"host": "Sync only this host.", "dry_run": "Print the rsync commands only.", "quiet": "Only errors.",
@@ -189,7 +230,8 @@ def sync(c: Context, host: str = "", dry_run: bool = False, quiet: bool = False,
     """Copy compiled install trees and runtime files to each host; only what changed."""
     from robocore.commands import sync as command
 
-    command.sync(_options(c, dry_run=dry_run, quiet=quiet, json=json), host=host or None)
+    options = _options(c, "sync", dry_run=dry_run, quiet=quiet, json=json)
+    _execute(options, lambda: command.sync(options, host=host or None))
 
 
 @task(help={"host": "Start/restart only this host.", "tag": "Deploy this released version.",
@@ -201,7 +243,8 @@ def run(
     """(Re)start each host's containers and the discovery server."""
     from robocore.commands import run as command
 
-    command.run(_options(c, dry_run=dry_run, quiet=quiet, json=json), host=host or None, tag=_tag(tag))
+    options = _options(c, "run", dry_run=dry_run, quiet=quiet, json=json)
+    _execute(options, lambda: command.run(options, host=host or None, tag=_tag(tag)))
 
 
 @task(help={"host": "Stop only this host.", "dry_run": "Print what would be removed.", "quiet": "Only errors."})
@@ -210,7 +253,8 @@ def down(c: Context, host: str = "", dry_run: bool = False, quiet: bool = False)
     """Stop and remove the robot's containers."""
     from robocore.commands import run as command
 
-    command.down(_options(c, dry_run=dry_run, quiet=quiet), host=host or None)
+    options = _options(c, "down", dry_run=dry_run, quiet=quiet)
+    _execute(options, lambda: command.down(options, host=host or None))
 
 
 @task(help={"json": "Machine-readable output.", "dry_run": "Print what would be queried."})
@@ -219,18 +263,22 @@ def status(c: Context, json: bool = False, dry_run: bool = False) -> None:
     """Table of components (host, state, uptime, restarts, image) and live ROS nodes."""
     from robocore.commands import observe
 
-    observe.status(_options(c, json=json, dry_run=dry_run))
+    options = _options(c, "status", json=json, dry_run=dry_run)
+    _execute(options, lambda: observe.status(options))
 
 
 @task(help={"component": "Only this component.", "follow": "Keep following.",
-            "tail": "Lines per container (a whole number; default 100).", "dry_run": "Print what would be read."})
+            "tail": "Lines per container (a whole number; default 100).", "dry_run": "Print what would be read.",
+            "json": "Machine-readable result on stdout (with --follow: one JSON object per line)."})
 @reported
-def logs(c: Context, component: str = "", follow: bool = False, tail: str = "100", dry_run: bool = False) -> None:
+def logs(c: Context, component: str = "", follow: bool = False, tail: str = "100", dry_run: bool = False,
+         json: bool = False) -> None:
     """Logs of the robot's containers on all hosts, each line prefixed by its component."""
-    lines = _count(tail, "--tail")
     from robocore.commands import observe
 
-    observe.logs(_options(c, dry_run=dry_run), component=component or None, follow=follow, tail=lines)
+    options = _options(c, "logs", dry_run=dry_run, json=json)
+    _execute(options, lambda: observe.logs(options, component=component or None, follow=follow,
+                                           tail=_count(tail, "--tail")))
 
 
 @task(help={"component": "The component to open a shell in (required).", "cmd": "Run this instead of a shell.",
@@ -244,9 +292,10 @@ def shell(c: Context, component: str = "", cmd: str = "", new: bool = False, dev
     _require(component, "shell")
     from robocore.commands import devshell
 
-    code = devshell.run(_options(c, dry_run=dry_run), component=component, cmd=cmd or None, new=new,
-                        devices=devices or None, gpus=True if gpus else (False if no_gpus else None),
-                        privileged=privileged)
+    options = _options(c, "shell", dry_run=dry_run)
+    code = _execute(options, lambda: devshell.run(
+        options, component=component, cmd=cmd or None, new=new, devices=devices or None,
+        gpus=True if gpus else (False if no_gpus else None), privileged=privileged))
     if code:
         raise Exit(code=code)
 
@@ -259,7 +308,8 @@ def connect(c: Context, component: str = "", cmd: str = "", dry_run: bool = Fals
     _require(component, "connect")
     from robocore.commands import observe
 
-    code = observe.connect(_options(c, dry_run=dry_run), component=component, cmd=cmd or None)
+    options = _options(c, "connect", dry_run=dry_run)
+    code = _execute(options, lambda: observe.connect(options, component=component, cmd=cmd or None))
     if code:
         raise Exit(code=code)
 
@@ -270,7 +320,8 @@ def release(c: Context, tag: str = "", dry_run: bool = False) -> None:
     """Tag every image with a version and push it to the registry."""
     from robocore.commands import release as command
 
-    command.release(_options(c, dry_run=dry_run), tag=_tag(tag))
+    options = _options(c, "release", dry_run=dry_run)
+    _execute(options, lambda: command.release(options, tag=_tag(tag)))
 
 
 @task(help={"host": "Only this host.", "dry_run": "Print what would be done."})
@@ -279,16 +330,18 @@ def rollback(c: Context, host: str = "", dry_run: bool = False) -> None:
     """Return each host to the version it ran before the last run."""
     from robocore.commands import release as command
 
-    command.rollback(_options(c, dry_run=dry_run), host=host or None)
+    options = _options(c, "rollback", dry_run=dry_run)
+    _execute(options, lambda: command.rollback(options, host=host or None))
 
 
-@task(help={"host": "Only this host."})
+@task(help={"host": "Only this host.", "json": "Machine-readable result on stdout."})
 @reported
-def doctor(c: Context, host: str = "") -> None:
+def doctor(c: Context, host: str = "", json: bool = False) -> None:
     """Check every host: reachable, Docker version, arch, free disk, rsync."""
     from robocore.commands import doctor as command
 
-    command.doctor(_options(c), host=host or None)
+    options = _options(c, "doctor", json=json)
+    _execute(options, lambda: command.doctor(options, host=host or None))
 
 
 PROJECT_TASKS = (validate, prepare_base, stage, build, test, sync, run, down, status, logs, shell, connect,

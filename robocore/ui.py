@@ -81,3 +81,13 @@ def stdout() -> Console:
 def make_console(**kwargs: Any) -> Console:
     """Another console with the same escaping (e.g. a fixed width for logs and CI)."""
     return _make(**kwargs)
+
+
+def human_size(n: int) -> str:
+    """A byte count for people: ``512 B``, ``1.5 KB``, ``3.2 MB``, ``1.1 GB`` (powers of 1024)."""
+    size = float(n)
+    for unit in ("B", "KB", "MB"):
+        if size < 1024:
+            return f"{size:.0f} {unit}" if unit == "B" else f"{size:.1f} {unit}"
+        size /= 1024
+    return f"{size:.1f} GB"

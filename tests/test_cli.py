@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -17,7 +18,7 @@ TASKS = {"validate", "shell", "stage", "prepare-base", "prepare_base", "schema",
 
 
 def robocore(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    env = {k: v for k, v in os.environ.items() if k != "ROBOCORE_PROJECT"}
+    env = dict(os.environ)
     return subprocess.run(
         [sys.executable, "-m", "robocore", *args], capture_output=True, text=True, cwd=cwd, env=env, timeout=60
     )
@@ -86,6 +87,24 @@ def test_every_project_form_validates(good: Path, tmp_path: Path, form: str) -> 
     assert "  rpi5 (192.168.1.20, arm64, docker via ssh): talker" in done.stderr
     assert "  dev (127.0.0.1, amd64, docker via local): listener" in done.stderr
     assert "  discovery server: rpi5:11811" in done.stderr
+
+
+def test_the_project_folder_reaches_the_task_as_an_argument(good: Path, tmp_path: Path,
+                                                            monkeypatch: pytest.MonkeyPatch,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """``-p`` sets no environment variable; a ROBOCORE_PROJECT in the environment (what a dev shell holds:
+    the project's name) is not read as a folder."""
+    from robocore.cli import main
+
+    monkeypatch.delenv("ROBOCORE_PROJECT", raising=False)
+    monkeypatch.chdir(tmp_path)
+    main(["-p", str(good), "validate", "--json"])
+    assert json.loads(capsys.readouterr().out)["results"][0]["file"] == str(good / "robot.yaml")
+    assert "ROBOCORE_PROJECT" not in os.environ
+    env = {**os.environ, "ROBOCORE_PROJECT": str(tmp_path / "elsewhere")}
+    done = subprocess.run([sys.executable, "-m", "robocore", "validate"], capture_output=True, text=True, cwd=good,
+                          env=env, timeout=60)
+    assert done.returncode == 0 and f"{good / 'robot.yaml'}: ok" in done.stderr, done.stderr
 
 
 def test_relative_project_folder(good: Path) -> None:

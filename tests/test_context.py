@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 
 from robocore.adapters import docker_hosts, ssh
-from robocore.commands import context, run, warmup
+from robocore.commands import context, hosts, warmup
 from robocore.config.model import Host, Robot
-from robocore.project import Project
+from robocore.project import Project, ProjectFolder
 
 
 def _project(root: Path) -> Project:
@@ -51,7 +51,7 @@ def test_ssh_hosts_are_warmed_only_before_remote_steps(tmp_path: Path, monkeypat
     assert seen == warmed
     # (tls and local hosts are passed too: prefetch leaves all but ssh alone)
     assert sorted({name for name, _, _ in prefetched}) == (["dev", "main", "tls"] if fetched else [])
-    assert all((t, c) == (run.CONNECT_API_TIMEOUT, run.HOST_CONNECT_TIMEOUT) for _, t, c in prefetched)
+    assert all((t, c) == (hosts.CONNECT_API_TIMEOUT, hosts.HOST_CONNECT_TIMEOUT) for _, t, c in prefetched)
 
 
 def test_the_next_command_warms_the_recorded_hosts_first_until_robot_yaml_changes(
@@ -63,7 +63,7 @@ def test_the_next_command_warms_the_recorded_hosts_first_until_robot_yaml_change
     robot_yaml.write_text("# the project's file\n")
     context.warm_remote_hosts(_project(tmp_path), ["sync"])
     assert seen == [("root", "10.0.0.5", 22)]
-    assert "10.0.0.5" in (tmp_path / ".robocore" / warmup.RECORD).read_text()
+    assert "10.0.0.5" in ProjectFolder(tmp_path).ssh_hosts_record.read_text()
 
     def next_command(argv: list[str], cwd: Path = tmp_path) -> list[tuple[str, str, int]]:
         seen.clear()
@@ -81,7 +81,7 @@ def test_the_next_command_warms_the_recorded_hosts_first_until_robot_yaml_change
     assert next_command(["sync"], cwd=elsewhere) == []  # not the project folder: no record there
     robot_yaml.write_text("# the project's file, edited: hosts may have moved\n")
     assert next_command(["sync"]) == []
-    (tmp_path / ".robocore" / warmup.RECORD).write_text("{not json")
+    ProjectFolder(tmp_path).ssh_hosts_record.write_text("{not json")
     assert next_command(["sync"]) == []
 
 

@@ -5,13 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from robocore.commands import build, images
+from robocore.commands import build, component_images, machine
 from robocore.config.model import Robot
 from robocore.plan import colcon
 from robocore.plan.inputs import FileDigest, inputs_hash, tree_hash
 from robocore.project import Project
 
-BASE = images.BaseRef(ref="proj-base:latest", arch="amd64", inputs="sha256:base1")
+BASE = component_images.BaseRef(ref="proj-base:latest", arch="amd64", inputs="sha256:base1")
 
 
 def make_project(root: Path, kind: str = "wheels", **changes: Any) -> Project:
@@ -31,8 +31,8 @@ def make_project(root: Path, kind: str = "wheels", **changes: Any) -> Project:
     return Project(root=root, robot=robot)
 
 
-def hashes(project: Project, base: images.BaseRef = BASE) -> dict[str, str]:
-    return {c.name: images.plan_component(project, c, base).inputs for c in project.robot.components}
+def hashes(project: Project, base: component_images.BaseRef = BASE) -> dict[str, str]:
+    return {c.name: component_images.plan_component(project, c, base).inputs for c in project.robot.components}
 
 
 def test_inputs_hash_is_order_independent_and_content_sensitive() -> None:
@@ -80,13 +80,13 @@ def test_package_xml_changes_the_hash_only_where_rosdep_reads_it(tmp_path: Path)
 
 def test_official_component_context_holds_only_package_xml(tmp_path: Path) -> None:
     project = make_project(tmp_path, kind="official")
-    planned = images.plan_component(project, project.robot.component("talker"), BASE)
+    planned = component_images.plan_component(project, project.robot.component("talker"), BASE)
     assert [f.dest for f in planned.files] == ["rosdep/src/pkg_talker/package.xml"]
 
 
 def test_a_new_base_changes_every_component_hash(tmp_path: Path) -> None:
     project = make_project(tmp_path)
-    other = images.BaseRef(ref=BASE.ref, arch="amd64", inputs="sha256:base2")
+    other = component_images.BaseRef(ref=BASE.ref, arch="amd64", inputs="sha256:base2")
     before, after = hashes(project), hashes(project, other)
     assert all(before[name] != after[name] for name in before)
 
@@ -148,19 +148,19 @@ def _git_repo(path: Path, text: str) -> str:
 
 def test_repositories_are_fetched_into_the_context_and_pinned_versions_hash(tmp_path: Path, monkeypatch: Any) -> None:
     # a local (file://) repository: as if the entry said allow_protocol: file
-    monkeypatch.setattr(images, "allowed_protocol", lambda entry: "file")
+    monkeypatch.setattr(component_images, "allowed_protocol", lambda entry: "file")
     upstream = tmp_path / "upstream"
     first = _git_repo(upstream, "one")
     second = _git_repo(upstream, "two")
     url = upstream.as_uri()
     project = make_project(tmp_path / "p", talker={"repositories": [{"url": url, "version": first}]})
-    planned = images.plan_component(project, project.robot.component("talker"), BASE)
+    planned = component_images.plan_component(project, project.robot.component("talker"), BASE)
     dests = [f.dest for f in planned.files]
     assert dests == ["repos/upstream/package.xml"]  # no .git in the context
     assert b"one" in planned.files[0].data
     assert "COPY repos /tmp/robocore/deps" in planned.plan.dockerfile
     other = make_project(tmp_path / "p", talker={"repositories": [{"url": url, "version": second}]})
-    again = images.plan_component(other, other.robot.component("talker"), BASE)
+    again = component_images.plan_component(other, other.robot.component("talker"), BASE)
     assert b"two" in again.files[0].data and again.inputs != planned.inputs
 
 
@@ -180,13 +180,13 @@ def test_cross_arch_without_binfmt_says_how_to_set_up_qemu(tmp_path: Path, monke
 
     from robocore.errors import ToolMissing
 
-    monkeypatch.setattr(images, "BINFMT_DIR", tmp_path)
-    images.check_emulation("amd64", "amd64", "x")  # native: nothing to check
+    monkeypatch.setattr(machine, "BINFMT_DIR", tmp_path)
+    machine.check_emulation("amd64", "amd64", "x")  # native: nothing to check
     with pytest.raises(ToolMissing) as info:
-        images.check_emulation("arm64", "amd64", "component cam")
+        machine.check_emulation("arm64", "amd64", "component cam")
     assert "component cam" in info.value.message and "qemu-user-static" in (info.value.hint or "")
     (tmp_path / "qemu-aarch64").write_text("enabled\n")
-    images.check_emulation("arm64", "amd64", "component cam")  # registered: fine
+    machine.check_emulation("arm64", "amd64", "component cam")  # registered: fine
 
 
 def test_missing_mmdebstrap_is_tool_missing_with_a_hint(tmp_path: Path, monkeypatch: Any) -> None:

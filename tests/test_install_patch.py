@@ -124,7 +124,7 @@ def test_an_edit_to_a_copied_module_is_written_into_the_install_tree(tmp_path: P
     assert installed.read_text() == "GREETING = 'edited'\n"
     assert installed.stat().st_mode & 0o777 == 0o644
     assert build.plan_build(project, comp, "img1").changed == []  # the state now says it is built
-    state = json.loads((project.build_dir("talker") / build.BUILD_STATE).read_text())
+    state = json.loads(project.build_state_file("talker").read_text())
     assert state["copies"]["pkg_talker"]["pkg_talker/node.py"] == [f"{SITE}/pkg_talker/node.py"]
 
 
@@ -153,7 +153,7 @@ def test_new_files_a_new_image_and_full_builds_run_colcon(tmp_path: Path) -> Non
 
 def test_a_state_file_from_an_older_robocore_means_colcon(tmp_path: Path) -> None:
     project, source, _ = _built(tmp_path)
-    state = project.build_dir("talker") / build.BUILD_STATE
+    state = project.build_state_file("talker")
     data = json.loads(state.read_text())
     state.write_text(json.dumps({"image": data["image"], "packages": data["packages"]}))
     source.write_text("GREETING = 'edited'\n")

@@ -3,6 +3,7 @@ reading and writing results, the report, and the whole command over a fake colco
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -242,9 +243,9 @@ def test_the_report_is_a_table_then_each_failing_test_with_its_message(project: 
 
 
 def test_json_is_one_document(project: Project) -> None:
-    doc = package_tests.as_json(project, _outcomes(project))
-    assert doc["ok"] is False and doc["results_dir"] == ".robocore/test-results"
-    talker = doc["components"][0]["packages"][0]  # type: ignore[index]
+    doc = [dataclasses.asdict(r) for r in package_tests.results(_outcomes(project))]
+    assert [c["ok"] for c in doc] == [False, True]
+    talker = doc[0]["packages"][0]
     assert talker == {"package": "demo_talker", "ok": False, "tests": 2, "failures": 1, "errors": 0, "skipped": 0,
                       "result_file": "x.xml", "problems": [], "failed": [
                           {"test": "demo_talker.test.test_a::test_wrong", "outcome": "failed",
@@ -332,13 +333,14 @@ def test_the_command_passes_and_prints_json(project: Project, monkeypatch: pytes
     _record_build(project)
     calls: list[dict[str, Any]] = []
     _fake_docker(monkeypatch, project, {"demo_talker": PASS, "talker_msgs": PASS, "demo_listener": PASS}, calls)
-    package_tests.test(Options(project_dir=project.root, json=True), component="talker",
-                       packages=["talker_msgs"])
+    options = Options(project_dir=project.root, json=True, task="test")
+    package_tests.test(options, component="talker", packages=["talker_msgs"])
+    options.report.finish()
     [call] = calls
     assert call["argv"][10:12] == ["--packages-select", "talker_msgs"]
     doc = json.loads(capsys.readouterr().out)
-    assert doc["ok"] is True
-    assert [(p["package"], p["tests"]) for c in doc["components"] for p in c["packages"]] == [("talker_msgs", 2)]
+    assert doc["ok"] is True and doc["task"] == "test"
+    assert [(p["package"], p["tests"]) for c in doc["results"] for p in c["packages"]] == [("talker_msgs", 2)]
 
 
 def test_colcon_failing_to_run_is_a_test_failure(project: Project, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -375,7 +377,7 @@ def test_dry_run_prints_the_plan_without_docker(project: Project, monkeypatch: p
 
 def test_the_cli_repeats_packages_select_and_exits_2_on_an_unknown_package(project: Project) -> None:
     def robocore(*args: str) -> subprocess.CompletedProcess[str]:
-        env = {k: v for k, v in os.environ.items() if k != "ROBOCORE_PROJECT"}
+        env = dict(os.environ)
         return subprocess.run([sys.executable, "-m", "robocore", "-p", str(project.root), "test", *args],
                               capture_output=True, text=True, timeout=60, env=env)
 
@@ -400,10 +402,12 @@ def test_the_project_collection_has_the_task() -> None:
 def test_dry_run_json_is_one_document(project: Project, monkeypatch: pytest.MonkeyPatch,
                                       capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setattr(package_tests, "local_docker", lambda: pytest.fail("the dry run contacted Docker"))
-    package_tests.test(Options(project_dir=project.root, dry_run=True, json=True), component="listener")
+    options = Options(project_dir=project.root, dry_run=True, json=True, task="test")
+    package_tests.test(options, component="listener")
+    options.report.finish()
     doc = json.loads(capsys.readouterr().out)
-    assert doc["dry_run"] is True
-    [listener] = doc["components"]
+    [listener] = doc["results"]
+    assert listener["kind"] == "test_plan"
     assert listener["argv"] == colcon.workspace_test_argv()
     assert listener["mounts"][str(project.root / "ws/listener")] == "/robocore/ws"
     assert (listener["packages"], listener["built"]) == (["demo_listener"], False)

@@ -25,6 +25,7 @@ from robocore.commands import init
 from robocore.config.loader import load_robot
 from robocore.config.schema import robot_schema, schema_json
 from robocore.errors import UsageError
+from robocore.project import ProjectFolder
 
 PROJECT_TASKS = ["validate", "prepare-base", "stage", "build", "sync", "run", "shell", "connect",
                  "release", "status", "logs", "down"]
@@ -88,7 +89,7 @@ def test_generated_robot_yaml_validates_with_the_defaults(project: Path) -> None
 def test_robot_yaml_points_editors_at_the_schema_init_wrote(project: Path) -> None:
     first = (project / "robot.yaml").read_text().splitlines()[0]
     assert first == "# yaml-language-server: $schema=.robocore/robot.schema.json"
-    written = (project / init.SCHEMA_FILE).read_text()
+    written = ProjectFolder(project).schema_file.read_text()
     assert json.loads(written) == json.loads(schema_json())
     jsonschema.validate(robot_doc(project), robot_schema())
 

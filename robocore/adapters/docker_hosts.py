@@ -22,6 +22,7 @@ from __future__ import annotations
 import subprocess
 import threading
 from concurrent.futures import Future
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -200,9 +201,17 @@ def _ssh_refused(host: Host, proc: subprocess.CompletedProcess[bytes], remote: l
                          f"is the Docker daemon running on {host.name}? (systemctl status docker)")
 
 
-def _tls_client(host: Host, timeout: int, connect_timeout: int, root: Path) -> docker.DockerClient:
-    from docker.tls import TLSConfig
+@dataclass(frozen=True)
+class TlsFiles:
+    """A TLS host's certificate files, as paths on this machine."""
 
+    ca_cert: str
+    client_cert: str
+    client_key: str
+
+
+def tls_files(host: Host, root: Path) -> TlsFiles:
+    """The TLS files of ``host``: ``~`` expanded, relative paths taken from the project folder ``root``."""
     if host.tls is None:
         raise HostError(f"host {host.name}: docker: tls needs tls: {{ca_cert, client_cert, client_key}} in robot.yaml")
 
@@ -210,8 +219,14 @@ def _tls_client(host: Host, timeout: int, connect_timeout: int, root: Path) -> d
         path = Path(value).expanduser()
         return str(path if path.is_absolute() else root / path)
 
-    tls = TLSConfig(client_cert=(resolve(host.tls.client_cert), resolve(host.tls.client_key)),
-                    ca_cert=resolve(host.tls.ca_cert), verify=True)
+    return TlsFiles(resolve(host.tls.ca_cert), resolve(host.tls.client_cert), resolve(host.tls.client_key))
+
+
+def _tls_client(host: Host, timeout: int, connect_timeout: int, root: Path) -> docker.DockerClient:
+    from docker.tls import TLSConfig
+
+    files = tls_files(host, root)
+    tls = TLSConfig(client_cert=(files.client_cert, files.client_key), ca_cert=files.ca_cert, verify=True)
     return _tcp_like(host, f"https://{url_host(host.ip, host.docker_port or 2376)}", timeout, connect_timeout, tls)
 
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from robocore.errors import DockerError
+from robocore.ui import human_size
 
 if TYPE_CHECKING:
     import docker
@@ -36,7 +37,7 @@ class Delivery:
     bytes: int = 0
 
     def __str__(self) -> str:
-        return f"{self.image}: {self.action}" + (f" ({_human(self.bytes)})" if self.bytes else "")
+        return f"{self.image}: {self.action}" + (f" ({human_size(self.bytes)})" if self.bytes else "")
 
 
 def normalize(image: str) -> str:
@@ -281,12 +282,3 @@ def _without_layers(chunks: Iterable[bytes], skip: set[str]) -> Iterator[bytes]:
             spool.seek(0)
             while block := spool.read(1 << 20):
                 yield block
-
-
-def _human(n: int) -> str:
-    size = float(n)
-    for unit in ("B", "KB", "MB", "GB"):
-        if size < 1024 or unit == "GB":
-            return f"{size:.0f} {unit}" if unit == "B" else f"{size:.1f} {unit}"
-        size /= 1024
-    return f"{n} B"

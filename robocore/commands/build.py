@@ -1,9 +1,9 @@
-"""build: colcon inside each component's staged image, incremental, with a copy fast path (issues #3, #4).
+"""build: colcon inside each component's staged image, incremental, with a copy fast path.
 
 The workspace and the outputs (``.robocore/build/<c>/{build,install,log}``) are bind-mounted
 into a throw-away container of the component's staged image, which runs as the invoking user.
 A package is rebuilt only when its source hash differs from the last successful build's, which
-is recorded in ``.robocore/build/<c>/.robocore-build.json`` (``BUILD_STATE``) together with the
+is recorded in the component's build state (:mod:`robocore.commands.state`) together with the
 source file list and the plain copies colcon made of them. When an edit only touches files that
 colcon copies verbatim (Python modules of ament_python packages, launch and config files), the new
 contents are written over those copies and colcon is not started at all
@@ -13,24 +13,19 @@ contents are written over those copies and colcon is not started at all
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 import time
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from robocore.commands.context import DRY_RUN_UNKNOWN, Options
-from robocore.commands.images import (
-    MAX_PARALLEL,
-    Outcome,
-    Reporter,
-    check_emulation,
-    native_arch,
-)
-from robocore.commands.workspace import check_workspace, local_docker, selected_components, workspace_files
+from robocore.commands.hosts import in_parallel
+from robocore.commands.machine import MAX_PARALLEL, check_emulation, local_docker, native_arch
+from robocore.commands.reporting import Outcome, Reporter, report_outcomes
+from robocore.commands.state import read_build_state, write_build_state
+from robocore.commands.workspace import check_workspace, selected_components, workspace_files
 from robocore.config.model import Component
 from robocore.errors import BuildError, UsageError
 from robocore.files import write_atomic
@@ -38,7 +33,6 @@ from robocore.plan import colcon, dockerfiles, install_patch, naming
 from robocore.plan.inputs import FileDigest, digest_bytes, tree_hash
 from robocore.project import Project
 
-BUILD_STATE = ".robocore-build.json"
 #: Output folders searched for plain copies of source files (not log/).
 COPY_FOLDERS = ("install", "build")
 
@@ -86,6 +80,7 @@ class BuildPlan:
     arch: str
     workspace: Path
     out: Path
+    state_file: Path  # the build state, read to plan and written after a success
     packages: dict[str, str]
     files: WorkspaceFiles
     roots: dict[str, str]  # package -> workspace-relative folder
@@ -98,14 +93,6 @@ class BuildPlan:
     def argv(self) -> list[str]:
         """The colcon command line."""
         return colcon.workspace_build_argv(self.changed or ())
-
-
-def _previous(out: Path) -> dict[str, Any]:
-    try:
-        data = json.loads((out / BUILD_STATE).read_text())
-        return data if isinstance(data, dict) else {}
-    except (OSError, ValueError):
-        return {}
 
 
 def _recorded_files(before: Mapping[str, Any]) -> WorkspaceFiles:
@@ -130,7 +117,8 @@ def plan_build(project: Project, comp: Component, image_id: str | None, *, full:
     out = project.build_dir(comp.name)
     roots, files = workspace_packages(ws)
     packages = _hashes(roots, files)
-    before = _previous(out)
+    state_file = project.build_state_file(comp.name)
+    before = read_build_state(state_file)
     old: dict[str, str] = before.get("packages", {}) if isinstance(before.get("packages"), dict) else {}
     changed: list[str] | None
     patches: list[install_patch.Patch] = []
@@ -152,7 +140,8 @@ def plan_build(project: Project, comp: Component, image_id: str | None, *, full:
         reason += f"; whether the staged image changed: {DRY_RUN_UNKNOWN}"
     image = f"{naming.component_image(project.robot, project.name, comp.name)}:latest"
     return BuildPlan(component=comp, image=image, image_id=image_id, arch=project.robot.host(comp.runs_on).arch.value,
-                     workspace=ws, out=out, packages=packages, files=files, roots=roots, changed=changed, reason=reason,
+                     workspace=ws, out=out, state_file=state_file, packages=packages,
+                     files=files, roots=roots, changed=changed, reason=reason,
                      patches=tuple(patches), copies=copies)
 
 
@@ -233,7 +222,7 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callabl
 def build(options: Options, *, component: str | None, full: bool = False) -> None:
     """colcon-build component workspaces inside their staged images (incremental; plain copies patched)."""
     project = options.load()
-    report = Reporter(options)
+    report = options.report
     comps = [c for c in selected_components(project, component) if c.folder is not None]
     if component and not comps:
         raise UsageError(f"component {component!r} has no folder: nothing to build")
@@ -244,14 +233,17 @@ def build(options: Options, *, component: str | None, full: bool = False) -> Non
         plans = [plan_build(project, comp, None, full=full) for comp in comps]
     else:
         client = local_docker()
-        for comp in comps:
-            ref = f"{naming.component_image(project.robot, project.name, comp.name)}:latest"
-            state = image_state(client, ref)
-            if state is None:
-                raise BuildError(f"component {comp.name}: no staged image {ref}", hint="run `stage` first")
-            check_emulation(project.robot.host(comp.runs_on).arch.value, native_arch(), f"component {comp.name}")
-            plans.append(plan_build(project, comp, state.id, full=full))
-        client.close()
+        try:
+            for comp in comps:
+                ref = f"{naming.component_image(project.robot, project.name, comp.name)}:latest"
+                state = image_state(client, ref)
+                if state is None:
+                    raise BuildError(f"component {comp.name}: no staged image {ref}", hint="run `stage` first")
+                check_emulation(project.robot.host(comp.runs_on).arch.value, native_arch(),
+                                f"component {comp.name}")
+                plans.append(plan_build(project, comp, state.id, full=full))
+        finally:
+            client.close()
     outcomes: list[Outcome] = []
     todo: list[BuildPlan] = []
     for plan in plans:
@@ -261,12 +253,15 @@ def build(options: Options, *, component: str | None, full: bool = False) -> Non
         if options.dry_run:
             if plan.patches:
                 report.plain(f"# {plan.component.name} ({plan.reason}):")
-                for patch in plan.patches:
-                    report.plain(f"  copy {patch.package}/{patch.source} -> " + ", ".join(patch.targets))
+                steps = [f"copy {patch.package}/{patch.source} -> " + ", ".join(patch.targets)
+                         for patch in plan.patches]
             else:
                 report.plain(f"# {plan.component.name} ({plan.reason}) in {plan.image}:")
-                report.plain("  " + " ".join(plan.argv))
-            outcomes.append(Outcome(what=plan.component.name, role="build", action="would-build", reason=plan.reason))
+                steps = [" ".join(plan.argv)]
+            for step in steps:
+                report.plain(f"  {step}")
+            outcomes.append(Outcome(what=plan.component.name, role="build", action="would-build", reason=plan.reason,
+                                    plan="\n".join(steps)))
             continue
         if plan.patches:
             patched = apply_patches(plan)
@@ -277,24 +272,20 @@ def build(options: Options, *, component: str | None, full: bool = False) -> Non
                                        "(colcon: an output differs from what the last build wrote)")
         todo.append(plan)
     outcomes += _run_colcon(project, todo, report)
-    report.done(outcomes)
+    report_outcomes(report, outcomes)
 
 
 def _run_colcon(project: Project, todo: Sequence[BuildPlan], report: Reporter) -> list[Outcome]:
     """colcon builds of several components side by side (one container each); every one is tried."""
     if not todo:
         return []
-    outcomes: list[Outcome] = []
-    errors: list[BaseException] = []
-    with report.progress() as update, ThreadPoolExecutor(max_workers=min(MAX_PARALLEL, len(todo))) as pool:
-        futures = [pool.submit(_colcon, project, plan, report, update) for plan in todo]
-        for future in futures:
-            try:
-                outcomes.append(future.result())
-            except BaseException as exc:  # collected: the other components still build
-                errors.append(exc)
+    with report.progress() as update:
+        done = in_parallel(todo, lambda plan: _colcon(project, plan, report, update), limit=MAX_PARALLEL,
+                           name="robocore-colcon")
+    outcomes = [result for _, result in done if not isinstance(result, BaseException)]
+    errors = [result for _, result in done if isinstance(result, BaseException)]
     if errors:
-        report.done(outcomes)
+        report_outcomes(report, outcomes)
         raise errors[0]
     return outcomes
 
@@ -323,17 +314,16 @@ def record_build(plan: BuildPlan) -> None:
     outputs = output_candidates(plan.out, plan.files)
     copies = {package: install_patch.verbatim_copies(package, members, outputs)
               for package, members in plan.files.items()}
-    _write_state(plan, copies)
+    _record(plan, copies)
 
 
-def _write_state(plan: BuildPlan, copies: Mapping[str, Mapping[str, list[str]]]) -> None:
-    state = {
+def _record(plan: BuildPlan, copies: Mapping[str, Mapping[str, list[str]]]) -> None:
+    write_build_state(plan.state_file, {
         "image": plan.image_id,
         "packages": plan.packages,
         "files": {p: {rel: [d, x] for rel, (d, x) in sorted(m.items())} for p, m in sorted(plan.files.items())},
         "copies": copies,
-    }
-    write_atomic(plan.out / BUILD_STATE, json.dumps(state, indent=1, sort_keys=True))
+    })
 
 
 # ---------------------------------------------------------------------------------------------- fast path
@@ -360,7 +350,7 @@ def apply_patches(plan: BuildPlan) -> Outcome | None:
             path = plan.out / target
             write_atomic(path, data, mode=path.stat().st_mode & 0o7777)
     assert plan.copies is not None
-    _write_state(plan, plan.copies)
+    _record(plan, plan.copies)
     return Outcome(what=plan.component.name, role="build", action="built", reason=plan.reason,
                    image_id=plan.image_id, seconds=time.monotonic() - start,
                    packages=sorted({p.package for p in plan.patches}))

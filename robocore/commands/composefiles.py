@@ -4,19 +4,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from robocore.commands.state import with_local_build
 from robocore.files import PRIVATE, write_atomic
 from robocore.plan import compose, discovery
+from robocore.plan.containers import host_specs
 from robocore.project import Project
 
 
-def dds_dir(project: Project) -> Path:
-    """``.robocore/dds/``: the files of the robot's discovery kind (DDS profiles), mounted at naming.CONTAINER_DDS."""
-    return project.state_dir / "dds"
-
-
 def write_dds_profiles(project: Project) -> list[Path]:
-    """Write every file of the robot's discovery kind; remove stale ones robocore wrote before; return the paths."""
-    folder = dds_dir(project)
+    """Write every file of the robot's discovery kind (DDS profiles); remove stale ones robocore wrote before;
+    return the paths."""
+    folder = project.dds_dir
     files = discovery.for_robot(project.robot).files()
     folder.mkdir(parents=True, exist_ok=True)  # mounted by every component, even when the kind has no files
     paths = []
@@ -34,9 +32,6 @@ def write_compose_files(project: Project, *, tag: str | None = None) -> list[Pat
     """Write one compose file per host (and the DDS profiles they mount); return the compose paths.
 
     Compose files hold the containers' environment, so they are mode 0600 whatever the umask."""
-    from robocore.commands.run import with_local_build
-    from robocore.plan.containers import host_specs
-
     write_dds_profiles(project)
     paths = []
     for host in project.robot.hosts:
@@ -47,7 +42,7 @@ def write_compose_files(project: Project, *, tag: str | None = None) -> list[Pat
         write_atomic(path, compose.render(project, host.name, tag=tag, specs=specs), mode=PRIVATE)
         paths.append(path)
     known = {p.name for p in paths}
-    for stale in project.compose_file("x").parent.glob("*.yaml"):
+    for stale in project.compose_dir.glob("*.yaml"):
         if stale.name not in known:
             stale.unlink()
     return paths

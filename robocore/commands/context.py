@@ -1,10 +1,12 @@
-"""What every command receives from its task: the project folder and output flags."""
+"""What every command receives from its task: the project folder, the output flags and the reporter."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
+from robocore.commands.reporting import Reporter
 from robocore.project import Project
 
 #: What a dry run says where the plan needs an answer only a Docker daemon or a host could give.
@@ -21,6 +23,13 @@ class Options:
     json: bool = False
     #: The whole command line, when a CLI runs the task: it says which remote steps follow (ssh warm-up).
     argv: tuple[str, ...] = ()
+    #: The task's name, as the JSON document names it.
+    task: str = ""
+
+    @cached_property
+    def report(self) -> Reporter:
+        """Where this task's output goes (one reporter per task run)."""
+        return Reporter(self.task, json=self.json, quiet=self.quiet)
 
     def load(self) -> Project:
         """Load the project (raises ConfigError with every problem)."""
@@ -44,6 +53,6 @@ def warm_remote_hosts(project: Project, argv: list[str]) -> None:
                  if h.access is DockerAccess.ssh]
     warmup.warm_loaded(project.root, endpoints, argv)
     if warmup.wants_docker(argv):
-        from robocore.commands.run import prefetch_connections
+        from robocore.commands.hosts import prefetch_connections
 
         prefetch_connections(project)

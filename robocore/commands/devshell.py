@@ -1,10 +1,10 @@
-"""shell: a dev container in a component's environment (issue #5).
+"""shell: a dev container in a component's environment.
 
 Plan (:mod:`robocore.plan.devshell`), then execute: write the shell files, the DDS profiles
 and the xauth cookie under ``.robocore/``, create and start the container (or join the
 running one), and ``docker exec`` a login bash or ``bash -lc CMD`` as the developer. When the
 last session of a container ends, the container is removed (its home and workspace live on
-the dev machine), as seed 001's ``docker run --rm`` did.
+the dev machine), as a ``docker run --rm`` shell would be.
 """
 
 from __future__ import annotations
@@ -23,14 +23,15 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from robocore import ui
 from robocore.adapters import x11
 from robocore.adapters.docker_hosts import local_client
 from robocore.commands.context import Options
+from robocore.commands.reporting import Reporter
 from robocore.errors import DockerError, ToolMissing, UsageError
 from robocore.files import write_atomic
 from robocore.plan import devshell as plan
 from robocore.plan import discovery, naming
+from robocore.plan.containers import X11_SOCKET
 from robocore.project import Project
 
 if TYPE_CHECKING:
@@ -70,17 +71,17 @@ def run(options: Options, *, component: str, cmd: str | None, new: bool, devices
     stdin_tty = sys.stdin.isatty()
     argv = plan.exec_argv(spec, cmd=cmd, stdin_tty=stdin_tty)
 
+    report = options.report
     if options.dry_run or client is None:
         out = plan.describe(spec)
         out["exec"] = argv
-        print(json.dumps(out, indent=2))
+        report.plain(json.dumps(out, indent=2))
         return 0
 
     if request.devices_all:  # said even with --quiet: the shell gets the whole machine's hardware
-        ui.console().print(f"warning: {DEVICES_ALL_WARNING}", markup=False, soft_wrap=True)
-    if not options.quiet:
-        for note in spec.notes:
-            ui.console().print(f"note: {note}", markup=False)
+        report.notice(f"warning: {DEVICES_ALL_WARNING}")
+    for note in spec.notes:
+        report.info(f"note: {note}")
     docker_cli = shutil.which("docker")
     if docker_cli is None:
         raise ToolMissing("the docker command-line client is not installed (the shell runs `docker exec`)",
@@ -90,10 +91,10 @@ def run(options: Options, *, component: str, cmd: str | None, new: bool, devices
     with _container_lock(project, spec.name):
         container = None if new else _running(client, spec.name)
         if container is not None:
-            _warn_if_stale(client, container, spec, quiet=options.quiet)
-            _refresh_cookie(project, spec, machine)
+            _warn_if_stale(client, container, spec, report)
+            _refresh_cookie(project, spec, report)
         else:
-            container = _create(client, project, spec, machine, quiet=options.quiet)
+            container = _create(client, project, spec, machine, report)
         proc = subprocess.Popen(argv)
         _wait_session_registered(client, container, proc)
     try:
@@ -143,7 +144,7 @@ def gather_machine(project: Project, request: plan.ShellRequest, *, uid: int, gi
     term = os.environ.get("TERM") if sys.stdin.isatty() else None
     return plan.DevMachine(
         uid=uid, gid=gid, user=os.environ.get("USER"), display=display,
-        x11_sockets=Path(plan.X11_SOCKETS).is_dir(), xauth_cookie=False, wayland_socket=wayland_socket,
+        x11_sockets=Path(X11_SOCKET).is_dir(), xauth_cookie=False, wayland_socket=wayland_socket,
         nvidia_runtime=nvidia, device_gids=tuple(sorted(gids)), term=term,
     )
 
@@ -189,8 +190,9 @@ def _free_number(client: docker.DockerClient, project: Project, component: str) 
     return number
 
 
-def _warn_if_stale(client: docker.DockerClient, container: Container, spec: plan.ShellSpec, *, quiet: bool) -> None:
-    if quiet:
+def _warn_if_stale(client: docker.DockerClient, container: Container, spec: plan.ShellSpec,
+                   report: Reporter) -> None:
+    if report.quiet:
         return
     labels = container.labels or {}
     reasons = []
@@ -202,8 +204,8 @@ def _warn_if_stale(client: docker.DockerClient, container: Container, spec: plan
     except Exception:  # image gone: nothing to compare
         pass
     for reason in reasons:
-        ui.console().print(f"note: joining the running dev container {spec.name}, but {reason}; "
-                           "leave all its shells to start a fresh one, or use --new", markup=False)
+        report.info(f"note: joining the running dev container {spec.name}, but {reason}; "
+                    "leave all its shells to start a fresh one, or use --new")
 
 
 def _ensure_dir(path: Path, owner: tuple[int, int]) -> None:
@@ -214,12 +216,12 @@ def _ensure_dir(path: Path, owner: tuple[int, int]) -> None:
 
 
 def _write_files(project: Project, spec: plan.ShellSpec) -> None:
-    folder = plan.shell_dir(project)
+    folder = project.shell_dir
     source = resources.files("robocore.resources").joinpath("shell")
     for name in plan.SHELL_FILES:
         write_atomic(folder / name, source.joinpath(name).read_bytes(), mode=0o644)
     for name, text in discovery.for_robot(project.robot).files().items():
-        write_atomic(plan.dds_dir(project) / name, text)
+        write_atomic(project.dds_dir / name, text)
     owner = (spec.uid, spec.gid)
     for mount in spec.mounts:
         src = Path(mount.source)
@@ -229,23 +231,23 @@ def _write_files(project: Project, spec: plan.ShellSpec) -> None:
             src.mkdir(parents=True, exist_ok=True)
 
 
-def _refresh_cookie(project: Project, spec: plan.ShellSpec, machine: plan.DevMachine) -> bool:
+def _refresh_cookie(project: Project, spec: plan.ShellSpec, report: Reporter) -> bool:
     display = spec.session_env.get("DISPLAY")
     if not display:
         return False
-    folder = plan.x11_dir(project, spec.name)
+    folder = project.x11_dir(spec.name)
     try:
         written = x11.write_cookie_file(display, folder, file_name=plan.XAUTH_FILE, owner=(spec.uid, spec.gid))
     except ToolMissing as missing:
-        ui.console().print(f"note: {missing.message}", markup=False)
+        report.notice(f"note: {missing.message}")
         return False
     if not written:
-        ui.console().print(f"note: no xauth cookie for DISPLAY={display}: X programs may be refused", markup=False)
+        report.notice(f"note: no xauth cookie for DISPLAY={display}: X programs may be refused")
     return written
 
 
 def _create(client: docker.DockerClient, project: Project, spec: plan.ShellSpec, machine: plan.DevMachine,
-            *, quiet: bool) -> Container:
+            report: Reporter) -> Container:
     from docker.errors import APIError, ImageNotFound
 
     comp = project.component(spec.component)
@@ -256,7 +258,7 @@ def _create(client: docker.DockerClient, project: Project, spec: plan.ShellSpec,
                 else f"run `robocore stage --component {comp.name}` first")
         raise UsageError(f"component {comp.name}: image {spec.image} is not on this machine", hint=hint) from None
     _write_files(project, spec)
-    _refresh_cookie(project, spec, machine)
+    _refresh_cookie(project, spec, report)
     kwargs: dict[str, Any] = spec.container_kwargs()
     if spec.gpus:
         from docker.types import DeviceRequest
@@ -277,8 +279,7 @@ def _create(client: docker.DockerClient, project: Project, spec: plan.ShellSpec,
         container.remove(force=True)
         raise DockerError(f"component {comp.name}: cannot start dev container {spec.name}: {_explain(exc)}",
                           hint=_hint(spec, exc)) from None
-    if not quiet:
-        ui.console().print(f"started dev container {spec.name} from {spec.image}", markup=False)
+    report.info(f"started dev container {spec.name} from {spec.image}")
     _wait_ready(container, spec)
     return container
 
@@ -317,7 +318,7 @@ def _wait_ready(container: Container, spec: plan.ShellSpec) -> None:
 @contextlib.contextmanager
 def _container_lock(project: Project, name: str) -> Iterator[None]:
     """Serialise "find or create, then start a session" against "last session left, remove"."""
-    folder = plan.shell_dir(project)
+    folder = project.shell_dir
     folder.mkdir(parents=True, exist_ok=True)
     with open(folder / f".{name}.lock", "a+b") as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
@@ -370,4 +371,4 @@ def _remove_if_idle(client: docker.DockerClient, container: Container, project: 
         pass
     except APIError as exc:
         raise DockerError(f"cannot remove dev container {name}: {_explain(exc)}") from None
-    shutil.rmtree(plan.x11_dir(project, name), ignore_errors=True)
+    shutil.rmtree(project.x11_dir(name), ignore_errors=True)

@@ -1,4 +1,4 @@
-"""doctor: check every host and say what to fix (issue #4).
+"""doctor: check every host and say what to fix.
 
 Per host: its Docker daemon is reachable (within the connect timeout) and recent enough, its
 CPU architecture is the one robot.yaml says, the file system of ``mount_root`` has free space,
@@ -9,21 +9,20 @@ the exit code is non-zero when there is any problem.
 from __future__ import annotations
 
 import shutil
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 from robocore.adapters import ssh
 from robocore.adapters.docker_hosts import client_for, describe
 from robocore.commands.context import Options
-from robocore.config.model import DockerAccess, Host
-from robocore.errors import HostError, RobocoreError
+from robocore.commands.hosts import for_each_host, select_hosts
+from robocore.config.model import DockerAccess, Host, docker_arch
+from robocore.errors import GroupError, HostError, RobocoreError
 from robocore.project import Project
 
 #: Below this much free space on mount_root's file system, doctor complains.
 MIN_FREE_BYTES = 2 * 1024**3
 MIN_DOCKER = (20, 10)
-_ARCH = {"x86_64": "amd64", "amd64": "amd64", "aarch64": "arm64", "arm64": "arm64"}
 
 # $1 = mount_root: df of its deepest existing ancestor (POSIX df -P, 1K blocks).
 _DF_SCRIPT = """\
@@ -33,13 +32,26 @@ df -P -k -- "$d"
 """
 
 
+@dataclass(frozen=True)
+class Finding:
+    """A problem doctor found, and how to fix it."""
+
+    problem: str
+    hint: str
+
+
 @dataclass
 class HostReport:
     """What doctor found on one host."""
 
+    kind: ClassVar[str] = "host_check"
     host: str
     facts: list[str] = field(default_factory=list)
-    problems: list[tuple[str, str]] = field(default_factory=list)  # (problem, hint)
+    problems: list[Finding] = field(default_factory=list)
+
+    def found(self, problem: str, hint: str) -> None:
+        """Record a problem and its hint."""
+        self.problems.append(Finding(problem, hint))
 
 
 class DoctorProblems(HostError):
@@ -54,9 +66,9 @@ class DoctorProblems(HostError):
         """``host: problem`` then ``hint: ...`` for each problem."""
         out = []
         for report in self.reports:
-            for problem, hint in report.problems:
-                out.append(f"{report.host}: {problem}")
-                out.append(f"hint: {hint}")
+            for finding in report.problems:
+                out.append(f"{report.host}: {finding.problem}")
+                out.append(f"hint: {finding.hint}")
         return out
 
 
@@ -64,23 +76,23 @@ def doctor(options: Options, *, host: str | None) -> None:
     """Check hosts; print what was found; raise DoctorProblems when anything needs fixing."""
     from rich.markup import escape
 
-    from robocore.ui import console
-
     project = options.load()
-    hosts = [project.host(host)] if host else list(project.robot.hosts)
-    with ThreadPoolExecutor(max_workers=max(1, len(hosts))) as pool:
-        reports = list(pool.map(lambda h: check_host(project, h), hosts))
+    hosts = select_hosts(project, host)
+    results, failures = for_each_host(hosts, lambda h: check_host(project, h))
+    if failures:  # check_host collects problems; anything raised is not a finding about the host
+        raise GroupError(failures, list(results))
+    reports = [results[h.name] for h in hosts]
     if any(not h.is_local for h in hosts):
         local = HostReport("this machine")
         for tool, package in (("rsync", "rsync"), ("ssh", "openssh-client")):
             if shutil.which(tool) is None:
-                local.problems.append((f"{tool} is not installed (sync needs it)", f"apt-get install {package}"))
+                local.found(f"{tool} is not installed (sync needs it)", f"apt-get install {package}")
         if local.problems:
             reports.append(local)
-    out = console()
+    options.report.add(*reports)
     for report in reports:
         mark = "[green]ok[/]" if not report.problems else f"[red]{len(report.problems)} problem(s)[/]"
-        out.print(f"{report.host}: {mark}  " + escape(", ".join(report.facts)), markup=True, highlight=False)
+        options.report.info(f"{report.host}: {mark}  " + escape(", ".join(report.facts)), markup=True)
     if any(r.problems for r in reports):
         raise DoctorProblems([r for r in reports if r.problems])
 
@@ -92,8 +104,8 @@ def check_host(project: Project, host: Host) -> HostReport:
     try:
         client = client_for(host, timeout=20, project_root=project.root)
     except RobocoreError as exc:
-        report.problems.append((exc.message, f"is {host.name} powered and on the network? "
-                                f"try `ssh -p {host.ssh_port} {ssh.destination(host)} docker version`"))
+        report.found(exc.message, f"is {host.name} powered and on the network? "
+                     f"try `ssh -p {host.ssh_port} {ssh.destination(host)} docker version`")
         if not host.is_local and host.access is not DockerAccess.ssh:
             _check_ssh(host, report)  # sync still needs ssh when Docker is reached over TLS/TCP
         return report
@@ -113,27 +125,27 @@ def _check_docker(host: Host, client: Any, report: HostReport) -> None:
     text = str(version.get("Version", "?"))
     report.facts.append(f"docker {text}")
     if _version_tuple(text) < MIN_DOCKER:
-        report.problems.append((f"Docker {text} is older than {'.'.join(map(str, MIN_DOCKER))}",
-                                "upgrade docker (Debian/Ubuntu: apt-get install docker.io)"))
+        report.found(f"Docker {text} is older than {'.'.join(map(str, MIN_DOCKER))}",
+                     "upgrade docker (Debian/Ubuntu: apt-get install docker.io)")
     machine = str(client.info().get("Architecture", "?"))
-    arch = _ARCH.get(machine, machine)
+    arch = docker_arch(machine)
     report.facts.append(arch)
     if arch != host.arch.value:
-        report.problems.append((f"robot.yaml says arch: {host.arch.value} but the daemon runs on {machine}",
-                                f"set arch: {arch} for host {host.name} in robot.yaml"))
+        report.found(f"robot.yaml says arch: {host.arch.value} but the daemon runs on {machine}",
+                     f"set arch: {arch} for host {host.name} in robot.yaml")
 
 
 def _check_ssh(host: Host, report: HostReport) -> None:
     try:
         proc = ssh.run(host, ["sh", "-c", _DF_SCRIPT, "sh", host.deploy_root], timeout=20)
     except RobocoreError as exc:
-        report.problems.append((f"ssh: {exc.message}", exc.hint or "check ssh access"))
+        report.found(f"ssh: {exc.message}", exc.hint or "check ssh access")
         return
     _disk_fact(host.deploy_root, _parse_df(proc.stdout.decode()), report)
     rsync = ssh.run(host, ["sh", "-c", "command -v rsync && rsync --version | head -n 1"], timeout=20, check=False)
     if rsync.returncode != 0:
-        report.problems.append(("rsync is not installed on the host (sync needs it)",
-                                f"on {host.name}: apt-get install rsync"))
+        report.found("rsync is not installed on the host (sync needs it)",
+                     f"on {host.name}: apt-get install rsync")
     else:
         words = rsync.stdout.decode().splitlines()[-1].split()
         report.facts.append(f"rsync {words[2] if len(words) > 2 else '?'}")
@@ -146,12 +158,12 @@ def _check_local_disk(project: Project, report: HostReport) -> None:
 
 def _disk_fact(where: str, free: int | None, report: HostReport) -> None:
     if free is None:
-        report.problems.append((f"could not read free disk space for {where}", "run `df -P` on the host"))
+        report.found(f"could not read free disk space for {where}", "run `df -P` on the host")
         return
     report.facts.append(f"{free / 1024**3:.1f} GiB free at {where}")
     if free < MIN_FREE_BYTES:
-        report.problems.append((f"only {free / 1024**2:.0f} MiB free on the file system of {where}",
-                                "free space (docker image prune, old releases) or set mount_root elsewhere"))
+        report.found(f"only {free / 1024**2:.0f} MiB free on the file system of {where}",
+                     "free space (docker image prune, old releases) or set mount_root elsewhere")
 
 
 def _parse_df(text: str) -> int | None:

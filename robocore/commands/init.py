@@ -19,11 +19,12 @@ from pathlib import Path
 from typing import Any
 
 from robocore.adapters import origin
+from robocore.commands.reporting import Reporter
 from robocore.config.model import Arch, BaseKind, RosDistro, docker_arch
 from robocore.errors import UsageError
+from robocore.project import ProjectFolder
 
 #: Where the generated robot.yaml's ``yaml-language-server`` comment points (relative to the project).
-SCHEMA_FILE = Path(".robocore") / "robot.schema.json"
 
 
 @dataclass(frozen=True)
@@ -159,10 +160,11 @@ def _repository_of(folder: Path) -> str:
 
 
 def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry_run: bool,
-        source: str | None = None, ref: str | None = None) -> None:
+        source: str | None = None, ref: str | None = None, report: Reporter | None = None) -> None:
     """Render the template into ``path``; with an existing project, only add missing files."""
     from robocore.adapters import copier_adapter
-    from robocore.ui import console
+
+    report = report or Reporter("init")
 
     if str(path).startswith("-"):
         raise UsageError(f"{path}: not a project folder (it starts with '-')",
@@ -181,10 +183,9 @@ def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry
         )
     template = choose_template(source, ref)
     if existing:
-        console().print(f"{destination}: existing robocore project; only missing template files are added",
-                        markup=False)
+        report.notice(f"{destination}: existing robocore project; only missing template files are added")
         if data:
-            console().print("note: robot.yaml is kept as it is; change ros_distro or base.kind in it yourself")
+            report.notice("note: robot.yaml is kept as it is; change ros_distro or base.kind in it yourself")
     request = copier_adapter.CopyRequest(
         template=template.location,
         destination=destination,
@@ -196,28 +197,27 @@ def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry
         vcs_ref=template.ref,
     )
     copier_adapter.copy(request)
-    console().print(template.note, markup=False, soft_wrap=True)
+    report.notice(template.note)
     if dry_run:
-        console().print(f"would write {destination / SCHEMA_FILE} and check {destination / 'robot.yaml'}",
-                        markup=False)
+        folder = ProjectFolder(destination)
+        report.notice(f"would write {folder.schema_file} and check {folder.robot_file}")
         return
     _write_schema(destination)
-    _check(destination)
+    _check(destination, report)
 
 
 def _write_schema(project: Path) -> None:
     from robocore.config.schema import schema_json
     from robocore.files import write_atomic
 
-    write_atomic(project / SCHEMA_FILE, schema_json() + "\n")
+    write_atomic(ProjectFolder(project).schema_file, schema_json() + "\n")
 
 
-def _check(project: Path) -> None:
+def _check(project: Path, report: Reporter) -> None:
     from robocore.config.loader import load_robot
-    from robocore.ui import console
 
     robot = load_robot(project)
-    console().print(
-        f"{project / 'robot.yaml'}: ok — ROS 2 {robot.ros_distro.value}, base {robot.base.kind.value}, "
+    report.notice(
+        f"{ProjectFolder(project).robot_file}: ok — ROS 2 {robot.ros_distro.value}, base {robot.base.kind.value}, "
         f"{len(robot.hosts)} host(s), {len(robot.components)} component(s)"
     )

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import queue
 import shlex
@@ -12,18 +11,19 @@ import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import datetime, timezone
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from robocore.commands.context import Options
-from robocore.commands.run import connect as connect_host
-from robocore.commands.run import for_each_host, managed_containers, print_table, select_hosts
+from robocore.commands.hosts import connect as connect_host
+from robocore.commands.hosts import for_each_host, managed_containers, select_hosts
+from robocore.commands.reporting import Reporter
 from robocore.config.model import DockerAccess, Host
 from robocore.errors import DockerError, GroupError, RobocoreError, UsageError
 from robocore.plan import discovery, naming
 from robocore.plan.addresses import url_host
 from robocore.plan.containers import discovery_service
 from robocore.project import Project
-from robocore.ui import clean, console, stdout
+from robocore.ui import clean
 
 if TYPE_CHECKING:
     import docker
@@ -39,8 +39,9 @@ LOG_STREAM_TIMEOUT = 7 * 24 * 3600
 
 @dataclass(frozen=True)
 class Row:
-    """One line of the status table."""
+    """One line of the status table: a container of the robot on its host."""
 
+    kind: ClassVar[str] = "container"
     component: str
     host: str
     state: str
@@ -142,6 +143,25 @@ def _running(client: docker.DockerClient, name: str) -> Any:
     return container if container.status == "running" else None
 
 
+@dataclass(frozen=True)
+class RosGraph:
+    """The ROS nodes alive in the graph, and where they were asked (``nodes`` None when no server answered)."""
+
+    kind: ClassVar[str] = "ros_graph"
+    nodes: list[str] | None
+    via: str
+
+
+@dataclass(frozen=True)
+class LogLine:
+    """One line a component's container logged."""
+
+    kind: ClassVar[str] = "log"
+    component: str
+    host: str
+    line: str
+
+
 def collect_status(project: Project, hosts: list[Host]) -> tuple[list[Row], dict[str, RobocoreError]]:
     """Status rows of every reachable host (file order) and the failures of the others."""
     results, failures = for_each_host(hosts, lambda h: _rows(project, h))
@@ -152,28 +172,24 @@ def collect_status(project: Project, hosts: list[Host]) -> tuple[list[Row], dict
 def status(options: Options) -> None:
     """Print the state of every component and the ROS nodes alive in the graph."""
     project = options.load()
+    report = options.report
     hosts = select_hosts(project, None)
     if options.dry_run:
         for h in hosts:
-            stdout().print(f"would list {project.name} containers on {h.name}", markup=False)
-        stdout().print("would run `ros2 node list` as a super client in the discovery server container")
+            report.out(f"would list {project.name} containers on {h.name}")
+        report.out("would run `ros2 node list` as a super client in the discovery server container")
         return
     rows, failures = collect_status(project, hosts)
     nodes, where = ros_nodes(project)
-    if options.json:
-        print(json.dumps({
-            "components": [row.__dict__ for row in rows],
-            "nodes": nodes,
-            "nodes_from": where,
-            "unreachable": {h: e.lines()[0] for h, e in failures.items()},
-        }, indent=2))
-    else:
-        print_status(rows, failures, nodes, where)
+    report.add(*rows, RosGraph(nodes, where))
+    if not options.json:
+        print_status(rows, failures, nodes, where, report=report)
     if failures:
         raise GroupError(failures, sorted({r.host for r in rows}))
 
 
-def print_status(rows: list[Row], failures: dict[str, RobocoreError], nodes: list[str] | None, where: str) -> None:
+def print_status(rows: list[Row], failures: dict[str, RobocoreError], nodes: list[str] | None, where: str, *,
+                 report: Reporter | None = None) -> None:
     """The status table, then the ROS nodes line."""
     from rich.markup import escape
     from rich.table import Table
@@ -188,13 +204,12 @@ def print_status(rows: list[Row], failures: dict[str, RobocoreError], nodes: lis
                       str(row.restarts), escape(row.image))
     for host, error in sorted(failures.items()):
         table.add_row("-", host, "[red]unreachable[/]", "-", "-", escape(error.lines()[0]))
-    print_table(table)
-    out = stdout()
+    report = report or Reporter()
+    report.table(table)
     if nodes is None:
-        out.print(f"ROS nodes: unknown ({where})", markup=False, soft_wrap=True)
+        report.out(f"ROS nodes: unknown ({where})")
     else:
-        out.print(f"ROS nodes ({len(nodes)}, via {where}): " + (", ".join(nodes) if nodes else "none"),
-                  markup=False, soft_wrap=True)
+        report.out(f"ROS nodes ({len(nodes)}, via {where}): " + (", ".join(nodes) if nodes else "none"))
 
 
 # --------------------------------------------------------------------------- logs
@@ -211,29 +226,30 @@ def _component_containers(project: Project, host: Host, component: str | None) -
 
 
 def logs(options: Options, *, component: str | None, follow: bool, tail: int) -> None:
-    """Print container logs of all hosts, each line prefixed by its component; ``follow`` merges live streams."""
+    """Print container logs of all hosts, each line prefixed by its component; ``follow`` merges live streams.
+    With JSON, each line is a result (and with ``follow`` one JSON object per line as it comes)."""
     project = options.load()
+    report = options.report
     if component is not None and component not in {c.name for c in project.robot.components}:
         project.component(component)  # UsageError listing the known components
     hosts = [project.host(project.component(component).runs_on)] if component else select_hosts(project, None)
     if options.dry_run:
         for h in hosts:
-            stdout().print(f"would read logs of {component or 'every container'} on {h.name}", markup=False)
+            report.out(f"would read logs of {component or 'every container'} on {h.name}")
         return
     results, failures = for_each_host(hosts, lambda h: _component_containers(project, h, component))
-    containers = [item for h in hosts for item in sorted(results.get(h.name, []), key=lambda i: i[0])]
+    containers = [(h.name, *item) for h in hosts for item in sorted(results.get(h.name, []), key=lambda i: i[0])]
     for host, error in sorted(failures.items()):
-        console().print(f"{host}: {error.lines()[0]}", style="red", markup=False)
+        report.notice(f"{host}: {error.lines()[0]}", style="red")
     if not containers and not failures:
-        console().print(f"no {project.name} containers" + (f" for {component}" if component else "") + "; run `run`",
-                        markup=False)
-    width = max((len(name) for name, _ in containers), default=0)
+        report.notice(f"no {project.name} containers" + (f" for {component}" if component else "") + "; run `run`")
+    width = max((len(name) for _, name, _ in containers), default=0)
     if not follow:
-        for name, container in containers:
+        for host, name, container in containers:
             for line in _lines(container.logs(tail=tail, stream=False)):
-                _emit(name, width, line)
+                _emit(report, LogLine(name, host, line), width, stream=False)
     else:
-        _follow(containers, width, tail)
+        _follow(report, containers, width, tail)
     if failures:
         raise GroupError(failures, list(results))
 
@@ -250,35 +266,44 @@ def _lines(data: bytes | Iterator[bytes]) -> Iterator[str]:
         yield pending.decode(errors="replace")
 
 
-def _emit(name: str, width: int, line: str) -> None:
-    """One log line behind its component's name. The line is the container's own output: its colours
-    (SGR sequences, which ROS logging uses) are kept, any other control sequence (titles, cursor moves,
-    screen clears) is escaped, and so is the name (a label read from the host)."""
-    sys.stdout.write(f"{clean(name):<{width}} | {clean(line, keep_sgr=True)}\n")
+def _emit(report: Reporter, log: LogLine, width: int, *, stream: bool) -> None:
+    """One log line behind its component's name, or (JSON) a result, streamed at once when following.
+
+    The line is the container's own output: its colours (SGR sequences, which ROS logging uses) are
+    kept, any other control sequence (titles, cursor moves, screen clears) is escaped, and so is the
+    name (a label read from the host)."""
+    if report.json:
+        if stream:
+            report.stream(log)
+        else:
+            report.add(log)
+        return
+    sys.stdout.write(f"{clean(log.component):<{width}} | {clean(log.line, keep_sgr=True)}\n")
     sys.stdout.flush()
 
 
-def _follow(containers: list[tuple[str, Any]], width: int, tail: int) -> None:
-    lines: queue.Queue[tuple[str, str] | None] = queue.Queue()
+def _follow(report: Reporter, containers: list[tuple[str, str, Any]], width: int, tail: int) -> None:
+    report.streamed = True  # with JSON: JSON Lines, the envelope last
+    lines: queue.Queue[LogLine | None] = queue.Queue()
 
-    def pump(name: str, container: Any) -> None:
+    def pump(host: str, name: str, container: Any) -> None:
         try:
             for line in _lines(container.logs(stream=True, follow=True, tail=tail)):
-                lines.put((name, line))
+                lines.put(LogLine(name, host, line))
         except Exception as exc:  # a host going away ends its streams, not the others
-            lines.put((name, f"[log stream ended: {exc}]"))
+            lines.put(LogLine(name, host, f"[log stream ended: {exc}]"))
         finally:
             lines.put(None)
 
-    for name, container in containers:
-        threading.Thread(target=pump, args=(name, container), daemon=True, name=f"logs-{name}").start()
+    for host, name, container in containers:
+        threading.Thread(target=pump, args=(host, name, container), daemon=True, name=f"logs-{name}").start()
     open_streams = len(containers)
     while open_streams:
         item = lines.get()
         if item is None:
             open_streams -= 1
         else:
-            _emit(item[0], width, item[1])
+            _emit(report, item, width, stream=True)
 
 
 # --------------------------------------------------------------------------- connect
@@ -304,8 +329,8 @@ def connect(options: Options, *, component: str, cmd: str | None) -> int:
     if options.dry_run:
         entry = None if comp.image else [naming.ENTRYPOINT]
         where = f"on {host.name} ({'interactive' if cmd is None else 'no tty'}), in {name}"
-        print(clean(f"{where}: {shlex.join(exec_argv(entry, command))}"))
-        print(clean("environment: " + " ".join(f"{k}={v}" for k, v in sorted(env.items()))))
+        options.report.plain(f"{where}: {shlex.join(exec_argv(entry, command))}")
+        options.report.plain("environment: " + " ".join(f"{k}={v}" for k, v in sorted(env.items())))
         return 0
     client, container = _require_running(project, host, name, comp.name)
     entrypoint = container.attrs.get("Config", {}).get("Entrypoint") or None
@@ -343,12 +368,11 @@ def interactive_argv(project: Project, host: Host, docker_argv: list[str], *,
         return ["ssh", "-t" if tty else "-T", *ssh.ssh_options(host), "--", ssh.destination(host),
                 shlex.join(docker_argv)], {}
     if access is DockerAccess.tls and host.tls is not None:
-        def resolve(value: str) -> str:
-            path = os.path.expanduser(value)
-            return path if os.path.isabs(path) else str(project.root / path)
+        from robocore.adapters.docker_hosts import tls_files
 
-        tls = ["--tlsverify", f"--tlscacert={resolve(host.tls.ca_cert)}", f"--tlscert={resolve(host.tls.client_cert)}",
-               f"--tlskey={resolve(host.tls.client_key)}"]
+        files = tls_files(host, project.root)
+        tls = ["--tlsverify", f"--tlscacert={files.ca_cert}", f"--tlscert={files.client_cert}",
+               f"--tlskey={files.client_key}"]
         tcp = f"tcp://{url_host(host.ip, host.docker_port or 2376)}"
         return ["docker", *tls, *docker_argv[1:]], {"DOCKER_HOST": tcp}
     return docker_argv, {"DOCKER_HOST": f"tcp://{url_host(host.ip, host.docker_port or 2375)}"}

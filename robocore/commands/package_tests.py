@@ -18,26 +18,25 @@ the last run only. Any failed or errored test, unreadable result file or failed 
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 import shutil
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 from robocore.commands.build import plan_build, workspace_packages
 from robocore.commands.context import Options
-from robocore.commands.images import MAX_PARALLEL, Reporter, check_emulation, native_arch
-from robocore.commands.workspace import local_docker, selected_components
+from robocore.commands.hosts import in_parallel
+from robocore.commands.machine import MAX_PARALLEL, check_emulation, local_docker, native_arch
+from robocore.commands.reporting import Reporter
+from robocore.commands.workspace import selected_components
 from robocore.config.model import Component
 from robocore.errors import BuildError, TestFailure, UsageError
 from robocore.files import write_atomic
 from robocore.plan import colcon, dockerfiles, junit, naming
 from robocore.project import Project
 
-#: Under the project's state folder: the merged JUnit XML of the last run, one file per package.
-RESULTS_DIR = "test-results"
 #: JUnit files colcon's test steps leave in a package's build folder, and folders searched for more.
 RESULT_FILES = ("pytest.xml",)
 RESULT_FOLDERS = ("test_results",)
@@ -171,7 +170,7 @@ def read_results(project: Project, plan: ComponentTests, outcome: ComponentOutco
                  failed: Sequence[str]) -> None:
     """Read each tested package's result files into ``outcome`` and write its merged file under
     ``.robocore/test-results/<component>/``. ``failed``: packages colcon reported as failed."""
-    folder = project.state_dir / RESULTS_DIR / plan.component.name
+    folder = project.test_results_dir / plan.component.name
     for package in plan.packages:
         files: list[tuple[str, bytes]] = []
         too_large: list[str] = []
@@ -240,30 +239,25 @@ def _run(project: Project, plan: ComponentTests, report: Reporter,
 
 def _run_all(project: Project, plans: Sequence[ComponentTests], report: Reporter) -> list[ComponentOutcome]:
     """Every component's tests, side by side (one container each); an exception is raised after all ran."""
-    outcomes: list[ComponentOutcome] = []
-    errors: list[BaseException] = []
-    with report.progress() as update, ThreadPoolExecutor(max_workers=min(MAX_PARALLEL, len(plans))) as pool:
-        futures = [pool.submit(_run, project, plan, report, update) for plan in plans]
-        for future in futures:
-            try:
-                outcomes.append(future.result())
-            except BaseException as exc:  # collected: the other components still run
-                errors.append(exc)
+    with report.progress() as update:
+        done = in_parallel(plans, lambda plan: _run(project, plan, report, update), limit=MAX_PARALLEL,
+                           name="robocore-test")
+    errors = [result for _, result in done if isinstance(result, BaseException)]
     if errors:
         raise errors[0]
-    return outcomes
+    return [result for _, result in done if not isinstance(result, BaseException)]
 
 
 def test(options: Options, *, component: str | None, packages: Sequence[str] = ()) -> None:
     """Run each component's package tests; print a result per package; fail when any test did not pass."""
     project = options.load()
-    report = Reporter(options)
+    report = options.report
     comps = [c for c in selected_components(project, component) if c.folder is not None]
     if component and not comps:
         raise UsageError(f"component {component!r} has no folder: nothing to test")
     plans = plan_tests(project, comps, packages)
     if options.dry_run:
-        show_plan(project, plans, options)
+        show_plan(project, plans, report)
         return
     if not plans:
         raise UsageError("no component has a workspace with packages: nothing to test")
@@ -280,49 +274,58 @@ def test(options: Options, *, component: str | None, packages: Sequence[str] = (
             check_current(project, plan, state.id)
     finally:
         client.close()
-    shutil.rmtree(project.state_dir / RESULTS_DIR, ignore_errors=True)
+    shutil.rmtree(project.test_results_dir, ignore_errors=True)
     outcomes = _run_all(project, plans, report)
-    if options.json:
-        print(json.dumps(as_json(project, outcomes), indent=2))
-    elif report.human:
-        print_report(project, outcomes)
+    report.add(*results(outcomes))
+    if report.human:
+        print_report(project, outcomes, report)
     error = failure(project, outcomes, details=not report.human and not options.json)
     if error is not None:
         raise error
 
 
-def show_plan(project: Project, plans: Sequence[ComponentTests], options: Options) -> None:
+@dataclass(frozen=True)
+class PlannedTests:
+    """What ``test`` would run for one component (a dry run)."""
+
+    kind: ClassVar[str] = "test_plan"
+    component: str
+    image: str
+    user: str
+    packages: list[str]
+    mounts: dict[str, str]
+    argv: list[str]
+    built: bool
+
+
+def show_plan(project: Project, plans: Sequence[ComponentTests], report: Reporter) -> None:
     """The dry run: per component, the image, mounts and colcon command line; Docker is not contacted."""
-    uid, gid = os.getuid(), os.getgid()
-    if options.json:
-        print(json.dumps({"dry_run": True, "components": [
-            {"component": p.component.name, "image": p.image, "user": f"{uid}:{gid}", "packages": list(p.packages),
-             "mounts": p.mounts, "argv": p.argv, "built": (p.out / "install").is_dir()} for p in plans]}, indent=2))
-        return
     import shlex
 
+    uid, gid = os.getuid(), os.getgid()
     for plan in plans:
-        built = "" if (plan.out / "install").is_dir() else " (not built yet: run build first)"
-        print(f"# {plan.component.name}: {', '.join(plan.packages)} in {plan.image} as {uid}:{gid}{built}")
+        built = (plan.out / "install").is_dir()
+        report.add(PlannedTests(component=plan.component.name, image=plan.image, user=f"{uid}:{gid}",
+                                packages=list(plan.packages), mounts=plan.mounts, argv=plan.argv, built=built))
+        note = "" if built else " (not built yet: run build first)"
+        report.plain(f"# {plan.component.name}: {', '.join(plan.packages)} in {plan.image} as {uid}:{gid}{note}")
         for host, inside in plan.mounts.items():
-            print(f"  mount {host} -> {inside}")
-        print(f"  {shlex.join(plan.argv)}")
-        print(f"  results: {_rel(project, project.state_dir / RESULTS_DIR / plan.component.name)}/<package>.xml")
+            report.plain(f"  mount {host} -> {inside}")
+        report.plain(f"  {shlex.join(plan.argv)}")
+        report.plain(f"  results: {_rel(project, project.test_results_dir / plan.component.name)}/<package>.xml")
     if not plans:
-        print("# nothing to test: no component has a workspace with packages")
+        report.plain("# nothing to test: no component has a workspace with packages")
 
 
 # ---------------------------------------------------------------------------------------------- report
 
 
-def print_report(project: Project, outcomes: Sequence[ComponentOutcome]) -> None:
+def print_report(project: Project, outcomes: Sequence[ComponentOutcome], report: Reporter | None = None) -> None:
     """The table of packages, then each test that did not pass with the first lines of its message."""
     from rich.markup import escape
     from rich.table import Table
 
-    from robocore.commands.run import print_table
-    from robocore.ui import stdout
-
+    report = report or Reporter()
     table = Table(title="package tests", title_justify="left")
     for column in ("component", "package", "tests", "failures", "errors", "skipped", "result"):
         table.add_column(column, justify="right" if column in ("tests", "failures", "errors", "skipped") else "left")
@@ -331,38 +334,68 @@ def print_report(project: Project, outcomes: Sequence[ComponentOutcome]) -> None
             verdict = "[green]passed[/]" if p.ok else "[red]FAILED[/]"
             table.add_row(escape(outcome.component), escape(p.package), str(p.tests), str(p.failures),
                           str(p.errors), str(p.skipped), verdict)
-    print_table(table)
-    out = stdout()
+    report.table(table)
     for outcome in outcomes:
         for p in outcome.packages:
             for case in p.not_passed:
-                out.print(f"{'FAILED' if case.outcome == 'failed' else 'ERROR'} {p.package}: {case.test_id}",
-                          markup=False, soft_wrap=True)
+                report.out(f"{'FAILED' if case.outcome == 'failed' else 'ERROR'} {p.package}: {case.test_id}")
                 for line in case.message.splitlines():
-                    out.print(f"    {line}", markup=False, soft_wrap=True)
+                    report.out(f"    {line}")
             for problem in p.problems:
-                out.print(f"ERROR {p.package}: {problem}", markup=False, soft_wrap=True)
+                report.out(f"ERROR {p.package}: {problem}")
         if outcome.exit_code:
-            out.print(f"{outcome.component}: colcon test exited {outcome.exit_code}", markup=False)
+            report.out(f"{outcome.component}: colcon test exited {outcome.exit_code}")
             for line in outcome.output:
-                out.print(f"    {line}", markup=False, soft_wrap=True)
-    out.print(f"JUnit XML: {_rel(project, project.state_dir / RESULTS_DIR)}/<component>/<package>.xml", markup=False)
+                report.out(f"    {line}")
+    report.out(f"JUnit XML: {_rel(project, project.test_results_dir)}/<component>/<package>.xml")
 
 
-def as_json(project: Project, outcomes: Sequence[ComponentOutcome]) -> dict[str, object]:
-    """The one JSON document of ``test --json``."""
-    return {
-        "ok": all(o.ok for o in outcomes),
-        "results_dir": _rel(project, project.state_dir / RESULTS_DIR),
-        "components": [{
-            "component": o.component, "ok": o.ok, "colcon_exit_code": o.exit_code, "colcon_output": o.output,
-            "packages": [{
-                "package": p.package, "ok": p.ok, "tests": p.tests, "failures": p.failures, "errors": p.errors,
-                "skipped": p.skipped, "result_file": o.result_files.get(p.package), "problems": list(p.problems),
-                "failed": [{"test": c.test_id, "outcome": c.outcome, "message": c.message} for c in p.not_passed],
-            } for p in o.packages],
-        } for o in outcomes],
-    }
+@dataclass(frozen=True)
+class FailedTest:
+    """A test that failed or errored, with its message."""
+
+    test: str
+    outcome: str
+    message: str
+
+
+@dataclass(frozen=True)
+class PackageTests:
+    """One package's test results (``result_file``: its merged JUnit XML, project-relative)."""
+
+    package: str
+    ok: bool
+    tests: int
+    failures: int
+    errors: int
+    skipped: int
+    result_file: str | None
+    problems: list[str]
+    failed: list[FailedTest]
+
+
+@dataclass(frozen=True)
+class ComponentTestResults:
+    """One component's test run: colcon's exit code (and last lines when it failed) and each package."""
+
+    kind: ClassVar[str] = "tests"
+    component: str
+    ok: bool
+    colcon_exit_code: int
+    colcon_output: list[str]
+    packages: list[PackageTests]
+
+
+def results(outcomes: Sequence[ComponentOutcome]) -> list[ComponentTestResults]:
+    """The typed results of a test run, one per component."""
+    return [ComponentTestResults(
+        component=o.component, ok=o.ok, colcon_exit_code=o.exit_code, colcon_output=list(o.output),
+        packages=[PackageTests(
+            package=p.package, ok=p.ok, tests=p.tests, failures=p.failures, errors=p.errors, skipped=p.skipped,
+            result_file=o.result_files.get(p.package), problems=list(p.problems),
+            failed=[FailedTest(c.test_id, c.outcome, c.message) for c in p.not_passed],
+        ) for p in o.packages],
+    ) for o in outcomes]
 
 
 def failure(project: Project, outcomes: Sequence[ComponentOutcome], *, details: bool) -> TestFailure | None:
@@ -379,7 +412,7 @@ def failure(project: Project, outcomes: Sequence[ComponentOutcome], *, details: 
         parts.append(f"{failures} failed, {errors} errored in {', '.join(p.package for _, p in bad)}")
     parts += [f"colcon test exited {o.exit_code} in component {o.component}" for o in broken]
     lines = ["tests did not pass: " + "; ".join(parts)
-             + f" (JUnit XML in {_rel(project, project.state_dir / RESULTS_DIR)}/)"]
+             + f" (JUnit XML in {_rel(project, project.test_results_dir)}/)"]
     if details:
         for _, p in bad:
             lines += [f"{p.package}: {c.outcome} {c.test_id}: {(c.message.splitlines() or [''])[0]}"

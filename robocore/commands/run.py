@@ -11,101 +11,29 @@ with a per-host summary and a :class:`~robocore.errors.GroupError`.
 from __future__ import annotations
 
 import contextlib
-import json
-import sys
-from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
-from robocore.adapters.docker_hosts import is_connection_error
+from robocore.commands.composefiles import write_compose_files
 from robocore.commands.context import DRY_RUN_UNKNOWN, Options
+from robocore.commands.hosts import connect, for_each_host, managed_containers, select_hosts, short_error
+from robocore.commands.reporting import Reporter
+from robocore.commands.state import history, record_run, with_local_build, with_synced_release
 from robocore.config.model import Host
-from robocore.errors import DockerError, GroupError, HostError, RobocoreError, UsageError
+from robocore.errors import DockerError, GroupError, UsageError
 from robocore.plan import discovery, naming
-from robocore.plan.containers import (
-    ROLE_COMPONENT,
-    ROLE_DISCOVERY,
-    ContainerSpec,
-    host_specs,
-    state_volumes,
-)
+from robocore.plan.containers import ROLE_DISCOVERY, ContainerSpec, host_specs, state_volumes
 from robocore.project import Project
-from robocore.ui import console, stdout
 
 if TYPE_CHECKING:
     import docker
 
-T = TypeVar("T")
-
-#: Roles of the containers ``run`` and ``down`` manage (dev shells and build containers are left alone).
-MANAGED_ROLES = (ROLE_COMPONENT, ROLE_DISCOVERY)
 #: Verb of a dry run's action: what the host runs now is not known.
 UNKNOWN = "unknown"
 #: Note of a host ``run`` leaves alone: nothing planned there, and no run of this project ever reached it.
 NOT_CONTACTED = "nothing planned, never deployed here: not contacted"
-#: Seconds a host gets to answer before it is reported unreachable.
-HOST_CONNECT_TIMEOUT = 8
-#: Seconds each Docker API call to a host may take.
-CONNECT_API_TIMEOUT = 300
-
-
-# --------------------------------------------------------------------------- hosts in parallel
-
-
-def select_hosts(project: Project, host: str | None) -> list[Host]:
-    """``--host NAME`` (checked), else every host of the robot."""
-    return [project.host(host)] if host else list(project.robot.hosts)
-
-
-def connect(project: Project, host: Host, *, timeout: int = CONNECT_API_TIMEOUT) -> docker.DockerClient:
-    """The Docker client of ``host`` (HostError naming the host when it cannot be reached)."""
-    from robocore.adapters.docker_hosts import client_for
-
-    return client_for(host, timeout, project_root=project.root, connect_timeout=HOST_CONNECT_TIMEOUT)
-
-
-def prefetch_connections(project: Project) -> None:
-    """Start :func:`connect`'s connection to every ssh host that runs something, in the background."""
-    from robocore.adapters.docker_hosts import prefetch
-
-    for host in project.robot.hosts_in_use():
-        prefetch(host, CONNECT_API_TIMEOUT, connect_timeout=HOST_CONNECT_TIMEOUT)
-
-
-def for_each_host(hosts: Sequence[Host], work: Callable[[Host], T]) -> tuple[dict[str, T], dict[str, RobocoreError]]:
-    """Run ``work(host)`` for every host in parallel; return (results, failures) by host name.
-
-    Docker and network errors become a HostError of that host; other exceptions are bugs and
-    are raised once every host has finished.
-    """
-    results: dict[str, T] = {}
-    failures: dict[str, RobocoreError] = {}
-    bugs: list[BaseException] = []
-    if not hosts:
-        return results, failures
-    with ThreadPoolExecutor(max_workers=len(hosts), thread_name_prefix="robocore-host") as pool:
-        futures = {h.name: pool.submit(work, h) for h in hosts}
-        for name, future in futures.items():
-            try:
-                results[name] = future.result()
-            except RobocoreError as error:
-                failures[name] = error
-            except Exception as exc:
-                if is_connection_error(exc):
-                    failures[name] = HostError(f"host {name}: {_short(exc)}")
-                else:
-                    bugs.append(exc)
-    if bugs:
-        raise bugs[0]
-    return results, failures
-
-
-def _short(exc: BaseException) -> str:
-    explanation = getattr(exc, "explanation", None)
-    text = str(explanation or exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
 
 
 # --------------------------------------------------------------------------- pure decisions
@@ -161,21 +89,18 @@ def decide(specs: Sequence[ContainerSpec], existing: Sequence[Existing], image_i
 
 @dataclass
 class HostOutcome:
-    """What happened on one host."""
+    """What happened on one host (``ok`` false and ``error`` its first line when the host failed)."""
 
+    kind: ClassVar[str] = "host_run"
     host: str
     actions: list[Action] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    ok: bool = True
+    error: str | None = None
 
     def count(self, verb: str) -> int:
         """How many actions have ``verb``."""
         return sum(1 for a in self.actions if a.verb == verb)
-
-
-def managed_containers(client: docker.DockerClient, project: str) -> list[Any]:
-    """This project's component and discovery containers on a host (running or not)."""
-    found = client.containers.list(all=True, filters={"label": f"{naming.LABEL_PROJECT}={project}"})
-    return [c for c in found if c.labels.get(naming.LABEL_ROLE) in MANAGED_ROLES]
 
 
 def _existing(container: Any) -> Existing:
@@ -233,7 +158,7 @@ def _image_ids(
                 client.images.pull(spec.image)
             except Exception as exc:
                 raise DockerError(f"host {host.name}: image {spec.image} is missing and could not be pulled: "
-                                  f"{_short(exc)}") from None
+                                  f"{short_error(exc)}") from None
             image_id = _image_id(client, spec.image)
         if image_id is None and spec.image in ours:
             step = "prepare-base" if spec.role == ROLE_DISCOVERY else "stage"
@@ -244,40 +169,8 @@ def _image_ids(
     return ids
 
 
-#: Label of a local component's container: the state of the build it runs (see with_local_build).
-LABEL_BUILD = "dev.robocore.build"
-
-
-def with_local_build(project: Project, host: Host, specs: Sequence[ContainerSpec]) -> list[ContainerSpec]:
-    """Add the state of each local component's last build to its spec's labels.
-
-    Local containers mount ``.robocore/build/<c>/install`` in place, so a rebuild changes
-    nothing in the spec; without this label ``run`` would keep the container on the code it
-    loaded at start. The build writes a small state file (package hashes) after each success.
-    """
-    import dataclasses
-    import hashlib
-
-    if not host.is_local:
-        return list(specs)
-    from robocore.commands.build import BUILD_STATE
-
-    out = []
-    for spec in specs:
-        if spec.role == ROLE_COMPONENT:
-            try:
-                state = (project.build_dir(spec.service) / BUILD_STATE).read_bytes()
-            except OSError:
-                state = b""
-            if state:
-                digest = hashlib.sha256(state).hexdigest()[:16]
-                spec = dataclasses.replace(spec, extra_labels=(*spec.extra_labels, (LABEL_BUILD, digest)))
-        out.append(spec)
-    return out
-
-
 def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *, dry_run: bool,
-                quiet: bool) -> HostOutcome:
+                report: Reporter) -> HostOutcome:
     """Bring one host to its planned containers (or, with ``dry_run``, say what that would take from what
     is known here: the host is not contacted, so what it runs now is unknown)."""
     outcome = HostOutcome(host.name)
@@ -299,7 +192,7 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
 
             local = local_client(timeout=600)  # also streams images (docker save) to the host
             if not dry_run:
-                _deliver(client, local, _robocore_images(specs, project), project, host, outcome, quiet=quiet)
+                _deliver(client, local, _robocore_images(specs, project), project, host, outcome, report=report)
         image_ids = _image_ids(client, local, specs, project, host, dry_run=dry_run)
         containers = {c.name: c for c in managed_containers(client, project.name)}
         _check_name_conflicts(client, specs, containers, host)
@@ -310,7 +203,7 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
         by_name = {s.name: s for s in specs}
         ready = discovery.for_robot(project.robot).readiness
         for action in actions:
-            _apply(client, action, by_name.get(action.name), containers.get(action.name), host, quiet=quiet,
+            _apply(client, action, by_name.get(action.name), containers.get(action.name), host, report=report,
                    ready=ready)
     finally:
         client.close()
@@ -320,13 +213,12 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
 
 
 def _deliver(client: docker.DockerClient, local: docker.DockerClient, images: list[str], project: Project,
-             host: Host, outcome: HostOutcome, *, quiet: bool) -> None:
-    try:
-        from robocore.adapters.image_delivery import ensure_images
-    except ImportError:  # image delivery not available: the host must already have the images
-        return
-    deliveries = ensure_images(client, images, registry=project.robot.registry, progress=not quiet, label=host.name,
-                               source=local)
+             host: Host, outcome: HostOutcome, *, report: Reporter) -> None:
+    """Put robocore's images on a remote host (pulled from the registry, or streamed from this machine)."""
+    from robocore.adapters.image_delivery import ensure_images
+
+    deliveries = ensure_images(client, images, registry=project.robot.registry, progress=report.human,
+                               label=host.name, source=local)
     outcome.notes += [str(d) for d in deliveries.values() if getattr(d, "action", "present") != "present"]
 
 
@@ -348,13 +240,12 @@ def _check_name_conflicts(client: docker.DockerClient, specs: Sequence[Container
 
 
 def _apply(client: docker.DockerClient, action: Action, spec: ContainerSpec | None, container: Any, host: Host, *,
-           quiet: bool, ready: discovery.ReadinessCheck) -> None:
+           report: Reporter, ready: discovery.ReadinessCheck) -> None:
     from docker.errors import APIError
     from rich.markup import escape
 
     def say(text: str) -> None:
-        if not quiet:
-            console().print(f"[bold]{host.name}[/]: {escape(text)}")
+        report.info(f"[bold]{host.name}[/]: {escape(text)}", markup=True)
 
     try:
         if action.verb == "remove":
@@ -377,7 +268,7 @@ def _apply(client: docker.DockerClient, action: Action, spec: ContainerSpec | No
                 + (f" ({action.reason})" if action.reason else ""))
     except APIError as exc:
         hint = None
-        text = _short(exc)
+        text = short_error(exc)
         if "bind source path does not exist" in text:
             hint = "run `robocore sync` first" if not host.is_local else "run `robocore build` first"
         raise DockerError(f"host {host.name}: {action.verb} {action.name} failed: {text}", hint=hint) from None
@@ -409,90 +300,68 @@ def wait_server_ready(container: Any, spec: ContainerSpec, host: Host, check: di
 
 def run(options: Options, *, host: str | None, tag: str | None) -> None:
     """(Re)start containers on hosts: discovery servers first, then components; idempotent."""
-    from robocore.commands.composefiles import write_compose_files
-
     project = options.load()
     hosts = select_hosts(project, host)
     if not options.dry_run:
         write_compose_files(project, tag=tag)
 
     def work(h: Host) -> HostOutcome:
-        from robocore.commands.release import history, record_run  # history for rollback
-        from robocore.commands.sync import with_synced_release  # restart on a newly synced release
-
+        # a newly synced release restarts its component; the history is what rollback returns to
         specs = with_synced_release(project, h, host_specs(project, h.name, tag=tag))
         if not specs and not host and not history(project, h.name):
             # nothing to start and nothing this project could have left there: an offline spare
             # machine in robot.yaml must not fail the run
             return HostOutcome(h.name, notes=[NOT_CONTACTED])
-        outcome = deploy_host(project, h, specs, dry_run=options.dry_run, quiet=options.quiet)
+        outcome = deploy_host(project, h, specs, dry_run=options.dry_run, report=options.report)
         if not options.dry_run:
             record_run(project, h, tag)
         return outcome
 
     results, failures = for_each_host(hosts, work)
-    _report(results, failures, hosts, options, title="would do" if options.dry_run else "run")
+    outcomes = [results.get(h.name) or HostOutcome(h.name, ok=False, error=failures[h.name].lines()[0])
+                for h in hosts]
+    options.report.add(*outcomes)
+    _report(options.report, outcomes, dry_run=options.dry_run)
     if failures:
         raise GroupError(failures, list(results))
 
 
-def _report(results: dict[str, HostOutcome], failures: dict[str, RobocoreError], hosts: Sequence[Host],
-            options: Options, *, title: str) -> None:
-    if options.json:
-        payload = {
-            h.name: (
-                {"ok": True, "actions": [a.__dict__ for a in results[h.name].actions], "notes": results[h.name].notes}
-                if h.name in results else {"ok": False, "error": failures[h.name].lines()}
-            )
-            for h in hosts
-        }
-        print(json.dumps(payload, indent=2))
-        return
-    if options.quiet and not failures:
+def _report(report: Reporter, outcomes: Sequence[HostOutcome], *, dry_run: bool) -> None:
+    """For people: a dry run's actions one line each; a table of what each host did (or why it failed)."""
+    failed = any(not out.ok for out in outcomes)
+    if report.quiet and not failed:
         return
     from rich.markup import escape
     from rich.table import Table
 
-    if options.dry_run:
-        for h in hosts:
-            out = results.get(h.name)
-            for action in out.actions if out else []:
+    if dry_run:
+        for out in outcomes:
+            for action in out.actions:
                 reason = f" ({action.reason})" if action.reason else ""
                 verb = "" if action.verb == UNKNOWN else "keep " if action.verb == "keep" else f"would {action.verb} "
-                stdout().print(f"{h.name}: {verb}{action.name}{reason}", markup=False, soft_wrap=True)
-            for note in out.notes if out else []:
-                stdout().print(f"{h.name}: {note}", markup=False, soft_wrap=True)
-        if not failures:
+                report.out(f"{out.host}: {verb}{action.name}{reason}")
+            for note in out.notes:
+                report.out(f"{out.host}: {note}")
+        if not failed:
             return
+    title = "would do" if dry_run else "run"
     table = Table(title=f"robocore {title}", title_justify="left")
     for column in ("host", "result", "created", "replaced", "started", "kept", "removed", "detail"):
         table.add_column(column)
-    for h in hosts:
-        if h.name in failures:
-            table.add_row(h.name, "[red]failed[/]", "", "", "", "", "", escape(failures[h.name].lines()[0]))
+    for out in outcomes:
+        if not out.ok:
+            table.add_row(out.host, "[red]failed[/]", "", "", "", "", "", escape(out.error or ""))
             continue
-        out = results[h.name]
         detail = escape("; ".join(out.notes))
-        table.add_row(h.name, "[green]ok[/]", *(str(out.count(v)) for v in ("create", "replace", "start", "keep",
-                                                                             "remove")), detail)
-    print_table(table)
-
-
-def print_table(table: Any) -> None:
-    """Print a rich table on stdout; off a terminal (logs, CI, pipes) 160 columns wide, not squeezed into 80."""
-    out = stdout()
-    if out.is_terminal:
-        out.print(table)
-        return
-    from robocore.ui import make_console
-
-    make_console(file=sys.stdout, width=160).print(table)
+        table.add_row(out.host, "[green]ok[/]", *(str(out.count(v)) for v in ("create", "replace", "start", "keep",
+                                                                               "remove")), detail)
+    report.table(table)
 
 
 # --------------------------------------------------------------------------- down
 
 
-def stop_host(project: Project, host: Host, *, dry_run: bool, quiet: bool, forget_servers: bool) -> HostOutcome:
+def stop_host(project: Project, host: Host, *, dry_run: bool, report: Reporter, forget_servers: bool) -> HostOutcome:
     """Remove this project's containers from one host: components first, discovery servers last.
 
     ``forget_servers`` also removes the discovery servers' state volumes, so that the next start is
@@ -513,11 +382,9 @@ def stop_host(project: Project, host: Host, *, dry_run: bool, quiet: bool, forge
         containers.sort(key=lambda c: (c.labels.get(naming.LABEL_ROLE) == ROLE_DISCOVERY, c.name))
         for container in containers:
             outcome.actions.append(Action("remove", container.name))
-            if not dry_run:
-                container.remove(force=True)
-                if not quiet:
-                    console().print(f"[bold]{host.name}[/]: removed {escape(container.name)}")
-        if forget_servers and not dry_run:
+            container.remove(force=True)
+            report.info(f"[bold]{host.name}[/]: removed {escape(container.name)}", markup=True)
+        if forget_servers:
             for volume in state_volumes(project, host.name):
                 with contextlib.suppress(NotFound):
                     client.volumes.get(volume).remove(force=True)
@@ -529,20 +396,19 @@ def stop_host(project: Project, host: Host, *, dry_run: bool, quiet: bool, forge
 def down(options: Options, *, host: str | None) -> None:
     """Stop and remove this project's containers on every host (or ``--host``)."""
     project = options.load()
+    report = options.report
     hosts = select_hosts(project, host)
     forget = host is None  # every host goes down: the next start of each server is a first start
 
     def work(h: Host) -> HostOutcome:
-        return stop_host(project, h, dry_run=options.dry_run, quiet=options.quiet, forget_servers=forget)
+        return stop_host(project, h, dry_run=options.dry_run, report=report, forget_servers=forget)
 
     results, failures = for_each_host(hosts, work)
-    if options.dry_run:
-        for name, out in results.items():
-            for note in out.notes:
-                stdout().print(f"{name}: {note}", markup=False, soft_wrap=True)
-    elif not options.quiet:
-        for name, out in results.items():
-            if not out.actions:
-                console().print(f"[bold]{name}[/]: nothing to remove")
+    report.add(*results.values())
+    for name, out in results.items():
+        for note in out.notes:
+            report.out(f"{name}: {note}")
+        if not options.dry_run and not out.actions:
+            report.info(f"[bold]{name}[/]: nothing to remove", markup=True)
     if failures:
         raise GroupError(failures, list(results))

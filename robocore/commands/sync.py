@@ -1,4 +1,4 @@
-"""sync: install trees and runtime files to each remote host, atomically (issue #4).
+"""sync: install trees and runtime files to each remote host, atomically.
 
 For every component on a remote host: its colcon install tree, the DDS profiles and the host's
 compose file go to ``<mount_root>/<component>/releases/<id>/`` and ``current`` is switched to
@@ -7,8 +7,8 @@ lock, in one ssh session per host plus one rsync per changed component. Hosts ar
 parallel; a host that fails is named and the others still get their files. Components on this
 machine use the build output in place: nothing is copied.
 
-What each host received is recorded in ``.robocore/sync/<host>.json`` (release id and a digest
-of the trees per component); ``run`` may use the release id to restart a container whose files
+What each host received is recorded (release id and a digest of the trees per component, see
+:mod:`robocore.commands.state`); ``run`` uses the release id to restart a container whose files
 changed.
 """
 
@@ -16,29 +16,32 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import json
 import os
 import shlex
 import time
-from concurrent.futures import ThreadPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import ClassVar
 
 from robocore.adapters import rsync, ssh
 from robocore.commands.context import Options
+from robocore.commands.hosts import for_each_host, select_hosts
+from robocore.commands.reporting import Reporter
+from robocore.commands.state import read_synced, write_synced
 from robocore.config.model import Component, Host, read_only_project_path
 from robocore.errors import GroupError, HostError, RobocoreError, UnsafePath, UsageError
-from robocore.files import refuse_links_leaving, write_atomic
+from robocore.files import refuse_links_leaving
 from robocore.plan import layout
 from robocore.plan import sync as plan
 from robocore.project import Project
+from robocore.ui import human_size
 
 
 @dataclass(frozen=True)
 class ComponentResult:
     """What one component's sync did."""
 
+    kind: ClassVar[str] = "sync"
     component: str
     host: str
     release: str
@@ -49,19 +52,16 @@ class ComponentResult:
     seconds: float
 
 
-def state_file(project: Project, host: str) -> Path:
-    """``.robocore/sync/<host>.json``: what was last synced to ``host``."""
-    return project.state_dir / "sync" / f"{host}.json"
+@dataclass(frozen=True)
+class PlannedSync:
+    """What a sync of one component would run (a dry run): the host's session and the component's rsync."""
 
-
-def synced_releases(project: Project, host: str) -> dict[str, str]:
-    """Component -> release id last synced to ``host`` (empty when never synced)."""
-    try:
-        data = json.loads(state_file(project, host).read_text())
-    except (OSError, ValueError):
-        return {}
-    comps = data.get("components", {}) if isinstance(data, dict) else {}
-    return {name: str(entry.get("release", "")) for name, entry in comps.items() if isinstance(entry, dict)}
+    kind: ClassVar[str] = "sync_plan"
+    component: str
+    host: str
+    root: str
+    session: list[str]
+    rsync: list[str]
 
 
 def plan_host(project: Project, host: Host, *, dry_run: bool = False) -> list[plan.ComponentSync]:
@@ -74,7 +74,7 @@ def plan_host(project: Project, host: Host, *, dry_run: bool = False) -> list[pl
     if host.is_local:
         return []
     robot = project.robot
-    dds_dir = project.state_dir / "dds"
+    dds_dir = project.dds_dir
     compose = project.compose_file(host.name)
     items = []
     for comp in robot.components_on(host.name):
@@ -110,7 +110,7 @@ def _project_files(project: Project, host: Host, comp: Component, *, dry_run: bo
 
     wanted = [(i, rel) for i, v in enumerate(comp.volumes) if (rel := read_only_project_path(v)) is not None]
     allowed = bool(getattr(comp, "allow_outside_project", False))  # robot.yaml's opt-in, for symlinks only
-    farm = project.state_dir / "sync" / "files" / host.name / comp.name / layout.FILES
+    farm = project.sync_links_dir(host.name, comp.name) / layout.FILES
     links: dict[str, Path] = {}
     for index, rel in wanted:
         real = (project.root / rel).resolve()
@@ -151,39 +151,28 @@ def _farm_links(farm: Path) -> dict[str, Path]:
 
 def sync(options: Options, *, host: str | None) -> None:
     """Copy install trees and runtime files to remote hosts; only what changed; atomic per component."""
-    from robocore.ui import console
-
     project = options.load()
-    hosts = [project.host(host)] if host else list(project.robot.hosts)
+    report = options.report
+    hosts = select_hosts(project, host)
     plans = {h.name: plan_host(project, h, dry_run=options.dry_run) for h in hosts}
     if options.dry_run:
-        _print_dry_run(project, hosts, plans)
+        _dry_run(report, hosts, plans)
         return
     remote = [h for h in hosts if plans[h.name]]
     for h in hosts:
-        if h.is_local and not options.quiet:
-            console().print(f"{h.name}: this machine, components use the build output in place (nothing to copy)")
-        elif not plans[h.name] and not options.quiet:
-            console().print(f"{h.name}: no components")
+        if h.is_local:
+            report.info(f"{h.name}: this machine, components use the build output in place (nothing to copy)")
+        elif not plans[h.name]:
+            report.info(f"{h.name}: no components")
     if not remote:
         return
     rsync.require_rsync()
     ssh.require_ssh()
-    results: dict[str, list[ComponentResult]] = {}
-    failures: dict[str, RobocoreError] = {}
-    with ThreadPoolExecutor(max_workers=max(1, len(remote))) as pool:
-        futures = {h.name: pool.submit(sync_host, project, h, plans[h.name]) for h in remote}
-        for name, future in futures.items():
-            try:
-                results[name] = future.result()
-            except RobocoreError as exc:
-                failures[name] = exc
+    results, failures = for_each_host(remote, lambda h: sync_host(project, h, plans[h.name]))
     rows = [r for name in sorted(results) for r in results[name]]
-    if options.json:
-        print(json.dumps({"results": [asdict(r) for r in rows],
-                          "failed": {k: v.lines() for k, v in failures.items()}}, indent=2), flush=True)
-    elif not options.quiet:
-        _print_table(rows)
+    report.add(*rows)
+    if not options.quiet:
+        _print_table(report, rows)
     if failures:
         raise GroupError(failures, sorted(results))
 
@@ -227,7 +216,7 @@ def _sync_locked(project: Project, host: Host, items: list[plan.ComponentSync],
                  session: ssh.Session) -> list[ComponentResult]:
     release_id = plan.new_release_id()
     rsh = ssh.rsh_command(host)
-    recorded = _read_state(project, host.name)
+    recorded = read_synced(project, host.name)
     start = time.monotonic()
     digests = [_tree_digest(item) for item in items]
     try:
@@ -263,7 +252,7 @@ def _sync_locked(project: Project, host: Host, items: list[plan.ComponentSync],
             component=item.component, host=host.name, release=release, changed=is_new, sent=st.sent,
             received=st.received, files=st.files, seconds=seconds.get(item.component, 0.0),
         ))
-    _write_state(project, host.name, recorded)
+    write_synced(project, host.name, recorded)
     if results:
         total = time.monotonic() - start
         results = [dataclasses.replace(r, seconds=round(total, 2)) for r in results]
@@ -292,90 +281,40 @@ def _walk(root: Path, *, follow: bool = False) -> list[Path]:
     return found
 
 
-def _read_state(project: Project, host: str) -> dict[str, dict[str, Any]]:
-    try:
-        data = json.loads(state_file(project, host).read_text())
-    except (OSError, ValueError):
-        return {}
-    comps = data.get("components", {}) if isinstance(data, dict) else {}
-    return {k: v for k, v in comps.items() if isinstance(v, dict)}
-
-
-def _write_state(project: Project, host: str, components: dict[str, dict[str, Any]]) -> None:
-    write_atomic(state_file(project, host), json.dumps({"host": host, "components": components}, indent=2) + "\n")
-
-
-def _print_dry_run(project: Project, hosts: list[Host], plans: dict[str, list[plan.ComponentSync]]) -> None:
-    from robocore.ui import stdout
-
-    out = stdout()
+def _dry_run(report: Reporter, hosts: list[Host], plans: dict[str, list[plan.ComponentSync]]) -> None:
+    """The plan of a sync: per remote host its one session and one rsync per component; nothing runs."""
     for h in hosts:
         if h.is_local:
-            out.print(f"# {h.name}: this machine, nothing to copy", markup=False)
+            report.out(f"# {h.name}: this machine, nothing to copy")
             continue
         rsh = ssh.rsh_command(h)
         items = plans[h.name]
         if not items:
             continue
-        out.print(f"# {h.name}: " + ", ".join(f"{i.component} -> {i.root}" for i in items), markup=False,
-                  soft_wrap=True)
-        out.print(f"# one session (holding flock on {h.deploy_root}/{plan.LOCK_FILE} there) prepares, waits "
-                  f"for the rsyncs, then releases each changed copy", markup=False, soft_wrap=True)
-        out.print(shlex.join(ssh.ssh_argv(h, plan.session_argv(h.deploy_root, _holder(), items))), markup=False,
-                  soft_wrap=True)
+        session = ssh.ssh_argv(h, plan.session_argv(h.deploy_root, _holder(), items))
+        report.out(f"# {h.name}: " + ", ".join(f"{i.component} -> {i.root}" for i in items))
+        report.out(f"# one session (holding flock on {h.deploy_root}/{plan.LOCK_FILE} there) prepares, waits "
+                   f"for the rsyncs, then releases each changed copy")
+        report.out(shlex.join(session))
         for item in items:
-            out.print(shlex.join(plan.rsync_argv(item, h, rsh)), markup=False, soft_wrap=True)
+            argv = plan.rsync_argv(item, h, rsh)
+            report.out(shlex.join(argv))
+            report.add(PlannedSync(component=item.component, host=h.name, root=str(item.root), session=session,
+                                   rsync=argv))
         steps = " ".join(plan.RELEASE for _ in items)
-        out.print(f"# then, on that session's stdin: {plan.new_release_id()} {steps}", markup=False, soft_wrap=True)
+        report.out(f"# then, on that session's stdin: {plan.new_release_id()} {steps}")
 
 
-def _print_table(rows: list[ComponentResult]) -> None:
+def _print_table(report: Reporter, rows: list[ComponentResult]) -> None:
     from rich.table import Table
-
-    from robocore.ui import stdout
 
     table = Table(title="sync")
     for col in ("host", "component", "release", "changed", "sent", "received", "files", "host time"):
         table.add_column(col, justify="right" if col in {"sent", "received", "files", "host time"} else "left",
                          no_wrap=col == "release")
     for r in rows:
-        table.add_row(r.host, r.component, r.release, "yes" if r.changed else "no", _human(r.sent),
-                      _human(r.received), str(r.files), f"{r.seconds:.1f}s")
+        table.add_row(r.host, r.component, r.release, "yes" if r.changed else "no", human_size(r.sent),
+                      human_size(r.received), str(r.files), f"{r.seconds:.1f}s")
     total = sum(r.sent for r in rows)
-    table.caption = f"{_human(total)} sent in total"
-    stdout().print(table)
-
-
-def _human(n: int) -> str:
-    size = float(n)
-    for unit in ("B", "KB", "MB"):
-        if size < 1024:
-            return f"{size:.0f} {unit}" if unit == "B" else f"{size:.1f} {unit}"
-        size /= 1024
-    return f"{size:.1f} GB"
-
-
-
-#: Label carrying the release a remote component's container was started on.
-LABEL_RELEASE = "dev.robocore.release"
-
-
-def with_synced_release(project: Project, host: Host, specs: list[Any]) -> list[Any]:
-    """Add the synced release id of each remote component to its spec's labels.
-
-    The container mounts ``<component>/current/install``, a path that stays the same across
-    releases, so without this a sync would not change the spec hash and ``run`` would keep
-    the container on the old files. Local hosts (files used in place) are unchanged.
-    """
-    import dataclasses
-
-    if host.is_local:
-        return specs
-    releases = synced_releases(project, host.name)
-    out = []
-    for spec in specs:
-        release = releases.get(spec.service) if spec.role == "component" else None
-        if release:
-            spec = dataclasses.replace(spec, extra_labels=(*spec.extra_labels, (LABEL_RELEASE, release)))
-        out.append(spec)
-    return out
+    table.caption = f"{human_size(total)} sent in total"
+    report.table(table)

@@ -2,15 +2,40 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import ClassVar
+
 from robocore.commands.context import Options
-from robocore.ui import console
+
+
+@dataclass(frozen=True)
+class HostSummary:
+    """A host of the robot and the components it runs."""
+
+    name: str
+    ip: str
+    arch: str
+    docker: str
+    components: list[str]
+
+
+@dataclass(frozen=True)
+class RobotSummary:
+    """What a valid robot.yaml describes."""
+
+    kind: ClassVar[str] = "robot"
+    file: str
+    ros_distro: str
+    base: str
+    hosts: list[HostSummary]
+    discovery_servers: list[str]
 
 
 def run(options: Options) -> None:
     """Validate robot.yaml; a ConfigError carries every problem (the task turns it into exit code 2)."""
-    out = console()
+    report = options.report
     if options.dry_run:
-        out.print(f"would validate {options.project_dir / 'robot.yaml'}", soft_wrap=True, markup=False)
+        report.notice(f"would validate {options.project_dir / 'robot.yaml'}")
         return
     project = options.load()
     robot = project.robot
@@ -21,19 +46,22 @@ def run(options: Options) -> None:
     if found:
         raise located(project.robot_file, found)
     for warning in robot_warnings(project.robot_file, robot, project.root):
-        out.print(str(warning), soft_wrap=True, markup=False)
-    lines = [
-        f"{project.robot_file}: ok — ROS 2 {robot.ros_distro.value}, {len(robot.hosts)} host(s), "
-        f"{len(robot.components)} component(s), base {robot.base.kind.value}"
-    ]
+        report.warn(warning.message, warning)
     by_host: dict[str, list[str]] = {}
     for comp in robot.components:
         by_host.setdefault(comp.runs_on, []).append(comp.name)
-    for host in robot.hosts:
-        names = ", ".join(by_host.get(host.name, [])) or "no components"
-        lines.append(f"  {host.name} ({host.ip}, {host.arch.value}, docker via {host.access.value}): {names}")
-    servers = ", ".join(f"{s.host}:{s.port}" for s in robot.discovery_servers)
-    lines.append(f"  discovery server: {servers}")
-    if not options.quiet:
-        for line in lines:
-            out.print(line, soft_wrap=True, markup=False)
+    summary = RobotSummary(
+        file=str(project.robot_file), ros_distro=robot.ros_distro.value, base=robot.base.kind.value,
+        hosts=[HostSummary(h.name, h.ip, h.arch.value, h.access.value, by_host.get(h.name, [])) for h in robot.hosts],
+        discovery_servers=[f"{s.host}:{s.port}" for s in robot.discovery_servers])
+    report.add(summary)
+    lines = [
+        f"{summary.file}: ok — ROS 2 {summary.ros_distro}, {len(robot.hosts)} host(s), "
+        f"{len(robot.components)} component(s), base {summary.base}"
+    ]
+    for host in summary.hosts:
+        names = ", ".join(host.components) or "no components"
+        lines.append(f"  {host.name} ({host.ip}, {host.arch}, docker via {host.docker}): {names}")
+    lines.append(f"  discovery server: {', '.join(summary.discovery_servers)}")
+    for line in lines:
+        report.info(line)

@@ -19,21 +19,17 @@ config model (pydantic), so that the CLI can call it before loading one.
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from robocore.project import ProjectFolder
+
 #: Steps that talk to the robot hosts over ssh.
 REMOTE_STEPS = frozenset({"sync", "run", "status", "logs", "connect", "doctor", "down", "rollback"})
-#: Steps that connect to the robot hosts' Docker daemons with :func:`robocore.commands.run.connect`'s
+#: Steps that connect to the robot hosts' Docker daemons with :func:`robocore.commands.hosts.connect`'s
 #: settings (status and logs use others).
 DOCKER_STEPS = frozenset({"run", "down", "rollback"})
-#: The record, inside the project's ``.robocore`` folder.
-RECORD = "ssh-hosts.json"
-ROBOT_FILE = "robot.yaml"
-STATE_DIR = ".robocore"
-PROJECT_ENV = "ROBOCORE_PROJECT"
 
 _warmed: set[tuple[str, str, int]] = set()  # (user, ip, port) already warmed by this process
 
@@ -93,7 +89,7 @@ def warm_recorded(argv: Sequence[str], cwd: Path | None = None) -> None:
         return
     try:
         root = _guess_project(argv, cwd or Path.cwd())
-        data = json.loads((root / STATE_DIR / RECORD).read_text())
+        data = json.loads(ProjectFolder(root).ssh_hosts_record.read_text())
         if data.get("robot_yaml") != _fingerprint(root):
             return
         endpoints = [Endpoint(str(e["name"]), str(e["user"]), str(e["ip"]), int(e["ssh_port"]))
@@ -105,21 +101,19 @@ def warm_recorded(argv: Sequence[str], cwd: Path | None = None) -> None:
 
 def _guess_project(argv: Sequence[str], cwd: Path) -> Path:
     """The project folder of a command line, without knowing the task names: ``-p DIR``, ``--project=DIR``,
-    ``$ROBOCORE_PROJECT``, a leading ``DIR`` holding a record, else ``cwd``."""
+    a leading ``DIR`` holding a record, else ``cwd``."""
     for i, arg in enumerate(argv):
         if arg in ("-p", "--project") and i + 1 < len(argv):
             return Path(argv[i + 1])
         if arg.startswith("--project="):
             return Path(arg.split("=", 1)[1])
-    if os.environ.get(PROJECT_ENV):
-        return Path(os.environ[PROJECT_ENV])
-    if argv and not argv[0].startswith("-") and (Path(argv[0]) / STATE_DIR / RECORD).is_file():
+    if argv and not argv[0].startswith("-") and ProjectFolder(Path(argv[0])).ssh_hosts_record.is_file():
         return Path(argv[0])
     return cwd
 
 
 def _fingerprint(root: Path) -> list[int]:
-    st = (root / ROBOT_FILE).stat()
+    st = ProjectFolder(root).robot_file.stat()
     return [st.st_size, st.st_mtime_ns]
 
 
@@ -128,6 +122,6 @@ def _record(root: Path, endpoints: Sequence[Endpoint]) -> None:
 
     try:
         text = json.dumps({"robot_yaml": _fingerprint(root), "hosts": [asdict(e) for e in endpoints]}) + "\n"
-        write_atomic(root / STATE_DIR / RECORD, text)  # rewritten only when it changes
+        write_atomic(ProjectFolder(root).ssh_hosts_record, text)  # rewritten only when it changes
     except OSError:
         pass  # a read-only project: the next command warms its hosts once it has loaded them

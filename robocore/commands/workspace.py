@@ -1,31 +1,19 @@
 """What the commands working on component workspaces share (stage, build, test): which components
-a command works on, the source files of a workspace, and the dev machine's Docker client that
-builds images and runs the colcon containers."""
+a command works on and the source files of a workspace."""
 
 from __future__ import annotations
 
 import os
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from robocore.config.model import Component
 from robocore.errors import UsageError
 from robocore.files import refuse_links_leaving
 from robocore.project import Project
 
-if TYPE_CHECKING:
-    import docker
-
 #: Top-level folders of a workspace that hold colcon's output, not sources.
 SKIP_WS_DIRS = frozenset({"build", "install", "log"})
-
-
-def local_docker() -> docker.DockerClient:
-    """The dev machine's Docker daemon, with a timeout long enough for image builds and colcon runs."""
-    from robocore.adapters.docker_hosts import local_client
-
-    return local_client(timeout=3600)
 
 
 def selected_components(project: Project, component: str | None) -> list[Component]:

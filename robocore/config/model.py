@@ -71,13 +71,19 @@ class Arch(str, Enum):
     arm64 = "arm64"
 
 
-_DOCKER_ARCH = {"x86_64": "amd64", "amd64": "amd64", "aarch64": "arm64", "arm64": "arm64"}
+#: Each architecture's name as the kernel says it (``uname -m``, ``platform.machine()``, qemu's binaries).
+MACHINE_NAMES = {Arch.amd64.value: "x86_64", Arch.arm64.value: "aarch64"}
 
 
 def docker_arch(machine: str) -> str:
     """A ``platform.machine()`` name in Docker terms (amd64, arm64); unknown names come back lower-cased."""
     machine = machine.lower()
-    return _DOCKER_ARCH.get(machine, machine)
+    return next((arch for arch, name in MACHINE_NAMES.items() if machine in (arch, name)), machine)
+
+
+def machine_arch(arch: str) -> str:
+    """A Docker arch name as the kernel says it (``arm64`` -> ``aarch64``); unknown names come back unchanged."""
+    return MACHINE_NAMES.get(arch, arch)
 
 
 class DockerAccess(str, Enum):

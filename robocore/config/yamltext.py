@@ -15,10 +15,9 @@ import yaml
 
 from robocore.config.values import printable, shown
 from robocore.errors import ConfigError, Problem
+from robocore.files import ROBOT_FILE as ROBOT_FILE
 
 KeyPath = tuple[str | int, ...]
-
-ROBOT_FILE = "robot.yaml"
 
 #: Largest robot.yaml read; a real one is a few kilobytes, and anything bigger is refused before parsing.
 MAX_FILE_BYTES = 1_000_000

@@ -27,6 +27,7 @@ ROLE_DISCOVERY = "discovery"
 DEFAULT_TAG = "latest"
 #: Command of a component that has no entrypoint: stay up so that ``connect`` can enter it.
 IDLE_COMMAND = ("sleep", "infinity")
+#: The X server's socket folder, shared with containers that show windows.
 X11_SOCKET = "/tmp/.X11-unix"
 
 
@@ -47,6 +48,11 @@ class Mount:
     def text(self) -> str:
         """``source:target[:ro]``: docker-py's and compose's short form."""
         return f"{self.source}:{self.target}" + (":ro" if self.read_only else "")
+
+    def api(self) -> dict[str, Any]:
+        """The Docker Engine API form (a ``HostConfig.Mounts`` entry)."""
+        return {"Type": "volume" if self.is_named_volume else "bind", "Source": self.source, "Target": self.target,
+                "ReadOnly": self.read_only}
 
 
 @dataclass(frozen=True)
@@ -332,8 +338,3 @@ def host_specs(project: Project, host: str, *, tag: str | None = None) -> list[C
     specs = [discovery_spec(project, s.index, tag=tag) for s in discovery.for_robot(robot).servers_on(host)]
     specs += [component_spec(project, c, tag=tag) for c in robot.components_on(host)]
     return specs
-
-
-def plan(project: Project, *, tag: str | None = None) -> dict[str, list[ContainerSpec]]:
-    """Host name -> its container specs, for every host of the robot (hosts with nothing included)."""
-    return {h.name: host_specs(project, h.name, tag=tag) for h in project.robot.hosts}

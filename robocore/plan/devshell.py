@@ -19,6 +19,7 @@ from typing import Any
 
 from robocore.config.model import Component, Robot
 from robocore.plan import naming
+from robocore.plan.containers import X11_SOCKET, Mount
 from robocore.project import Project
 
 #: Where robocore's shell files (setup.sh, profile.sh, bashrc, colcon defaults) are mounted.
@@ -32,7 +33,6 @@ CONTAINER_BUILD = "/robocore/build"
 CONTAINER_LOG = "/robocore/log"
 #: Mount points of the component's colcon folders (created on the dev machine before mounting).
 BUILD_TARGETS = (CONTAINER_BUILD, naming.CONTAINER_INSTALL, CONTAINER_LOG)
-X11_SOCKETS = "/tmp/.X11-unix"
 XAUTH_FILE = "xauth"
 SETUP_SCRIPT = "setup.sh"
 SHELL_FILES = ("setup.sh", "profile.sh", "bashrc", "colcon-defaults.yaml")
@@ -67,19 +67,6 @@ class ShellRequest:
     gpus: bool | None = None  # None: when the NVIDIA runtime is present
     privileged: bool = False
     number: int = 0  # > 0 for ``--new`` containers
-
-
-@dataclass(frozen=True)
-class Mount:
-    """A bind mount: host ``source`` at container ``target``."""
-
-    source: str
-    target: str
-    read_only: bool = False
-
-    def api(self) -> dict[str, Any]:
-        """The Docker Engine API form (``HostConfig.Mounts`` entry)."""
-        return {"Type": "bind", "Source": self.source, "Target": self.target, "ReadOnly": self.read_only}
 
 
 @dataclass(frozen=True)
@@ -169,26 +156,6 @@ def image_for(robot: Robot, project_name: str, component: Component) -> str:
     return f"{naming.component_image(robot, project_name, component.name)}:latest"
 
 
-def shell_dir(project: Project) -> Path:
-    """Host folder the shell files are written to (mounted read-only at :data:`CONTAINER_SHELL`)."""
-    return project.state_dir / "shell"
-
-
-def home_dir(project: Project, user: str) -> Path:
-    """The developer's persistent home for this project."""
-    return project.state_dir / "home" / user
-
-
-def x11_dir(project: Project, container: str) -> Path:
-    """Host folder of a container's xauth cookie file (a folder, so it can be replaced atomically)."""
-    return project.state_dir / "x11" / container
-
-
-def dds_dir(project: Project) -> Path:
-    """Host folder of the generated DDS profiles."""
-    return project.state_dir / "dds"
-
-
 def workspace_dir(project: Project, component: Component) -> Path | None:
     """The component's workspace on the dev machine, or None for ``image:`` components."""
     if component.folder is None:
@@ -260,8 +227,8 @@ def plan_shell(
     notes: list[str] = []
 
     mounts: list[Mount] = [
-        Mount(str(shell_dir(project)), CONTAINER_SHELL, read_only=True),
-        Mount(str(home_dir(project, user)), home),
+        Mount(str(project.shell_dir), CONTAINER_SHELL, read_only=True),
+        Mount(str(project.home_dir(user)), home),
     ]
     workspace = workspace_dir(project, component)
     env: dict[str, str] = {
@@ -285,7 +252,7 @@ def plan_shell(
     # Discovery: an observer (Fast DDS: a super client of the discovery servers) sees the whole graph.
     if dds_env is not None:
         env.update(dds_env)
-        mounts.append(Mount(str(dds_dir(project)), naming.CONTAINER_DDS, read_only=True))
+        mounts.append(Mount(str(project.dds_dir), naming.CONTAINER_DDS, read_only=True))
     else:
         env["ROS_DOMAIN_ID"] = str(robot.ros_domain_id)
 
@@ -304,8 +271,8 @@ def plan_shell(
         session["TERM"] = machine.term
     if machine.display:
         if machine.x11_sockets:
-            mounts.append(Mount(X11_SOCKETS, X11_SOCKETS, read_only=True))
-        mounts.append(Mount(str(x11_dir(project, name)), CONTAINER_X11, read_only=True))
+            mounts.append(Mount(X11_SOCKET, X11_SOCKET, read_only=True))
+        mounts.append(Mount(str(project.x11_dir(name)), CONTAINER_X11, read_only=True))
         env["QT_X11_NO_MITSHM"] = "1"
         session["DISPLAY"] = machine.display
         session["XAUTHORITY"] = f"{CONTAINER_X11}/{XAUTH_FILE}"

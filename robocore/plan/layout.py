@@ -37,7 +37,7 @@ def host_paths(project: Project, host: Host, component: str) -> HostPaths:
     if host.is_local:
         return HostPaths(
             install=str(project.build_dir(component) / "install"),
-            dds=str(project.state_dir / "dds"),
+            dds=str(project.dds_dir),
         )
     current = component_root(host, component) / CURRENT
     return HostPaths(install=str(current / "install"), dds=str(current / "dds"))

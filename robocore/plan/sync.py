@@ -48,7 +48,6 @@ KEEP_RELEASES = 3
 STAGING = "staging"
 RELEASES = "releases"
 CURRENT = "current"
-COMPOSE_NAME = "compose.yaml"
 _RELEASE_RE = re.compile(r"^\d{8}T\d{6}Z-[0-9a-f]{6}$")
 
 #: Exit code of :data:`SESSION_SCRIPT` when another sync holds the host's lock.

@@ -26,8 +26,6 @@ LABEL_RUN = "dev.robocore.testrun"
 #: ``<hostname>|<boot id>|<pid>|<process start ticks>`` of the pytest process that owns the run.
 LABEL_OWNER = "dev.robocore.testrun.owner"
 ROLE_HOST = "testhost"
-#: Where a run's generated files live (DDS profiles): ``.robocore/test-runs/<run id>/``.
-RUNS_DIR = "test-runs"
 #: The command of a host container: hold the namespaces, nothing else.
 HOST_COMMAND = ("sleep", "infinity")
 

@@ -135,7 +135,7 @@ def reserve_domain() -> tuple[int, socket.socket]:
 def build_lock(project: Project) -> Iterator[None]:
     """Hold the project's build lock: runs of one project build one at a time (the others find the caches warm)."""
     project.state_dir.mkdir(parents=True, exist_ok=True)
-    with open(project.state_dir / "build.lock", "a+") as handle:
+    with open(project.build_lock, "a+") as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
         try:
             yield
@@ -145,12 +145,12 @@ def build_lock(project: Project) -> Iterator[None]:
 
 def build_images(project_dir: Path) -> None:
     """prepare-base, stage and build, quietly; each does nothing when its inputs did not change."""
-    from robocore.commands import build, images
+    from robocore.commands import base_image, build, component_images
     from robocore.commands.context import Options
 
     options = Options(project_dir=project_dir, quiet=True)
-    images.prepare_base(options, force=False)
-    images.stage(options, refresh=False, component=None, force=False)
+    base_image.prepare_base(options, force=False)
+    component_images.stage(options, refresh=False, component=None, force=False)
     build.build(options, component=None, full=False)
 
 
@@ -331,7 +331,7 @@ def bring_up(project_dir: Path, *, build: bool = True, servers: bool = True, gra
     built = time.monotonic()
     domain, holder = reserve_domain()
     run = TestRun(project=source.name, run_id=secrets.token_hex(4), domain_id=domain, owner=owner())
-    run_dir = source.state_dir / testrun.RUNS_DIR / run.run_id
+    run_dir = source.test_runs_dir / run.run_id
     robot = RobotUnderTest(project=source, run=run, client=client, run_dir=run_dir, _domain_holder=holder)
     if reaped:
         robot.notes.append(f"removed {reaped} container(s) left by an earlier run that was killed")

@@ -16,8 +16,8 @@ from typing import Any
 import pytest
 
 from robocore.errors import RobocoreError
+from robocore.files import ROBOT_FILE
 
-ROBOT_FILE = "robot.yaml"
 _RUN = pytest.StashKey["Any"]()
 
 

@@ -17,7 +17,6 @@ from pathlib import Path
 import pytest
 
 from robocore import cli
-from robocore.tasks import PROJECT_ENV
 
 ROBOT_YAML = """\
 ros_distro: jazzy
@@ -126,8 +125,6 @@ def project(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     for folder in ("components/talker/src", "components/listener/src"):
         (root / folder).mkdir(parents=True)
     (root / "robot.yaml").write_text(ROBOT_YAML)
-    monkeypatch.setenv(PROJECT_ENV, "unset")  # main() sets it for -p: recorded here, so that it is restored
-    monkeypatch.delenv(PROJECT_ENV)
     monkeypatch.setenv("DOCKER_HOST", f"unix://{tmp_path}/no-daemon.sock")  # nothing listens there
     monkeypatch.chdir(root)
     return root
@@ -170,7 +167,6 @@ def test_nothing_was_written_by_refused_lines(project: Path, capsys: pytest.Capt
     for case in CASES:
         if case.code == 2 and "init" not in case.argv:
             run_main([arg.replace(MARK, str(project.parent / "MARKER")) for arg in case.argv], capsys)
-            os.environ.pop(PROJECT_ENV, None)  # each line starts without the previous one's -p
     assert sorted(p.relative_to(project.parent) for p in project.parent.rglob("*")) == before
 
 
@@ -187,7 +183,7 @@ SUBPROCESS_CASES = [
 @pytest.mark.parametrize("case", SUBPROCESS_CASES, ids=lambda c: c.id)
 def test_hostile_line_through_the_console_script(case: Case, project: Path) -> None:
     marker = project.parent / "MARKER"
-    env = {k: v for k, v in os.environ.items() if k != PROJECT_ENV}
+    env = dict(os.environ)
     done = subprocess.run([sys.executable, "-m", "robocore", *(a.replace(MARK, str(marker)) for a in case.argv)],
                           capture_output=True, text=True, cwd=project, env=env, timeout=60)
     check(case, done.returncode, done.stdout, done.stderr, marker)
@@ -197,7 +193,7 @@ def test_invoke_in_a_project_checks_numeric_flags_too(project: Path) -> None:
     """The project's own ``invoke`` (not the robocore command) runs the same tasks: one line, no traceback."""
     (project / "tasks.py").write_text("from robocore.tasks import namespace  # noqa: F401\n")
     invoke = Path(sys.executable).with_name("invoke")
-    env = {k: v for k, v in os.environ.items() if k != PROJECT_ENV}
+    env = dict(os.environ)
     done = subprocess.run([str(invoke), "logs", "--tail", "abc"], capture_output=True, text=True, cwd=project,
                           env=env, timeout=60)
     assert done.returncode == 2 and "Traceback" not in done.stderr

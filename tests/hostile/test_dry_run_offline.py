@@ -80,7 +80,7 @@ def world(tmp_path: Path) -> Iterator[dict[str, object]]:
     listener.bind(str(sock_path))
     listener.listen(16)
     listener.setblocking(False)
-    env = {k: v for k, v in os.environ.items() if k not in {"ROBOCORE_PROJECT", "XDG_RUNTIME_DIR"}}
+    env = {k: v for k, v in os.environ.items() if k != "XDG_RUNTIME_DIR"}
     env.update(PATH=f"{fake_bin}:{env['PATH']}", DOCKER_HOST=f"unix://{sock_path}", TMPDIR=str(tmp_path / "tmp"))
     (tmp_path / "tmp").mkdir()
     yield {"root": root, "tmp": tmp_path, "env": env, "listener": listener}

@@ -65,7 +65,6 @@ def sandbox(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Sandbox:
     git.chmod(0o755)
     monkeypatch.setenv("PATH", f"{bin_dir}{os.pathsep}{os.environ.get('PATH', '')}")
     monkeypatch.setenv("DOCKER_HOST", f"unix://{tmp_path / 'no-docker.sock'}")  # never the shared daemon
-    monkeypatch.setenv("ROBOCORE_PROJECT", str(project))  # restored afterwards (main sets it)
     monkeypatch.chdir(project)  # messages name ./robot.yaml as robot.yaml
     return box
 
@@ -173,7 +172,7 @@ def test_the_marker_would_be_noticed(sandbox: Sandbox) -> None:
 def test_end_to_end_in_a_new_process(sandbox: Sandbox, case_id: str, args: tuple[str, ...]) -> None:
     case = next(c for c in CASES if c.id == case_id)
     sandbox.write(case)
-    env = {k: v for k, v in os.environ.items() if k != "ROBOCORE_PROJECT"}
+    env = dict(os.environ)
     done = subprocess.run([sys.executable, "-m", "robocore", "-p", str(sandbox.project), *args],
                           capture_output=True, text=True, env=env, cwd=sandbox.project, timeout=120, check=False)
     output = done.stdout + done.stderr

@@ -1,0 +1,137 @@
+"""prepare-base: the base image (ROS plus ``common_packages``), one per arch of the hosts that need it.
+
+The base is rebuilt only when its inputs hash changes. Its parent is the official ROS image
+(pulled when missing) or, for the wheels base, a Debian root image robocore bootstraps itself.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from contextlib import suppress
+from typing import TYPE_CHECKING
+
+from robocore.commands.context import DRY_RUN_UNKNOWN, Options
+from robocore.commands.images import (
+    Planned,
+    allowed_protocol,
+    arches,
+    decide,
+    fetch_source,
+    planned,
+    refuse_config_problems,
+    resource_entry,
+    run_builds,
+    show_plan,
+    triage,
+)
+from robocore.commands.machine import check_emulation, find_ca_bundle, local_docker, native_arch
+from robocore.commands.reporting import Outcome, report_outcomes
+from robocore.config.model import BaseKind
+from robocore.errors import DockerError
+from robocore.files import ROBOT_FILE, refuse_links_leaving
+from robocore.plan import dockerfiles, naming
+from robocore.plan.dockerfiles import ContextEntry, ImagePlan
+from robocore.project import Project
+
+if TYPE_CHECKING:
+    import docker
+
+
+def _base_parent(project: Project, client: docker.DockerClient | None, arch: str, *, dry_run: bool,
+                 say: Callable[[str], None]) -> tuple[str, str]:
+    """(FROM reference, its image ID) of the base for ``arch``; without a client (a dry run) the ID is
+    :data:`DRY_RUN_UNKNOWN`."""
+    from robocore.adapters import rootfs
+    from robocore.adapters.image_builder import image_state
+
+    robot = project.robot
+    if client is None:
+        default = rootfs.BOOTSTRAPPED if robot.base.kind is BaseKind.wheels else dockerfiles.official_image(robot)
+        return robot.base.image or default, DRY_RUN_UNKNOWN
+    if robot.base.kind is BaseKind.wheels:
+        if dry_run:
+            for ref in ([robot.base.image] if robot.base.image else [rootfs.BOOTSTRAPPED, rootfs.UPSTREAM]):
+                state = image_state(client, ref)
+                if state is not None:
+                    return ref, state.id
+            return robot.base.image or rootfs.BOOTSTRAPPED, "(to be bootstrapped)"
+        return rootfs.ensure_root_image(client, robot.base.image, work_dir=project.cache_dir, status=say)
+    ref = dockerfiles.official_image(robot)
+    state = image_state(client, ref)
+    if state is None and not dry_run:
+        say(f"pulling {ref}")
+        from docker.errors import DockerException
+
+        with suppress(DockerException):
+            client.images.pull(ref, platform=dockerfiles.platform(arch))
+        state = image_state(client, ref)
+    if state is None:
+        if dry_run:
+            return ref, "(to be pulled)"
+        raise DockerError(
+            f"robot.yaml: base image {ref} is not present locally and cannot be pulled",
+            hint="pull or docker load it on this machine, or use base.kind: wheels (built from Debian and PyPI)",
+        )
+    return ref, state.id
+
+
+def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *, dry_run: bool = False,
+              refresh_sources: bool = False, say: Callable[[str], None] = lambda _: None) -> Planned:
+    """The base image plan for ``arch`` (resolves the root image and fetches common packages)."""
+    robot = project.robot
+    refuse_config_problems(project)
+    native = native_arch()
+    if not dry_run:
+        check_emulation(arch, native, f"{ROBOT_FILE}: hosts of arch {arch}")
+    root_ref, root_id = _base_parent(project, client, arch, dry_run=dry_run, say=say)
+    ca = find_ca_bundle()
+    entries: list[ContextEntry] = [resource_entry("entrypoint.sh", "entrypoint.sh", executable=True)]
+    if robot.base.kind is BaseKind.wheels:
+        from robocore import resources
+
+        setup = resources.read("wheels-setup.bash").replace(b"@DISTRO@", robot.ros_distro.value.encode())
+        entries += [ContextEntry("wheels-setup.bash", data=setup), resource_entry("ros2", "ros2", executable=True)]
+    if ca is not None:
+        entries.append(ContextEntry("host-ca.pem", data=ca.read_bytes()))
+    common: list[str] = []
+    known = True
+    for pkg in robot.common_packages:
+        if pkg.repo:
+            source = fetch_source(project, pkg.repo, pkg.branch, allowed_protocol(pkg), refresh=refresh_sources,
+                                  dry_run=dry_run)
+        else:
+            source = project.root / (pkg.folder or pkg.name)
+            refuse_links_leaving(source, project.root, what=f"common package {pkg.name}, staged into the base image")
+        if source is None:
+            known = False  # a dry run before the first fetch
+        else:
+            entries.append(ContextEntry(f"common/{pkg.name}", source=source))
+        common.append(pkg.name)
+    dockerfile = dockerfiles.base_dockerfile(robot, root_image=root_ref, has_ca=ca is not None, common=common)
+    plan = ImagePlan(role="base", name=naming.base_image(robot, project.name), tag=dockerfiles.base_tag(arch, native),
+                     arch=arch, dockerfile=dockerfile, parent=root_ref, context=tuple(entries))
+    return planned(project, plan, root_id, known=known)
+
+
+def prepare_base(options: Options, *, force: bool) -> None:
+    """Build the base image (per arch) when its inputs changed."""
+    project = options.load()
+    report = options.report
+    refuse_config_problems(project)
+    client = None if options.dry_run else local_docker()  # a dry run contacts no daemon
+    from robocore.adapters.image_builder import image_state
+
+    outcomes: list[Outcome] = []
+    work: list[tuple[Planned, str]] = []
+    try:
+        for arch in arches(project):
+            base = plan_base(project, client, arch, dry_run=options.dry_run, refresh_sources=force, say=report.info)
+            reason = decide(image_state(client, base.plan.ref) if client else None, base, force=force)
+            if options.dry_run:
+                show_plan(report, base, reason)
+            triage(base, reason, options.dry_run, outcomes, work)
+    finally:
+        if client is not None:
+            client.close()
+    outcomes += run_builds(report, work, parallel=False)
+    report_outcomes(report, outcomes)
