@@ -68,11 +68,11 @@ def start_process(argv: list[str], *, env: Mapping[str, str] | None = None, **po
 
 
 def stop_process(proc: subprocess.Popen[str]) -> None:
-    """Kill ``proc``'s process group (SIGKILL) if it still runs, wait for it and close its pipes."""
-    if proc.poll() is None:
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=30)
+    """Kill ``proc``'s process group (SIGKILL: the process and what it started, such as ssh or rsync, even
+    when the process itself already ended), wait for it and close its pipes."""
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=30)
     for stream in (proc.stdin, proc.stdout, proc.stderr):
         if stream is not None:
             stream.close()
