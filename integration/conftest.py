@@ -14,6 +14,7 @@ Docker, projects and robot hosts
   Its folder name is fixed, so its images (``robocore-it-demo-*``) survive between runs and a rerun
   is a cheap no-op thanks to the content-hash labels; the images are the cache and are kept on purpose.
 - ``project_copies`` (function): throw-away copies of the demo project; their containers are removed.
+- ``robot_run`` (function): a project brought up by the pytest plugin's machinery; closed afterwards.
 - ``robot_fleets`` (module) and ``fleet`` (module): Docker-in-Docker robot hosts reached over ssh://
   (robot_host/); removed after the module's last test.
 
@@ -258,6 +259,24 @@ def project_copies(demo_project: Path, tmp_path: Path, docker_client: Any) -> It
     for name in made:
         remove_test_runs(docker_client, name)
         remove_project_containers(docker_client, name)
+
+
+@pytest.fixture
+def robot_run(project_copies: Callable[..., Path]) -> Iterator[Callable[..., Any]]:
+    """``robot_run(root=None, servers=True)``: project ``root`` (default: a ``robocore-it-probe-*`` copy of the
+    demo project) brought up by robocore's pytest plugin machinery (``robocore.testing.bring_up``); every run
+    is closed when the test ends."""
+    from robocore.testing import bring_up
+
+    runs: list[Any] = []
+
+    def start(root: Path | None = None, *, servers: bool = True) -> Any:
+        runs.append(bring_up(root or project_copies("probe"), servers=servers))
+        return runs[-1]
+
+    yield start
+    for run in runs:
+        run.close()
 
 
 class Restorer:
