@@ -19,6 +19,7 @@ import tarfile
 import tempfile
 import threading
 import time
+import uuid
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -37,8 +38,10 @@ if TYPE_CHECKING:
 
 pytestmark = pytest.mark.docker
 
-TINY = "robocore-it-tiny:v1"
-DERIVED = "robocore-it-tiny-derived:v1"
+#: Names of this run's own (another run on the same daemon removes its own when it ends).
+TINY_REPO = f"robocore-it-tiny-{uuid.uuid4().hex[:6]}"
+TINY = f"{TINY_REPO}:v1"
+DERIVED = f"{TINY_REPO}-derived:v1"
 
 
 @pytest.fixture(scope="module")
@@ -50,13 +53,13 @@ def tiny_images(docker_client: Any) -> Iterator[list[str]]:
         info = tarfile.TarInfo("payload.bin")
         info.size = len(data)
         tar.addfile(info, io.BytesIO(data))
-    docker_client.api.import_image_from_data(payload.getvalue(), repository="robocore-it-tiny", tag="v1")
+    docker_client.api.import_image_from_data(payload.getvalue(), repository=TINY_REPO, tag="v1")
     with tempfile.TemporaryDirectory() as ctx:
         Path(ctx, "Dockerfile").write_text(f"FROM {TINY}\nCOPY extra.txt /extra.txt\n")
         Path(ctx, "extra.txt").write_text("one more layer\n" * 100)
         docker_client.images.build(path=ctx, tag=DERIVED, rm=True)
     yield [TINY, DERIVED]
-    remove_local_tags(docker_client, ("robocore-it-tiny",))
+    remove_local_tags(docker_client, (TINY_REPO,))
 
 
 def remove_local_tags(docker_client: Any, repositories: tuple[str, ...]) -> None:
@@ -146,7 +149,7 @@ def test_images_go_through_a_registry_when_one_is_configured(fleet: RobotFleet, 
         client.images.remove(name, force=True)
     result = ensure_images(client, [TINY], registry=registry, progress=False, label="robot-a")
     assert result[TINY].action == "pulled"
-    assert registry_tags(registry, "robocore-it-tiny") == ["v1"]  # pushed once, from this machine
+    assert registry_tags(registry, TINY_REPO) == ["v1"]  # pushed once, from this machine
     assert client.images.get(TINY).id == docker_client.images.get(TINY).id
     assert client.images.get(f"{registry}/{TINY}").id == docker_client.images.get(TINY).id
 
