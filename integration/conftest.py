@@ -60,7 +60,7 @@ _STARTED: list[subprocess.Popen[str]] = []
 
 def start_process(argv: list[str], *, env: Mapping[str, str] | None = None, **popen: Any) -> subprocess.Popen[str]:
     """``argv`` left running in a process group of its own (stdin from /dev/null and text pipes unless
-    ``popen`` says otherwise); the group is killed when the current test ends if the process still runs."""
+    ``popen`` says otherwise); its process group is killed when the current test ends."""
     options: dict[str, Any] = {"stdin": subprocess.DEVNULL, "stdout": subprocess.PIPE, "stderr": subprocess.PIPE,
                                "text": True, **popen}
     proc: subprocess.Popen[str] = subprocess.Popen(argv, env=env, start_new_session=True, **options)
@@ -130,7 +130,7 @@ class RobocoreCli:
     def start(self, project: Path | None, *args: str, env: Env | None = None,
               **popen: Any) -> subprocess.Popen[str]:
         """The CLI left running, for a test that reads it live or acts meanwhile (:func:`start_process`:
-        killed with its process group when the test ends if it still runs)."""
+        killed with its process group when the test ends)."""
         return start_process(self.argv(project, *args), env=self.environ(env), **popen)
 
     def in_terminal(self, project: Path | None, *args: str, typed: str, env: Env | None = None,

@@ -56,9 +56,20 @@ class RobotHost:
             raise AssertionError(f"ssh {self.name} {argv} exited {proc.returncode}: {proc.stderr}")
         return proc.stdout
 
+    def docker(self, fleet: RobotFleet) -> Any:
+        """A new docker-py client of the host's inner daemon, which the caller closes (for scripts such as
+        bench/deploy.py; the suites use the fleet's own clients, :meth:`RobotFleet.client`)."""
+        from robocore.adapters.docker_hosts import client_for
+        from robocore.config.model import Host
+
+        return client_for(Host(name=self.name, ip=self.ip), timeout=600)
+
 
 class RobotFleet:
-    """``count`` robot hosts on one private network: :meth:`start` them, :meth:`close` removes everything."""
+    """``count`` robot hosts on one private network: :meth:`start` them, :meth:`close` removes everything.
+
+    The suites get fleets from conftest's fixtures; a script uses a fleet as a context manager.
+    """
 
     def __init__(self, count: int = 2, tag: str = "", *, env: list[dict[str, str]] | None = None,
                  setup: Callable[[RobotHost], None] | None = None) -> None:
@@ -77,6 +88,17 @@ class RobotFleet:
         self._clients: dict[int, Any] = {}
         self._saved_env: str | None = None
         self._env_set = False
+
+    def __enter__(self) -> RobotFleet:
+        try:
+            self.start()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     def start(self) -> None:
         """Build the image if needed, start the hosts, wait for sshd and dockerd, write the ssh config."""
