@@ -1,59 +1,193 @@
 """Shared fixtures of the Docker integration suites.
 
-- ``docker_client``: a docker-py client of the local daemon; FAILS (never skips) without one.
-- ``demo_project``: one session-wide robot project (``robocore init --defaults --base wheels``)
-  taken through ``prepare-base``, ``stage`` and ``build``. Its folder name is fixed, so its
-  images (``robocore-it-demo-*``) survive between runs and a rerun is a cheap no-op thanks to the
-  content-hash labels; the images are the cache and are kept on purpose.
-- ``run_robocore``: run ``python -m robocore -p PROJECT ...`` and return the completed process.
+The robocore CLI
+- ``run_robocore`` (session): the one way the suites run the CLI, ``python -m robocore -p PROJECT
+  ...`` in a subprocess (:class:`RobocoreCli`): in the foreground (returns the completed process;
+  fails the test with the command, exit code and output tails when asked to check), left running
+  (``.start``), or on a pseudo-terminal (``.in_terminal``).
 
-Containers created by tests must be removed by the tests themselves; name them with a
-``robocore-it-`` prefix so a leftover is easy to spot.
+Docker, projects and robot hosts
+- ``docker_client`` (session): a docker-py client of the local daemon; FAILS (never skips) without one.
+- ``new_demo_project`` (session): ``robocore init DIR/robocore-it-demo --defaults --base wheels`` in a
+  new temporary folder; every such folder is removed at the end of the session.
+- ``demo_project`` (session): one of those taken through ``prepare-base``, ``stage`` and ``build``.
+  Its folder name is fixed, so its images (``robocore-it-demo-*``) survive between runs and a rerun
+  is a cheap no-op thanks to the content-hash labels; the images are the cache and are kept on purpose.
+- ``project_copies`` (function): throw-away copies of the demo project; their containers are removed.
+- ``robot_run`` (function): a project brought up by the pytest plugin's machinery; closed afterwards.
+- ``robot_fleets`` (module) and ``fleet`` (module): Docker-in-Docker robot hosts reached over ssh://
+  (robot_host/); removed after the module's last test.
+
+What a test creates is removed by a fixture, pass or fail
+- ``tracked_containers``: containers a test starts itself;
+- ``restore``: files and folders of a shared project a test edits, put back afterwards;
+- ``background``: processes left running (and ``run_robocore.start``): their process groups are
+  killed when the test ends.
+
+Name containers with a ``robocore-it-`` prefix so that a leftover is easy to spot.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import pty
+import select
+import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
-from collections.abc import Callable, Iterator
+import time
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
+from typing import Any
 
 import pytest
+from deploy_helpers import copy_project, output_tails, remove_project_containers, remove_test_runs
+from robot_host.hosts import RobotFleet
 
 os.environ.setdefault("TESTCONTAINERS_RYUK_DISABLED", "true")
 
 DEMO_NAME = "robocore-it-demo"
-RunRobocore = Callable[..., "subprocess.CompletedProcess[str]"]
+#: Environment changes of a CLI run: variables set on top of this process's environment, None removes one.
+Env = Mapping[str, "str | None"]
+
+#: Processes started with :func:`start_process` (``background``, ``run_robocore.start``), oldest first.
+_STARTED: list[subprocess.Popen[str]] = []
 
 
-def _robocore(
-    project: Path | None, *args: str, check: bool = True, timeout: float = 1800
-) -> subprocess.CompletedProcess[str]:
-    argv = [sys.executable, "-m", "robocore"]
-    if project is not None:
-        argv += ["-p", str(project)]
-    argv += list(args)
-    proc = subprocess.run(argv, capture_output=True, text=True, timeout=timeout)
-    if check and proc.returncode != 0:
-        pytest.fail(
-            f"`robocore {' '.join(args)}` exited {proc.returncode}\n--- stdout\n{proc.stdout[-4000:]}\n"
-            f"--- stderr\n{proc.stderr[-4000:]}",
-            pytrace=False,
-        )
+def start_process(argv: list[str], *, env: Mapping[str, str] | None = None, **popen: Any) -> subprocess.Popen[str]:
+    """``argv`` left running in a process group of its own (stdin from /dev/null and text pipes unless
+    ``popen`` says otherwise); its process group is killed when the current test ends."""
+    options: dict[str, Any] = {"stdin": subprocess.DEVNULL, "stdout": subprocess.PIPE, "stderr": subprocess.PIPE,
+                               "text": True, **popen}
+    proc: subprocess.Popen[str] = subprocess.Popen(argv, env=env, start_new_session=True, **options)
+    _STARTED.append(proc)
     return proc
 
 
-@pytest.fixture(scope="session")
-def run_robocore() -> RunRobocore:
-    """``run_robocore(project, *args, check=True)`` runs the robocore CLI in a subprocess."""
-    return _robocore
+def stop_process(proc: subprocess.Popen[str]) -> None:
+    """Kill ``proc``'s process group (SIGKILL: the process and what it started, such as ssh or rsync, even
+    when the process itself already ended), wait for it and close its pipes."""
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=30)
+    for stream in (proc.stdin, proc.stdout, proc.stderr):
+        if stream is not None:
+            stream.close()
+
+
+@pytest.fixture(autouse=True)
+def _stop_started_processes() -> Iterator[None]:
+    """Kills what the test left running of the processes it started (not those of wider fixtures)."""
+    mark = len(_STARTED)
+    yield
+    while len(_STARTED) > mark:
+        stop_process(_STARTED.pop())
+
+
+@pytest.fixture
+def background() -> Callable[..., subprocess.Popen[str]]:
+    """``background(argv, **popen)``: a command other than robocore's CLI left running (:func:`start_process`)."""
+    return start_process
+
+
+class RobocoreCli:
+    """robocore's command line as a user runs it: ``python -m robocore [-p PROJECT] ARGS`` in a subprocess.
+
+    Every way takes ``env``: variables set on top of this process's environment, ``None`` removing
+    one (e.g. ``{"DISPLAY": None}``). Standard input is /dev/null unless a terminal is asked for, so
+    that the CLI never sees the terminal pytest may have been started from.
+    """
+
+    def argv(self, project: Path | None, *args: str) -> list[str]:
+        """The command line: this interpreter, ``-m robocore``, ``-p PROJECT`` when given, ``args``."""
+        return [sys.executable, "-m", "robocore", *(["-p", str(project)] if project is not None else []), *args]
+
+    def environ(self, env: Env | None = None) -> dict[str, str]:
+        """This process's environment with ``env`` applied (``None`` values remove the variable)."""
+        full = dict(os.environ)
+        for name, value in (env or {}).items():
+            if value is None:
+                full.pop(name, None)
+            else:
+                full[name] = value
+        return full
+
+    def __call__(self, project: Path | None, *args: str, check: bool = True, env: Env | None = None,
+                 timeout: float = 1800) -> subprocess.CompletedProcess[str]:
+        """Run the CLI to its end and return the completed process (text stdout and stderr). With ``check``,
+        a non-zero exit fails the test with the command line, the exit code and the ends of both outputs."""
+        argv = self.argv(project, *args)
+        proc = subprocess.run(argv, env=self.environ(env), stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                              timeout=timeout)
+        if check and proc.returncode != 0:
+            pytest.fail(f"`robocore {shlex.join(argv[3:])}` failed: {output_tails(proc, 4000)}", pytrace=False)
+        return proc
+
+    def start(self, project: Path | None, *args: str, env: Env | None = None,
+              **popen: Any) -> subprocess.Popen[str]:
+        """The CLI left running, for a test that reads it live or acts meanwhile (:func:`start_process`:
+        killed with its process group when the test ends)."""
+        return start_process(self.argv(project, *args), env=self.environ(env), **popen)
+
+    def in_terminal(self, project: Path | None, *args: str, typed: str, env: Env | None = None,
+                    timeout: float = 60) -> subprocess.CompletedProcess[str]:
+        """The CLI on a new pseudo-terminal, its controlling terminal as in an interactive session: ``typed``
+        is written to the terminal, and all the terminal showed until the CLI exited is the result's stdout
+        (stderr is empty: one terminal carries both). Killed after ``timeout`` seconds (exit code -9)."""
+        argv = self.argv(project, *args)
+        environ = self.environ(env)
+        pid, fd = pty.fork()
+        if pid == 0:  # the child: the CLI on the terminal
+            try:
+                os.execve(argv[0], argv, environ)
+            finally:
+                os._exit(127)
+        output = b""
+        deadline = time.monotonic() + timeout
+        try:
+            os.write(fd, typed.encode())
+            while time.monotonic() < deadline:
+                ready, _, _ = select.select([fd], [], [], 1.0)
+                if not ready:
+                    continue
+                try:
+                    chunk = os.read(fd, 4096)
+                except OSError:  # the child closed the terminal
+                    break
+                if not chunk:
+                    break
+                output += chunk
+        finally:
+            status = _reap(pid, grace=10 if time.monotonic() < deadline else 0)
+            os.close(fd)
+        return subprocess.CompletedProcess(argv, os.waitstatus_to_exitcode(status), output.decode(errors="replace"), "")
+
+
+def _reap(pid: int, grace: float) -> int:
+    """Wait up to ``grace`` seconds for child ``pid`` to exit, then kill it; return its wait status."""
+    end = time.monotonic() + grace
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            return status
+        if time.monotonic() >= end:
+            os.kill(pid, signal.SIGKILL)
+            return os.waitpid(pid, 0)[1]
+        time.sleep(0.05)
 
 
 @pytest.fixture(scope="session")
-def docker_client() -> Iterator[object]:
+def run_robocore() -> RobocoreCli:
+    """``run_robocore(project, *args, check=True, env=None, timeout=1800)``: the robocore CLI (:class:`RobocoreCli`)."""
+    return RobocoreCli()
+
+
+@pytest.fixture(scope="session")
+def docker_client() -> Iterator[Any]:
     """A client of the local Docker daemon. Fails loudly when there is none."""
     try:
         import docker
@@ -69,21 +203,157 @@ def docker_client() -> Iterator[object]:
     client.close()
 
 
-def make_demo_project(parent: Path, name: str = DEMO_NAME) -> Path:
-    """``robocore init PARENT/NAME --defaults --base wheels``: the template project on the wheels base."""
-    root = parent / name
-    if root.exists():
-        shutil.rmtree(root)
-    _robocore(None, "init", str(root), "--defaults", "--base", "wheels")
-    return root
+@pytest.fixture
+def tracked_containers(docker_client: Any) -> Iterator[list[Any]]:
+    """A list for the containers a test starts itself: each is removed (forced, with its anonymous volumes)
+    when the test ends, pass or fail."""
+    from docker.errors import NotFound
+
+    started: list[Any] = []
+    yield started
+    for container in started:
+        with contextlib.suppress(NotFound):
+            container.remove(force=True, v=True)
 
 
 @pytest.fixture(scope="session")
-def demo_project(docker_client: object) -> Iterator[Path]:
+def new_demo_project(docker_client: Any, run_robocore: RobocoreCli) -> Iterator[Callable[[], Path]]:
+    """``new_demo_project()``: ``robocore init TMP/robocore-it-demo --defaults --base wheels``, the template
+    project on the wheels base in a new temporary folder; every such folder is removed when the session ends."""
+    parents: list[Path] = []
+
+    def make() -> Path:
+        parents.append(Path(tempfile.mkdtemp(prefix="robocore-it-")))
+        root = parents[-1] / DEMO_NAME
+        run_robocore(None, "init", str(root), "--defaults", "--base", "wheels")
+        return root
+
+    yield make
+    for parent in parents:
+        shutil.rmtree(parent, ignore_errors=True)
+
+
+@pytest.fixture(scope="session")
+def demo_project(new_demo_project: Callable[[], Path], run_robocore: RobocoreCli) -> Path:
     """The template project (wheels base) after prepare-base, stage and build; returns its folder."""
-    parent = Path(tempfile.mkdtemp(prefix="robocore-it-"))
-    root = make_demo_project(parent)
+    root = new_demo_project()
     for step in ("prepare-base", "stage", "build"):
-        _robocore(root, step, "--quiet")
-    yield root
-    shutil.rmtree(parent, ignore_errors=True)
+        run_robocore(root, step, "--quiet")
+    return root
+
+
+@pytest.fixture
+def project_copies(demo_project: Path, tmp_path: Path, docker_client: Any) -> Iterator[Callable[..., Path]]:
+    """``project_copies(kind, transport="shm", edit=None)``: a copy of the built demo project named
+    ``robocore-it-<kind>-<n>-<stamp>`` (:func:`deploy_helpers.copy_project`: its own containers, discovery
+    port and ROS domain). When the test ends, the containers, discovery server volumes and pytest-plugin
+    test runs of every copy are removed."""
+    made: list[str] = []
+
+    def make(kind: str, **kwargs: Any) -> Path:
+        name = f"robocore-it-{kind}-{len(made)}-{int(time.time() * 1000) % 100000}"
+        made.append(name)
+        return copy_project(demo_project, tmp_path, name, **kwargs)
+
+    yield make
+    for name in made:
+        remove_test_runs(docker_client, name)
+        remove_project_containers(docker_client, name)
+
+
+@pytest.fixture
+def robot_run(project_copies: Callable[..., Path]) -> Iterator[Callable[..., Any]]:
+    """``robot_run(root=None, servers=True)``: project ``root`` (default: a ``robocore-it-probe-*`` copy of the
+    demo project) brought up by robocore's pytest plugin machinery (``robocore.testing.bring_up``); every run
+    is closed when the test ends."""
+    from robocore.testing import bring_up
+
+    runs: list[Any] = []
+
+    def start(root: Path | None = None, *, servers: bool = True) -> Any:
+        runs.append(bring_up(root or project_copies("probe"), servers=servers))
+        return runs[-1]
+
+    yield start
+    for run in runs:
+        run.close()
+
+
+class Restorer:
+    """Puts files and folders back as they were when kept: the same content, or absent if they did not exist.
+
+    A file gets its content back (written anew, so that tools comparing times see a change); a folder
+    is copied back with its files' times; ``then(action)`` runs after everything is back (e.g. a
+    rebuild of a shared project, whose build must match its sources again).
+    """
+
+    def __init__(self, backups: Path) -> None:
+        self.backups = backups
+        self.kept: list[tuple[Path, Path | None]] = []
+        self.actions: list[Callable[[], object]] = []
+
+    def keep(self, *paths: Path) -> None:
+        """Remember ``paths`` as they are now."""
+        for path in paths:
+            backup: Path | None = None
+            if path.is_dir() and not path.is_symlink():
+                backup = self.backups / str(len(self.kept))
+                shutil.copytree(path, backup, symlinks=True)
+            elif path.exists() or path.is_symlink():
+                backup = self.backups / str(len(self.kept))
+                shutil.copy2(path, backup, follow_symlinks=False)
+            self.kept.append((path, backup))
+
+    def then(self, action: Callable[[], object]) -> None:
+        """Run ``action`` once everything kept is back."""
+        self.actions.append(action)
+
+    def restore(self) -> None:
+        """Put back every kept path (the last kept first), then run the actions."""
+        for path, backup in reversed(self.kept):
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path)
+            if backup is None:
+                path.unlink(missing_ok=True)
+            elif backup.is_dir():
+                shutil.copytree(backup, path, symlinks=True)
+            elif backup.is_symlink():
+                path.unlink(missing_ok=True)
+                path.symlink_to(os.readlink(backup))
+            else:
+                path.write_bytes(backup.read_bytes())
+        for action in self.actions:
+            action()
+
+
+@pytest.fixture
+def restore(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Restorer]:
+    """``restore.keep(path, ...)`` before a test edits, moves or creates paths in a shared project: they are
+    put back when the test ends, pass or fail (:class:`Restorer`)."""
+    restorer = Restorer(tmp_path_factory.mktemp("restore"))
+    yield restorer
+    restorer.restore()
+
+
+@pytest.fixture(scope="module")
+def robot_fleets(docker_client: Any) -> Iterator[Callable[..., RobotFleet]]:
+    """``robot_fleets(count=2, env=None, setup=None)``: a started :class:`RobotFleet` of simulated robot hosts;
+    every fleet of the module (hosts, network, keys) is removed after the module's last test."""
+    fleets: list[RobotFleet] = []
+
+    def start(count: int = 2, **kwargs: Any) -> RobotFleet:
+        fleet = RobotFleet(count, **kwargs)
+        fleets.append(fleet)  # before start: a fleet that fails halfway is removed too
+        fleet.start()
+        return fleet
+
+    yield start
+    for fleet in reversed(fleets):  # reversed: each restores the ROBOCORE_SSH_CONFIG it found
+        fleet.close()
+
+
+@pytest.fixture(scope="module")
+def fleet(robot_fleets: Callable[..., RobotFleet]) -> RobotFleet:
+    """Two simulated robot hosts reached over ssh://. One fleet per module, not per session: suites stop
+    hosts and leave releases on them."""
+    return robot_fleets(2)

@@ -1,17 +1,28 @@
-"""Helpers of the deploy suites (test_discovery_local, test_run_local): throw-away copies of the
-session's demo project with their own discovery port and ROS domain, so that suites running at
-the same time on one Docker host never share a discovery server or a graph."""
+"""Plain helpers shared by the integration suites (fixtures are in conftest.py).
+
+- polling: :func:`wait_for`;
+- logs: :func:`log_lines` (the lines of a container's log holding a marker);
+- ports: :func:`free_udp_port`, :func:`free_tcp_port`;
+- projects: :func:`copy_project`, a throw-away copy of the session's demo project with its own
+  discovery port and ROS domain, so that suites running at the same time on one Docker host never
+  share a discovery server or a graph; :func:`remove_project_containers` and
+  :func:`remove_test_runs`, what fixture finalizers use to remove what a project left;
+- output: :func:`output_tails`, the exit code and the ends of a process's output for a failure message;
+- tools: :func:`compose_command`.
+"""
 
 from __future__ import annotations
 
 import random
 import shutil
 import socket
+import subprocess
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
+import pytest
 import yaml
 
 T = TypeVar("T")
@@ -22,10 +33,6 @@ PUBLISHED = "Publishing"
 
 def compose_command() -> list[str]:
     """``docker-compose`` (v1) or ``docker compose`` (v2 plugin); fails the test when neither exists."""
-    import subprocess
-
-    import pytest
-
     if shutil.which("docker-compose"):
         return ["docker-compose"]
     probe = subprocess.run(["docker", "compose", "version"], capture_output=True)
@@ -46,6 +53,19 @@ def free_udp_port() -> int:
                 continue
             return port
     raise RuntimeError("no free UDP port")
+
+
+def free_tcp_port() -> int:
+    """A TCP port of the loopback interface that nobody listens on right now (the kernel picks it)."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def output_tails(proc: subprocess.CompletedProcess[str], tail: int = 6000) -> str:
+    """The exit code and the last ``tail`` characters of stdout and stderr, for a failure message."""
+    out, err = (proc.stdout or "")[-tail:], (proc.stderr or "")[-tail:]
+    return f"exit {proc.returncode}\n--- stdout\n{out}\n--- stderr\n{err}"
 
 
 def copy_project(source: Path, parent: Path, name: str, *, transport: str = "shm",
@@ -105,7 +125,18 @@ def remove_project_containers(client: Any, project: str) -> None:
             volume.remove(force=True)
 
 
-def containers_of(client: Any, project: str) -> Iterator[Any]:
-    """The project's containers, by name."""
-    yield from sorted(client.containers.list(all=True, filters={"label": f"dev.robocore.project={project}"}),
-                      key=lambda c: c.name)
+def remove_test_runs(client: Any, project: str) -> None:
+    """Remove the containers, networks and volumes of the pytest plugin's runs of ``project`` (named
+    ``<project>-t<run id>-*``), which a failed or killed run may leave behind."""
+    from robocore.plan.testrun import LABEL_RUN
+
+    prefix = f"{project}-t"
+    for container in client.containers.list(all=True, filters={"label": LABEL_RUN}):
+        if container.name.startswith(prefix):
+            container.remove(force=True, v=True)
+    for network in client.networks.list(filters={"label": LABEL_RUN}):
+        if network.name.startswith(prefix):
+            network.remove()
+    for volume in client.volumes.list(filters={"label": LABEL_RUN}):
+        if volume.name.startswith(prefix):
+            volume.remove(force=True)

@@ -18,21 +18,13 @@ were not the one carrying the messages:
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import pytest
-from deploy_helpers import (
-    HEARD,
-    PUBLISHED,
-    copy_project,
-    free_udp_port,
-    log_lines,
-    remove_project_containers,
-    wait_for,
-)
+from deploy_helpers import HEARD, PUBLISHED, free_udp_port, log_lines, wait_for
 
 from robocore.commands.composefiles import write_compose_files
 from robocore.plan import naming
@@ -81,44 +73,19 @@ class Deployment:
 
 
 @pytest.fixture
-def deployment(demo_project: Path, tmp_path: Path, docker_client: Any, request: pytest.FixtureRequest) -> Iterator[
-        Any]:
-    """A factory of deployments of copies of the demo project; every container is removed afterwards."""
-    made: list[Deployment] = []
+def deployment(project_copies: Callable[..., Path], docker_client: Any) -> Callable[..., Deployment]:
+    """A factory of deployments of ``robocore-it-dds-*`` copies of the demo project (conftest's
+    ``project_copies``: every container is removed when the test ends)."""
 
     def make(transport: str = "shm", servers: int = 1) -> Deployment:
-        name = f"robocore-it-dds-{len(made)}-{int(time.time() * 1000) % 100000}"
-
         def more_servers(data: dict[str, Any]) -> None:
             host = data["hosts"][0]["name"]
             data["discovery"]["servers"] = [{"host": host, "port": free_udp_port()} for _ in range(servers)]
 
-        root = copy_project(demo_project, tmp_path, name, transport=transport,
-                            edit=more_servers if servers > 1 else None)
-        dep = Deployment(docker_client, Project.load(root))
-        made.append(dep)
-        return dep
+        root = project_copies("dds", transport=transport, edit=more_servers if servers > 1 else None)
+        return Deployment(docker_client, Project.load(root))
 
-    yield make
-    for dep in made:
-        remove_project_containers(docker_client, dep.project.name)
-
-
-@pytest.fixture
-def robot_run(demo_project: Path, tmp_path: Path) -> Iterator[Any]:
-    """``start(servers=True)``: a copy of the demo project brought up by robocore's pytest plugin machinery."""
-    from robocore.testing import bring_up
-
-    runs: list[Any] = []
-
-    def start(servers: bool = True) -> Any:
-        root = copy_project(demo_project, tmp_path, f"robocore-it-probe-{len(runs)}")
-        runs.append(bring_up(root, servers=servers))
-        return runs[-1]
-
-    yield start
-    for run in runs:
-        run.close()
+    return make
 
 
 def test_messages_flow_through_the_discovery_server(robot_run: Any) -> None:

@@ -13,18 +13,23 @@ import os
 import random
 import re
 import shlex
+import socket
 import subprocess
 import time
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pytest
+from deploy_helpers import free_tcp_port, wait_for
 
 from robocore.config.model import Component
 from robocore.plan import naming
 from robocore.project import Project
+
+if TYPE_CHECKING:
+    from conftest import Restorer, RobocoreCli
 
 pytestmark = pytest.mark.docker
 
@@ -56,15 +61,6 @@ def _start(client: Any, project: Project, comp: Component, command: list[str], d
     )
 
 
-@pytest.fixture
-def containers(docker_client: Any) -> Iterator[list[Any]]:
-    started: list[Any] = []
-    yield started
-    for container in started:
-        with contextlib.suppress(Exception):
-            container.remove(force=True)
-
-
 def _logs(container: Any) -> str:
     return str(container.logs().decode("utf-8", "replace"))
 
@@ -81,7 +77,9 @@ def _quoted(text: str) -> set[str]:
     return found
 
 
-def test_talker_and_listener_exchange_messages(docker_client: Any, demo_project: Path, containers: list[Any]) -> None:
+def test_talker_and_listener_exchange_messages(docker_client: Any, demo_project: Path,
+                                               tracked_containers: list[Any]) -> None:
+    containers = tracked_containers
     project = _project(demo_project)
     talker, listener = _role(project, "talker"), _role(project, "listener")
     assert talker.entrypoint and listener.entrypoint
@@ -130,7 +128,8 @@ def _image_ids(client: Any, project: Project) -> dict[str, str]:
     return {ref: client.images.get(ref).id for ref in refs}
 
 
-def test_second_prepare_base_and_stage_are_no_ops(docker_client: Any, demo_project: Path, run_robocore: Any) -> None:
+def test_second_prepare_base_and_stage_are_no_ops(docker_client: Any, demo_project: Path,
+                                                  run_robocore: RobocoreCli) -> None:
     project = _project(demo_project)
     before = _image_ids(docker_client, project)
     for step in ("prepare-base", "stage"):
@@ -160,7 +159,7 @@ def test_images_have_the_runtime_contract(docker_client: Any, demo_project: Path
     assert "Server is running" in out or "Server started" in out, out
 
 
-def test_noop_build_then_one_edit_rebuilds_only_that_package(demo_project: Path, run_robocore: Any) -> None:
+def test_noop_build_then_one_edit_rebuilds_only_that_package(demo_project: Path, run_robocore: RobocoreCli) -> None:
     project = _project(demo_project)
     result = json.loads(run_robocore(demo_project, "build", "--json").stdout)
     assert {r["action"] for r in result["results"]} == {"up-to-date"}, result
@@ -178,85 +177,79 @@ def test_noop_build_then_one_edit_rebuilds_only_that_package(demo_project: Path,
     assert installed and any("# edited by test_images" in p.read_text() for p in installed)
 
 
-def _talker_says(client: Any, project: Project, comp: Component, needle: str, timeout: float = 30) -> str:
-    """Start the talker from its install tree; return its output once it prints ``needle`` (or fail)."""
+def _talker_says(client: Any, project: Project, comp: Component, needle: str, started: list[Any],
+                 timeout: float = 30) -> str:
+    """Start the talker from its install tree (its container goes into ``started``, tracked_containers); return
+    its output once it prints ``needle`` or exits (or after ``timeout`` seconds)."""
     assert comp.entrypoint
     container = _start(client, project, comp, shlex.split(comp.entrypoint), random.randint(150, 220))
-    try:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            out = _logs(container)
-            container.reload()
-            if needle in out or container.status == "exited":
-                return out
-            time.sleep(0.5)
-        return _logs(container)
-    finally:
-        container.remove(force=True)
+    started.append(container)
+
+    def said() -> str | None:
+        out = _logs(container)
+        container.reload()
+        return out if needle in out or container.status == "exited" else None
+
+    return wait_for(said, timeout) or _logs(container)
 
 
 def test_module_edit_is_copied_without_colcon_and_runs_but_a_new_module_needs_colcon(
-        docker_client: Any, demo_project: Path, run_robocore: Any) -> None:
+        docker_client: Any, demo_project: Path, run_robocore: RobocoreCli, restore: Restorer,
+        tracked_containers: list[Any]) -> None:
     """The fast path writes the edited module into the install tree and the node runs it; adding a
     module (which only colcon can install) goes through colcon: the negative control."""
     project = _project(demo_project)
     talker = _role(project, "talker")
     assert talker.folder
     module = next(p for p in (demo_project / talker.folder).rglob("talker.py"))
+    extra = module.parent / "robocore_it_extra.py"
+    restore.keep(module, extra)  # then the shared project is built again from its own sources
+    restore.then(lambda: run_robocore(demo_project, "build", "--component", talker.name))
     original = module.read_text()
     token = uuid.uuid4().hex[:8]
-    try:
-        module.write_text(original.replace('f"hello from talker #', f'f"patched {token} #'))
-        assert module.read_text() != original
-        result = json.loads(run_robocore(demo_project, "build", "--component", talker.name, "--json").stdout)
-        (row,) = result["results"]
-        assert row["action"] == "built" and "no colcon" in row["reason"], row
-        out = _talker_says(docker_client, project, talker, f"patched {token}")
-        assert f"patched {token} #" in out, out[-1500:]
+    module.write_text(original.replace('f"hello from talker #', f'f"patched {token} #'))
+    assert module.read_text() != original
+    result = json.loads(run_robocore(demo_project, "build", "--component", talker.name, "--json").stdout)
+    (row,) = result["results"]
+    assert row["action"] == "built" and "no colcon" in row["reason"], row
+    out = _talker_says(docker_client, project, talker, f"patched {token}", tracked_containers)
+    assert f"patched {token} #" in out, out[-1500:]
 
-        extra = module.parent / "robocore_it_extra.py"
-        extra.write_text(f"WORD = 'extra {token}'\n")
-        module.write_text(module.read_text().replace(
-            "import rclpy\n", "import rclpy\n\nfrom .robocore_it_extra import WORD\n", 1).replace(
-            f'f"patched {token} #', 'f"{WORD} #'))
-        result = json.loads(run_robocore(demo_project, "build", "--component", talker.name, "--json").stdout)
-        (row,) = result["results"]
-        assert row["action"] == "built" and "colcon: " in row["reason"] and "file added" in row["reason"], row
-        out = _talker_says(docker_client, project, talker, f"extra {token}")
-        assert f"extra {token} #" in out, out[-1500:]
-    finally:
-        module.write_text(original)
-        (module.parent / "robocore_it_extra.py").unlink(missing_ok=True)
-        run_robocore(demo_project, "build", "--component", talker.name)
+    extra.write_text(f"WORD = 'extra {token}'\n")
+    module.write_text(module.read_text().replace(
+        "import rclpy\n", "import rclpy\n\nfrom .robocore_it_extra import WORD\n", 1).replace(
+        f'f"patched {token} #', 'f"{WORD} #'))
+    result = json.loads(run_robocore(demo_project, "build", "--component", talker.name, "--json").stdout)
+    (row,) = result["results"]
+    assert row["action"] == "built" and "colcon: " in row["reason"] and "file added" in row["reason"], row
+    out = _talker_says(docker_client, project, talker, f"extra {token}", tracked_containers)
+    assert f"extra {token} #" in out, out[-1500:]
 
 
-def test_failed_build_names_the_package_and_shows_its_log(demo_project: Path, run_robocore: Any) -> None:
+def test_failed_build_names_the_package_and_shows_its_log(demo_project: Path, run_robocore: RobocoreCli,
+                                                          restore: Restorer) -> None:
     project = _project(demo_project)
     listener = _role(project, "listener")
     assert listener.folder
     broken = demo_project / listener.folder / "robocore_it_broken"
+    restore.keep(broken)  # then the shared project builds again without it
+    restore.then(lambda: run_robocore(demo_project, "build", "--component", listener.name))
     broken.mkdir(parents=True)
-    try:
-        (broken / "package.xml").write_text(
-            '<?xml version="1.0"?><package format="3"><name>robocore_it_broken</name><version>0.0.0</version>'
-            "<description>x</description><maintainer email='a@b.c'>a</maintainer><license>MIT</license>"
-            "<export><build_type>ament_python</build_type></export></package>")
-        # identifies fine, fails when built: the package directory it names does not exist
-        (broken / "setup.py").write_text(
-            "from setuptools import setup\nsetup(name='robocore_it_broken', version='0.0.0', "
-            "packages=['robocore_it_marker_dir'])\n")
-        proc = run_robocore(demo_project, "build", "--component", listener.name, check=False)
-        assert proc.returncode == 6, proc.stderr
-        assert "robocore_it_broken" in proc.stderr
-        assert "robocore_it_marker_dir" in proc.stderr  # the tail of the package's own log
-    finally:
-        import shutil
-
-        shutil.rmtree(broken)
-    run_robocore(demo_project, "build", "--component", listener.name)
+    (broken / "package.xml").write_text(
+        '<?xml version="1.0"?><package format="3"><name>robocore_it_broken</name><version>0.0.0</version>'
+        "<description>x</description><maintainer email='a@b.c'>a</maintainer><license>MIT</license>"
+        "<export><build_type>ament_python</build_type></export></package>")
+    # identifies fine, fails when built: the package directory it names does not exist
+    (broken / "setup.py").write_text(
+        "from setuptools import setup\nsetup(name='robocore_it_broken', version='0.0.0', "
+        "packages=['robocore_it_marker_dir'])\n")
+    proc = run_robocore(demo_project, "build", "--component", listener.name, check=False)
+    assert proc.returncode == 6, proc.stderr
+    assert "robocore_it_broken" in proc.stderr
+    assert "robocore_it_marker_dir" in proc.stderr  # the tail of the package's own log
 
 
-def test_dry_run_prints_the_plan(demo_project: Path, run_robocore: Any) -> None:
+def test_dry_run_prints_the_plan(demo_project: Path, run_robocore: RobocoreCli) -> None:
     out = run_robocore(demo_project, "stage", "--dry-run").stdout
     # a dry run asks no daemon, so whether the images are up to date is unknown, and said so
     assert "FROM " in out and "build or keep: unknown (dry run: not contacted)" in out
@@ -283,19 +276,18 @@ def _ament_python_pkg(folder: Path, name: str, module_text: str) -> None:
 def _git_daemon(base: Path) -> tuple[subprocess.Popen[bytes], int]:
     """``git daemon`` serving the repositories under ``base`` on a free loopback port (git:// is a network
     transport: robocore fetches it without robot.yaml's opt-in to local repositories)."""
-    import socket
-
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
+    port = free_tcp_port()
     proc = subprocess.Popen(["git", "daemon", "--export-all", f"--base-path={base}", "--listen=127.0.0.1",
                              f"--port={port}", "--reuseaddr", str(base)], stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 10
-    while time.monotonic() < deadline:
+
+    def listening() -> bool:
         with socket.socket() as client, contextlib.suppress(OSError):
             client.connect(("127.0.0.1", port))
-            return proc, port
-        time.sleep(0.1)
+            return True
+        return False
+
+    if wait_for(listening, 10, interval=0.1):
+        return proc, port
     proc.kill()
     raise RuntimeError("git daemon did not start")
 
@@ -335,7 +327,7 @@ def deps_project(docker_client: Any, tmp_path_factory: pytest.TempPathFactory) -
 
 
 def test_common_packages_repositories_and_pip_are_in_the_images(
-        docker_client: Any, deps_project: Path, run_robocore: Any) -> None:
+        docker_client: Any, deps_project: Path, run_robocore: RobocoreCli) -> None:
     run_robocore(deps_project, "prepare-base", "--quiet")
     run_robocore(deps_project, "stage", "--quiet")
     project = _project(deps_project)
@@ -359,7 +351,7 @@ def test_common_packages_repositories_and_pip_are_in_the_images(
 
 
 def test_changing_one_components_packages_restages_only_that_one(
-        docker_client: Any, deps_project: Path, run_robocore: Any) -> None:
+        docker_client: Any, deps_project: Path, run_robocore: RobocoreCli) -> None:
     import yaml
 
     run_robocore(deps_project, "prepare-base", "--quiet")

@@ -11,36 +11,37 @@
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import subprocess
-import sys
 import tarfile
 import tempfile
+import threading
 import time
-from collections.abc import Iterator
+import uuid
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pytest
 import yaml
-from conftest import make_demo_project
-from robot_host.hosts import RobotFleet
+from deploy_helpers import HEARD, free_tcp_port, log_lines, wait_for
 
 from robocore.adapters.image_delivery import ensure_images
 from robocore.config.model import Host
 from robocore.errors import HostError
 
+if TYPE_CHECKING:
+    from conftest import Restorer, RobocoreCli
+    from robot_host.hosts import RobotFleet
+
 pytestmark = pytest.mark.docker
 
-TINY = "robocore-it-tiny:v1"
-DERIVED = "robocore-it-tiny-derived:v1"
-
-
-@pytest.fixture(scope="module")
-def fleet() -> Iterator[RobotFleet]:
-    with RobotFleet(2) as hosts:
-        yield hosts
+#: Names of this run's own (another run on the same daemon removes its own when it ends).
+TINY_REPO = f"robocore-it-tiny-{uuid.uuid4().hex[:6]}"
+TINY = f"{TINY_REPO}:v1"
+DERIVED = f"{TINY_REPO}-derived:v1"
 
 
 @pytest.fixture(scope="module")
@@ -52,13 +53,13 @@ def tiny_images(docker_client: Any) -> Iterator[list[str]]:
         info = tarfile.TarInfo("payload.bin")
         info.size = len(data)
         tar.addfile(info, io.BytesIO(data))
-    docker_client.api.import_image_from_data(payload.getvalue(), repository="robocore-it-tiny", tag="v1")
+    docker_client.api.import_image_from_data(payload.getvalue(), repository=TINY_REPO, tag="v1")
     with tempfile.TemporaryDirectory() as ctx:
         Path(ctx, "Dockerfile").write_text(f"FROM {TINY}\nCOPY extra.txt /extra.txt\n")
         Path(ctx, "extra.txt").write_text("one more layer\n" * 100)
         docker_client.images.build(path=ctx, tag=DERIVED, rm=True)
     yield [TINY, DERIVED]
-    remove_local_tags(docker_client, ("robocore-it-tiny",))
+    remove_local_tags(docker_client, (TINY_REPO,))
 
 
 def remove_local_tags(docker_client: Any, repositories: tuple[str, ...]) -> None:
@@ -71,44 +72,37 @@ def remove_local_tags(docker_client: Any, repositories: tuple[str, ...]) -> None
 
 
 @pytest.fixture(scope="module")
-def registry(fleet: RobotFleet, tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+def registry(fleet: RobotFleet, tmp_path_factory: pytest.TempPathFactory, docker_client: Any) -> Iterator[str]:
     """Debian's docker-registry on this machine's loopback, reachable as the same 127.0.0.1:PORT on
-    every robot host through an ssh reverse tunnel (loopback registries need no TLS in dockerd)."""
+    every robot host through an ssh reverse tunnel (loopback registries need no TLS in dockerd).
+    Afterwards this machine's tags under the registry (those ``release`` pushed) are removed."""
     import shutil
-    import socket
     import urllib.request
 
     binary = shutil.which("docker-registry")
     assert binary, "the release tests need Debian's docker-registry package (apt-get install docker-registry)"
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port = sock.getsockname()[1]
+    port = free_tcp_port()
     base = tmp_path_factory.mktemp("registry")
     config = base / "config.yml"
     config.write_text(f"version: 0.1\nstorage:\n  filesystem:\n    rootdirectory: {base / 'data'}\n"
                       f"http:\n  addr: 127.0.0.1:{port}\nlog:\n  level: warn\n")
     server = subprocess.Popen([binary, "serve", str(config)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     tunnels = []
+    def serving() -> bool:
+        with contextlib.suppress(OSError), urllib.request.urlopen(f"http://127.0.0.1:{port}/v2/", timeout=2):
+            return True
+        return False
+
     try:
-        deadline = time.monotonic() + 30
-        while True:
-            try:
-                urllib.request.urlopen(f"http://127.0.0.1:{port}/v2/", timeout=2).close()
-                break
-            except OSError:
-                if time.monotonic() > deadline:
-                    raise
-                time.sleep(0.2)
+        assert wait_for(serving, 30, interval=0.2), f"docker-registry did not answer on 127.0.0.1:{port}"
         for host in fleet.hosts:
             tunnels.append(subprocess.Popen(
                 ["ssh", "-F", str(fleet.ssh_config), "-N", "-o", "ExitOnForwardFailure=yes",
                  "-R", f"{port}:127.0.0.1:{port}", f"root@{host.ip}"], stdin=subprocess.DEVNULL))
+        probe = ["sh", "-c", '"$@" && echo up || true', "sh", "bash", "-c", f"exec 3<>/dev/tcp/127.0.0.1/{port}"]
         for host in fleet.hosts:
-            probe = ["bash", "-c", f"exec 3<>/dev/tcp/127.0.0.1/{port}"]
-            deadline = time.monotonic() + 20
-            while host.ssh(fleet, "sh", "-c", '"$@" && echo up || true', "sh", *probe).strip() != "up":
-                assert time.monotonic() < deadline, f"registry tunnel to {host.name} did not come up"
-                time.sleep(0.3)
+            assert wait_for(lambda h=host: h.ssh(fleet, *probe).strip() == "up", 20, interval=0.3), \
+                f"registry tunnel to {host.name} did not come up"
         yield f"127.0.0.1:{port}"
     finally:
         for tunnel in tunnels:
@@ -116,6 +110,10 @@ def registry(fleet: RobotFleet, tmp_path_factory: pytest.TempPathFactory) -> Ite
             tunnel.wait()
         server.kill()
         server.wait()
+        for image in docker_client.images.list():
+            for tag in image.tags:
+                if tag.startswith(f"127.0.0.1:{port}/"):
+                    docker_client.images.remove(tag)
 
 
 def registry_tags(registry: str, repo: str) -> list[str]:
@@ -129,7 +127,7 @@ def test_images_are_streamed_without_registry_then_skipped(fleet: RobotFleet, ti
                                                            docker_client: Any) -> None:
     local_ids = {name: docker_client.images.get(name).id for name in tiny_images}
     for index, host in enumerate(fleet.hosts):
-        client = host.docker(fleet)
+        client = fleet.client(index)
         # negative control: the inner daemon starts without them
         assert not {t for img in client.images.list() for t in img.tags} & set(tiny_images)
         first = ensure_images(client, [TINY], registry=None, progress=False, label=host.name)
@@ -142,22 +140,18 @@ def test_images_are_streamed_without_registry_then_skipped(fleet: RobotFleet, ti
         assert all(d.action == "present" for d in third.values())
         for name in tiny_images:
             assert client.images.get(name).id == local_ids[name], (index, name)
-        client.close()
 
 
 def test_images_go_through_a_registry_when_one_is_configured(fleet: RobotFleet, tiny_images: list[str],
                                                             registry: str, docker_client: Any) -> None:
-    client = fleet.hosts[0].docker(fleet)
-    try:
-        for name in tiny_images:
-            client.images.remove(name, force=True)
-        result = ensure_images(client, [TINY], registry=registry, progress=False, label="robot-a")
-        assert result[TINY].action == "pulled"
-        assert registry_tags(registry, "robocore-it-tiny") == ["v1"]  # pushed once, from this machine
-        assert client.images.get(TINY).id == docker_client.images.get(TINY).id
-        assert client.images.get(f"{registry}/{TINY}").id == docker_client.images.get(TINY).id
-    finally:
-        client.close()
+    client = fleet.client(0)
+    for name in tiny_images:
+        client.images.remove(name, force=True)
+    result = ensure_images(client, [TINY], registry=registry, progress=False, label="robot-a")
+    assert result[TINY].action == "pulled"
+    assert registry_tags(registry, TINY_REPO) == ["v1"]  # pushed once, from this machine
+    assert client.images.get(TINY).id == docker_client.images.get(TINY).id
+    assert client.images.get(f"{registry}/{TINY}").id == docker_client.images.get(TINY).id
 
 
 def test_unreachable_host_fails_fast_with_its_name(fleet: RobotFleet) -> None:
@@ -175,20 +169,10 @@ def test_unreachable_host_fails_fast_with_its_name(fleet: RobotFleet) -> None:
 # --------------------------------------------------------------------------- the full path
 
 
-def robocore(project: Path, *args: str, check: bool = True, timeout: float = 1800) -> subprocess.CompletedProcess[str]:
-    proc = subprocess.run([sys.executable, "-m", "robocore", "-p", str(project), *args],
-                          capture_output=True, text=True, timeout=timeout)
-    if check and proc.returncode != 0:
-        pytest.fail(f"robocore {' '.join(args)} exited {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}",
-                    pytrace=False)
-    return proc
-
-
 @pytest.fixture(scope="module")
-def robot(fleet: RobotFleet, docker_client: Any) -> Iterator[Path]:
+def robot(fleet: RobotFleet, new_demo_project: Callable[[], Path], run_robocore: RobocoreCli) -> Path:
     """The template project (wheels) with talker on robot-a and listener on robot-b."""
-    parent = Path(tempfile.mkdtemp(prefix="robocore-it-mh-"))
-    root = make_demo_project(parent)
+    root = new_demo_project()
     data = yaml.safe_load((root / "robot.yaml").read_text())
     data["hosts"] = [{"name": n, "ip": h.ip, "user": "root", "arch": "amd64"}
                      for n, h in zip(["robot-a", "robot-b"], fleet.hosts, strict=True)]
@@ -196,51 +180,38 @@ def robot(fleet: RobotFleet, docker_client: Any) -> Iterator[Path]:
         comp["runs_on"] = "robot-a" if comp["name"] == "talker" else "robot-b"
     (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
     for step in ("prepare-base", "stage", "build"):
-        robocore(root, step, "--quiet")
-    yield root
-    import shutil
-
-    shutil.rmtree(parent, ignore_errors=True)
+        run_robocore(root, step, "--quiet")
+    return root
 
 
 def heard(fleet: RobotFleet, index: int, container: str) -> list[str]:
-    client = fleet.hosts[index].docker(fleet)
-    try:
-        logs = client.containers.get(container).logs().decode(errors="replace")
-    finally:
-        client.close()
-    return [line for line in logs.splitlines() if "I heard" in line]
+    """The "I heard" lines of ``container`` on host ``index``."""
+    return log_lines(fleet.client(index).containers.get(container), HEARD)
 
 
 def wait_heard(fleet: RobotFleet, index: int, container: str, needle: str, timeout: float = 60) -> list[str]:
-    deadline = time.monotonic() + timeout
-    lines: list[str] = []
-    while time.monotonic() < deadline:
-        lines = [line for line in heard(fleet, index, container) if needle in line]
-        if lines:
-            return lines
-        time.sleep(1)
-    return lines
+    """The heard lines holding ``needle``, once there are any (empty after ``timeout`` seconds without)."""
+    lines = wait_for(lambda: [line for line in heard(fleet, index, container) if needle in line], timeout, 1)
+    return lines or []
 
 
-def test_stage_build_sync_run_over_ssh_one_graph_across_hosts(fleet: RobotFleet, robot: Path) -> None:
+def test_stage_build_sync_run_over_ssh_one_graph_across_hosts(fleet: RobotFleet, robot: Path,
+                                                              run_robocore: RobocoreCli) -> None:
     listener = f"{robot.name}-listener"
-    robocore(robot, "sync", "--quiet")
+    run_robocore(robot, "sync", "--quiet")
     # listener host first: with no talker anywhere it hears nothing (negative control)
-    robocore(robot, "run", "--host", "robot-b", "--quiet")
+    run_robocore(robot, "run", "--host", "robot-b", "--quiet")
     time.sleep(8)
     assert heard(fleet, 1, listener) == []
     # then robot-a: the discovery server and the talker
-    robocore(robot, "run", "--host", "robot-a", "--quiet")
+    run_robocore(robot, "run", "--host", "robot-a", "--quiet")
     lines = wait_heard(fleet, 1, listener, "hello from talker")
     assert lines, "the listener on robot-b never heard the talker on robot-a"
     # images arrived without a registry, on both inner daemons
     for index, comp in ((0, "talker"), (1, "listener")):
-        client = fleet.hosts[index].docker(fleet)
-        assert client.images.get(f"{robot.name}-{comp}:latest")
-        client.close()
+        assert fleet.client(index).images.get(f"{robot.name}-{comp}:latest")
 
-    status = robocore(robot, "status", "--json")
+    status = run_robocore(robot, "status", "--json")
     data = json.loads(status.stdout)
     [graph] = [r for r in data["results"] if r["kind"] == "ros_graph"]
     nodes = " ".join(graph["nodes"] or [])
@@ -250,32 +221,32 @@ def test_stage_build_sync_run_over_ssh_one_graph_across_hosts(fleet: RobotFleet,
 
     # through the same ssh connections: a command in the live talker container (its output and exit code
     # come back over the Docker API's multiplexed stream) and `logs -f` (a live stream from robot-b)
-    graph = robocore(robot, "connect", "--component", "talker", "--cmd", "ros2 node list --no-daemon --spin-time 3")
+    graph = run_robocore(robot, "connect", "--component", "talker", "--cmd", "ros2 node list --no-daemon --spin-time 3")
     assert "/talker" in graph.stdout and "/listener" in graph.stdout, graph.stdout
-    assert robocore(robot, "connect", "--component", "talker", "--cmd", "exit 3", check=False).returncode == 3
-    assert followed_lines(robot, "listener", count=3), "logs -f printed no new lines of the remote listener"
+    assert run_robocore(robot, "connect", "--component", "talker", "--cmd", "exit 3", check=False).returncode == 3
+    assert followed_lines(run_robocore, robot, "listener", count=3), \
+        "logs -f printed no new lines of the remote listener"
 
     # a second run changes nothing
-    again = robocore(robot, "run", "--json")
+    again = run_robocore(robot, "run", "--json")
     assert "create" not in again.stdout and "replace" not in again.stdout, again.stdout
 
     # a one-line change of the talker: build, sync, run; robot-b hears the new text
     code = robot / "components" / "talker" / "src" / "demo_talker" / "demo_talker" / "talker.py"
     code.write_text(code.read_text().replace('f"hello from talker #', 'f"edited talker #'))
-    robocore(robot, "build", "--component", "talker", "--quiet")
-    synced = json.loads(robocore(robot, "sync", "--json").stdout)
+    run_robocore(robot, "build", "--component", "talker", "--quiet")
+    synced = json.loads(run_robocore(robot, "sync", "--json").stdout)
     moved = {row["component"]: row["sent"] for row in synced["results"]}
     assert moved["talker"] < 50_000, moved
-    robocore(robot, "run", "--quiet")
+    run_robocore(robot, "run", "--quiet")
     assert wait_heard(fleet, 1, listener, "edited talker #"), "the edited talker was never heard on robot-b"
 
 
-def followed_lines(project: Path, component: str, count: int, timeout: float = 30) -> list[str]:
+def followed_lines(run_robocore: RobocoreCli, project: Path, component: str, count: int,
+                   timeout: float = 30) -> list[str]:
     """``robocore logs -f --tail 1``: the first ``count`` distinct heard lines it prints live (empty if none)."""
-    import threading
-
-    proc = subprocess.Popen([sys.executable, "-m", "robocore", "-p", str(project), "logs", "-f", "--component",
-                             component, "--tail", "1"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    proc = run_robocore.start(project, "logs", "-f", "--component", component, "--tail", "1",
+                              stderr=subprocess.DEVNULL)
     seen: list[str] = []
     done = threading.Event()
 
@@ -296,74 +267,56 @@ def followed_lines(project: Path, component: str, count: int, timeout: float = 3
 
 
 def container_image(fleet: RobotFleet, index: int, name: str) -> str:
-    client = fleet.hosts[index].docker(fleet)
-    try:
-        return str(client.containers.get(name).attrs["Config"]["Image"])
-    finally:
-        client.close()
+    return str(fleet.client(index).containers.get(name).attrs["Config"]["Image"])
 
 
-def test_release_run_tag_and_rollback(fleet: RobotFleet, robot: Path, registry: str) -> None:
+def test_release_run_tag_and_rollback(fleet: RobotFleet, robot: Path, registry: str, run_robocore: RobocoreCli,
+                                      restore: Restorer) -> None:
     listener, talker = f"{robot.name}-listener", f"{robot.name}-talker"
     # rollback first: robot-a goes back to the release synced before the one-line edit
     before = fleet.hosts[0].ssh(fleet, "readlink", "/root/robocore/talker/current").strip()
-    robocore(robot, "rollback", "--host", "robot-a")
+    run_robocore(robot, "rollback", "--host", "robot-a")
     after = fleet.hosts[0].ssh(fleet, "readlink", "/root/robocore/talker/current").strip()
     assert after != before
     since = time.time()
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        client = fleet.hosts[1].docker(fleet)
-        recent = client.containers.get(listener).logs(since=int(since) + 2).decode(errors="replace")
-        client.close()
-        if "I heard: hello from talker" in recent:
-            break
-        time.sleep(1)
-    assert "I heard: hello from talker" in recent and "edited talker" not in recent, recent[-500:]
+
+    def recent() -> str:
+        return str(fleet.client(1).containers.get(listener).logs(since=int(since) + 2).decode(errors="replace"))
+
+    wait_for(lambda: "I heard: hello from talker" in recent(), 60, interval=1)
+    text = recent()
+    assert "I heard: hello from talker" in text and "edited talker" not in text, text[-500:]
 
     # release: needs a registry; pushes base and component images with the tag
-    assert robocore(robot, "release", "--tag", "v1", check=False).returncode != 0  # no registry yet
+    assert run_robocore(robot, "release", "--tag", "v1", check=False).returncode != 0  # no registry yet
+    restore.keep(robot / "robot.yaml")  # the next test runs without the registry
     data = yaml.safe_load((robot / "robot.yaml").read_text())
     data["registry"] = registry
     (robot / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
-    robocore(robot, "release", "--tag", "v1")
+    run_robocore(robot, "release", "--tag", "v1")
     for repo in ("base", "talker", "listener"):
         assert registry_tags(registry, f"{robot.name}-{repo}") == ["v1"]
-    robocore(robot, "run", "--tag", "v1", "--quiet")
+    run_robocore(robot, "run", "--tag", "v1", "--quiet")
     assert container_image(fleet, 0, talker) == f"{registry}/{robot.name}-talker:v1"
     assert container_image(fleet, 1, listener) == f"{registry}/{robot.name}-listener:v1"
     # rollback returns each host to what it ran before: the untagged images
-    robocore(robot, "rollback")
+    run_robocore(robot, "rollback")
     assert container_image(fleet, 0, talker) == f"{robot.name}-talker:latest"
     assert container_image(fleet, 1, listener) == f"{robot.name}-listener:latest"
-    data.pop("registry")
-    (robot / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
-    import docker
-
-    local = docker.from_env()
-    for image in local.images.list():
-        for tag in image.tags:
-            if tag.startswith(f"{registry}/"):  # the release's push tags on this machine
-                local.images.remove(tag)
-    local.close()
 
 
-def test_run_with_a_stopped_host_names_it_and_deploys_the_other(fleet: RobotFleet, robot: Path) -> None:
+def test_run_with_a_stopped_host_names_it_and_deploys_the_other(fleet: RobotFleet, robot: Path,
+                                                                run_robocore: RobocoreCli) -> None:
     # last test of the module: stops robot-b
-    client = fleet.hosts[0].docker(fleet)
-    talker = client.containers.get(f"{robot.name}-talker")
-    talker.remove(force=True)
-    client.close()
+    fleet.client(0).containers.get(f"{robot.name}-talker").remove(force=True)
     fleet.stop(1)
     start = time.monotonic()
-    proc = robocore(robot, "run", check=False)
+    proc = run_robocore(robot, "run", check=False)
     elapsed = time.monotonic() - start
     assert proc.returncode != 0
     assert "robot-b" in proc.stderr, proc.stderr
     assert elapsed < 30, f"run took {elapsed:.1f} s with robot-b down"
-    client = fleet.hosts[0].docker(fleet)
-    assert client.containers.get(f"{robot.name}-talker").status == "running"
-    client.close()
+    assert fleet.client(0).containers.get(f"{robot.name}-talker").status == "running"
 
 
 # --------------------------------------------------------------------------- TLS and plain TCP
@@ -427,7 +380,8 @@ TLS_DIR = "/etc/robocore-tls"
 
 
 @pytest.fixture(scope="module")
-def tcp_fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[RobotFleet, dict[str, Path]]]:
+def tcp_fleet(robot_fleets: Callable[..., RobotFleet],
+              tmp_path_factory: pytest.TempPathFactory) -> tuple[RobotFleet, dict[str, Path]]:
     """robot 0 serves Docker on TCP 2376 with TLS client verification, robot 1 on plain TCP 2375."""
     pki: dict[str, Path] = {}
     folder = tmp_path_factory.mktemp("pki")
@@ -447,8 +401,7 @@ def tcp_fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[RobotF
                 f"--tlskey={TLS_DIR}/server-key.pem --host tcp://0.0.0.0:2376")
     env = [{"DOCKERD_ARGS": tls_args, "DOCKERD_WAIT_FILE": f"{TLS_DIR}/ready"},
            {"DOCKERD_ARGS": "--host tcp://0.0.0.0:2375"}]
-    with RobotFleet(2, env=env, setup=setup) as hosts:
-        yield hosts, pki
+    return robot_fleets(2, env=env, setup=setup), pki
 
 
 def test_docker_over_tls_with_client_certificates(tcp_fleet: tuple[RobotFleet, dict[str, Path]],
@@ -460,15 +413,13 @@ def test_docker_over_tls_with_client_certificates(tcp_fleet: tuple[RobotFleet, d
     ip = fleet.hosts[0].ip
     host = Host(name="tls-robot", ip=ip, docker=DockerAccess.tls, docker_port=2376,
                 tls=TlsFiles(ca_cert=str(pki["ca"]), client_cert="cert.pem", client_key="key.pem"))
-    client = client_for(host, timeout=120, project_root=pki["ca"].parent)  # relative paths: project folder
-    try:
+    # relative paths: project folder
+    with contextlib.closing(client_for(host, timeout=120, project_root=pki["ca"].parent)) as client:
         assert client.version()["Version"]
         assert client.api.base_url.startswith("https://")
         result = ensure_images(client, [TINY], registry=None, progress=False, label=host.name)
         assert result[TINY].action == "loaded"
         assert client.images.get(TINY).id == docker_client.images.get(TINY).id
-    finally:
-        client.close()
     # negative control: a client certificate from another CA is refused, and the host is named
     rogue = Host(name="tls-robot", ip=ip, docker=DockerAccess.tls, docker_port=2376,
                  tls=TlsFiles(ca_cert=str(pki["ca"]), client_cert=str(pki["rogue"]), client_key=str(pki["rogue_key"])))
@@ -487,11 +438,8 @@ def test_plain_tcp_only_when_insecure_and_with_a_warning(tcp_fleet: tuple[RobotF
     with pytest.raises(HostError):
         client_for(Host(name="plain", ip=ip, docker=DockerAccess.tcp, docker_port=2375), timeout=30)
     capsys.readouterr()
-    client = client_for(Host(name="plain", ip=ip, docker=DockerAccess.tcp, docker_port=2375, insecure=True),
-                        timeout=30)
-    try:
+    insecure = Host(name="plain", ip=ip, docker=DockerAccess.tcp, docker_port=2375, insecure=True)
+    with contextlib.closing(client_for(insecure, timeout=30)) as client:
         assert client.version()["Version"]
-    finally:
-        client.close()
     err = capsys.readouterr().err
     assert "warning" in err and "plain" in err and "tcp://" in err, err

@@ -10,13 +10,15 @@ from __future__ import annotations
 
 import json
 import re
-import time
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import pytest
-from deploy_helpers import copy_project
+
+if TYPE_CHECKING:
+    from conftest import RobocoreCli
 
 pytestmark = pytest.mark.docker
 
@@ -38,7 +40,7 @@ def _row(stdout: str, package: str) -> list[str]:
     raise AssertionError(f"no row for {package} in:\n{stdout}")
 
 
-def test_the_template_packages_pass_with_their_tests_counted(demo_project: Path, run_robocore: Any) -> None:
+def test_the_template_packages_pass_with_their_tests_counted(demo_project: Path, run_robocore: RobocoreCli) -> None:
     proc = run_robocore(demo_project, "test")
     print(proc.stdout)
     assert _row(proc.stdout, "demo_talker") == ["talker", "demo_talker", "2", "0", "0", "0", "passed"]
@@ -55,7 +57,7 @@ def test_the_template_packages_pass_with_their_tests_counted(demo_project: Path,
         ("demo_listener", 2), ("demo_talker", 2)]
 
 
-def test_packages_select_runs_only_that_package(demo_project: Path, run_robocore: Any) -> None:
+def test_packages_select_runs_only_that_package(demo_project: Path, run_robocore: RobocoreCli) -> None:
     talker_result = demo_project / ".robocore/build/talker/build/demo_talker/pytest.xml"
     talker_result.unlink(missing_ok=True)
     proc = run_robocore(demo_project, "test", "--packages-select", "demo_listener")
@@ -70,9 +72,9 @@ def test_packages_select_runs_only_that_package(demo_project: Path, run_robocore
     assert unknown.stderr.strip() == "error: unknown package 'nope' (known: demo_listener, demo_talker)"
 
 
-def test_a_failing_test_fails_the_run_by_name_with_its_message(demo_project: Path, tmp_path: Path,
-                                                                run_robocore: Any) -> None:
-    root = copy_project(demo_project, tmp_path, f"robocore-it-pkgtest-{int(time.time() * 1000) % 100000}")
+def test_a_failing_test_fails_the_run_by_name_with_its_message(project_copies: Callable[..., Path],
+                                                                run_robocore: RobocoreCli) -> None:
+    root = project_copies("pkgtest")
     (root / "components/talker/src/demo_talker/test/test_wrong.py").write_text(WRONG_TEST)
     stale = run_robocore(root, "test", check=False)
     assert stale.returncode == 6, stale.stderr

@@ -14,13 +14,13 @@ import subprocess
 import sys
 import textwrap
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
 import yaml
-from deploy_helpers import copy_project, wait_for
+from deploy_helpers import output_tails, wait_for
 
 from robocore.plan.testrun import LABEL_OWNER, LABEL_RUN
 
@@ -68,10 +68,6 @@ def _pytest(project: Path, *args: str, env: dict[str, str] | None = None,
                           capture_output=True, text=True, timeout=timeout, env={**os.environ, **(env or {})})
 
 
-def _output(proc: subprocess.CompletedProcess[str]) -> str:
-    return f"exit {proc.returncode}\n--- stdout\n{proc.stdout[-6000:]}\n--- stderr\n{proc.stderr[-3000:]}"
-
-
 def _run_containers(client: Any, owner_pid: int | None = None) -> list[Any]:
     found = client.containers.list(all=True, filters={"label": LABEL_RUN})
     if owner_pid is None:
@@ -80,27 +76,25 @@ def _run_containers(client: Any, owner_pid: int | None = None) -> list[Any]:
 
 
 @pytest.fixture
-def graph_project(demo_project: Path, tmp_path: Path) -> Iterator[Callable[..., Path]]:
-    """``make(tests, edit=None)``: a copy of the built demo project with ``tests/graph/test_robot.py``."""
-    made = 0
+def graph_project(project_copies: Callable[..., Path]) -> Callable[..., Path]:
+    """``make(tests, edit=None)``: a ``robocore-it-graph-*`` copy of the built demo project with
+    ``tests/graph/test_robot.py`` (conftest's ``project_copies``: what its runs leave is removed)."""
 
     def make(tests: str = GRAPH_TESTS, edit: Callable[[dict[str, Any]], None] | None = None) -> Path:
-        nonlocal made
-        made += 1
-        root = copy_project(demo_project, tmp_path, f"robocore-it-graph-{made}", edit=edit)
+        root = project_copies("graph", edit=edit)
         (root / "tests" / "graph").mkdir(parents=True)
         (root / "tests" / "graph" / "test_robot.py").write_text(textwrap.dedent(tests))
         return root
 
-    yield make
+    return make
 
 
 def test_a_projects_graph_tests_pass(graph_project: Callable[..., Path], docker_client: Any) -> None:
     root = graph_project()
     proc = _pytest(root, "tests/graph")
-    assert proc.returncode == 0, _output(proc)
-    assert "6 passed" in proc.stdout, _output(proc)
-    leftovers = [c.name for c in _run_containers(docker_client) if c.name.startswith("robocore-it-graph-1-")]
+    assert proc.returncode == 0, output_tails(proc)
+    assert "6 passed" in proc.stdout, output_tails(proc)
+    leftovers = [c.name for c in _run_containers(docker_client) if c.name.startswith(f"{root.name}-")]
     assert leftovers == [], f"the run left containers behind: {leftovers}"
 
 
@@ -113,12 +107,12 @@ def test_a_wrong_expectation_fails_and_its_report_shows_the_logs(graph_project: 
             assert msg.data == "goodbye from talker"
     ''')
     proc = _pytest(root, "tests/graph")
-    assert proc.returncode == 1, _output(proc)
-    assert "1 failed" in proc.stdout, _output(proc)
-    assert "robocore: components and graph" in proc.stdout, _output(proc)
-    assert "--- listener" in proc.stdout and "I heard: hello from talker #" in proc.stdout, _output(proc)
-    assert "--- talker" in proc.stdout and "Publishing: hello from talker #" in proc.stdout, _output(proc)
-    assert "/talker" in proc.stdout.split("--- graph", 1)[1], _output(proc)
+    assert proc.returncode == 1, output_tails(proc)
+    assert "1 failed" in proc.stdout, output_tails(proc)
+    assert "robocore: components and graph" in proc.stdout, output_tails(proc)
+    assert "--- listener" in proc.stdout and "I heard: hello from talker #" in proc.stdout, output_tails(proc)
+    assert "--- talker" in proc.stdout and "Publishing: hello from talker #" in proc.stdout, output_tails(proc)
+    assert "/talker" in proc.stdout.split("--- graph", 1)[1], output_tails(proc)
 
 
 def test_a_message_that_never_comes_names_the_topic_and_publishers(graph_project: Callable[..., Path]) -> None:
@@ -129,10 +123,10 @@ def test_a_message_that_never_comes_names_the_topic_and_publishers(graph_project
             robot.graph.wait_for_message("/chatter", String, lambda m: m.data == "never", timeout=2.0)
     ''')
     proc = _pytest(root, "tests/graph")
-    assert proc.returncode == 1, _output(proc)
-    assert "no message matching the predicate on /chatter (String) within 2.0 s" in proc.stdout, _output(proc)
-    assert "publishers seen: /talker" in proc.stdout, _output(proc)
-    assert "last message received: std_msgs.msg.String(data='hello from talker #" in proc.stdout, _output(proc)
+    assert proc.returncode == 1, output_tails(proc)
+    assert "no message matching the predicate on /chatter (String) within 2.0 s" in proc.stdout, output_tails(proc)
+    assert "publishers seen: /talker" in proc.stdout, output_tails(proc)
+    assert "last message received: std_msgs.msg.String(data='hello from talker #" in proc.stdout, output_tails(proc)
 
 
 COUNT_NODES = '''
@@ -149,11 +143,11 @@ def test_exactly_one_node_of_each_name(robot):
 '''
 
 
-def test_two_runs_of_one_project_at_once_never_see_each_other(graph_project: Callable[..., Path]) -> None:
+def test_two_runs_of_one_project_at_once_never_see_each_other(graph_project: Callable[..., Path],
+                                                              background: Callable[..., Any]) -> None:
     root = graph_project(COUNT_NODES)
     argv = [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", "tests/graph"]
-    runs = [subprocess.Popen(argv, cwd=root, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-            for _ in range(2)]
+    runs = [background(argv, cwd=root, stderr=subprocess.STDOUT) for _ in range(2)]
     outputs = [run.communicate(timeout=600)[0] for run in runs]
     for run, output in zip(runs, outputs, strict=True):
         assert run.returncode == 0, output[-5000:]
@@ -161,7 +155,7 @@ def test_two_runs_of_one_project_at_once_never_see_each_other(graph_project: Cal
 
 
 def test_the_next_run_removes_what_a_killed_run_left(graph_project: Callable[..., Path], docker_client: Any,
-                                                     tmp_path: Path) -> None:
+                                                     tmp_path: Path, background: Callable[..., Any]) -> None:
     marker = tmp_path / "up"
     root = graph_project(f'''
         import time
@@ -171,20 +165,18 @@ def test_the_next_run_removes_what_a_killed_run_left(graph_project: Callable[...
             Path({str(marker)!r}).write_text("up")
             time.sleep(600)
     ''')
-    killed = subprocess.Popen([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", "tests/graph"],
-                              cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        assert wait_for(marker.exists, 300, interval=0.2), "the first run never came up"
-        assert _run_containers(docker_client, killed.pid), "the run's containers are not labelled with their owner"
-    finally:
-        killed.send_signal(signal.SIGKILL)
-        killed.wait()
+    killed = background([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", "tests/graph"],
+                        cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    assert wait_for(marker.exists, 300, interval=0.2), "the first run never came up"
+    assert _run_containers(docker_client, killed.pid), "the run's containers are not labelled with their owner"
+    killed.send_signal(signal.SIGKILL)
+    killed.wait()
     left = _run_containers(docker_client, killed.pid)
     assert left, "a SIGKILLed run left nothing behind: this test no longer proves the clean-up"
     (root / "tests" / "graph" / "test_robot.py").write_text(textwrap.dedent(GRAPH_TESTS))
     proc = _pytest(root, "tests/graph", "-k", "talker_publishes")
-    assert proc.returncode == 0, _output(proc)
-    assert f"removed {len(left)} container(s) left by an earlier run that was killed" in proc.stdout, _output(proc)
+    assert proc.returncode == 0, output_tails(proc)
+    assert f"removed {len(left)} container(s) left by an earlier run that was killed" in proc.stdout, output_tails(proc)
     assert _run_containers(docker_client, killed.pid) == []
     networks = [n.name for n in docker_client.networks.list(filters={"label": LABEL_OWNER})
                 if n.attrs.get("Labels", {}).get(LABEL_OWNER, "").split("|")[2:3] == [str(killed.pid)]]
@@ -204,10 +196,10 @@ def test_three(robot):
 
 
 def _assert_stopped_once(proc: subprocess.CompletedProcess[str], cause: str) -> None:
-    assert proc.returncode != 0, _output(proc)
-    assert cause in proc.stdout, _output(proc)
-    assert "1 error" in proc.stdout and "3 error" not in proc.stdout, _output(proc)
-    assert "Traceback" not in proc.stdout, _output(proc)
+    assert proc.returncode != 0, output_tails(proc)
+    assert cause in proc.stdout, output_tails(proc)
+    assert "1 error" in proc.stdout and "3 error" not in proc.stdout, output_tails(proc)
+    assert "Traceback" not in proc.stdout, output_tails(proc)
 
 
 def test_a_component_that_dies_at_start_errors_once_with_its_log(graph_project: Callable[..., Path],
@@ -218,7 +210,7 @@ def test_a_component_that_dies_at_start_errors_once_with_its_log(graph_project: 
     root = graph_project(THREE_TESTS, edit=dying_talker)
     proc = _pytest(root, "tests/graph")
     _assert_stopped_once(proc, "component talker exited at start (exit code 3)")
-    assert "dying on purpose" in proc.stdout, _output(proc)
+    assert "dying on purpose" in proc.stdout, output_tails(proc)
     assert [c.name for c in _run_containers(docker_client) if c.name.startswith(root.name)] == []
 
 
@@ -264,19 +256,14 @@ def test_a_robot_with_two_hosts_keeps_its_shape(graph_project: Callable[..., Pat
 
     root = graph_project(TWO_HOSTS, edit=two_hosts)
     proc = _pytest(root, "tests/graph")
-    assert proc.returncode == 0, _output(proc)
-    assert "1 passed" in proc.stdout, _output(proc)
+    assert proc.returncode == 0, output_tails(proc)
+    assert "1 passed" in proc.stdout, output_tails(proc)
 
 
-def test_bring_up_time_is_reported(graph_project: Callable[..., Path]) -> None:
+def test_bring_up_time_is_reported(graph_project: Callable[..., Path], robot_run: Callable[..., Any]) -> None:
     """Not a timing assertion: bring_up records its phases, which bench/graph_tests.py prints."""
-    from robocore.testing.bringup import bring_up
-
     root = graph_project()
     started = time.monotonic()
-    run = bring_up(root)
-    try:
-        assert set(run.timings) == {"build", "start", "total"}
-        assert 0 < run.timings["total"] <= time.monotonic() - started
-    finally:
-        run.close()
+    run = robot_run(root)
+    assert set(run.timings) == {"build", "start", "total"}
+    assert 0 < run.timings["total"] <= time.monotonic() - started

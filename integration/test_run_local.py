@@ -12,15 +12,17 @@ import re
 import shutil
 import socket
 import subprocess
-import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pytest
 import yaml
 from deploy_helpers import HEARD, compose_command, copy_project, log_lines, remove_project_containers, wait_for
+
+if TYPE_CHECKING:
+    from conftest import RobocoreCli
 
 pytestmark = pytest.mark.docker
 
@@ -33,22 +35,30 @@ def ids(client: Any, project: str) -> dict[str, str]:
 
 
 @pytest.fixture
-def project_copy(demo_project: Path, tmp_path: Path, docker_client: Any) -> Iterator[Callable[..., Path]]:
-    made: list[str] = []
+def project_copy(project_copies: Callable[..., Path]) -> Callable[..., Path]:
+    """``project_copy(**copy_project options)``: a ``robocore-it-run-*`` copy of the demo project (conftest's
+    ``project_copies``: its containers are removed when the test ends)."""
+    return lambda **kwargs: project_copies("run", **kwargs)
 
-    def make(**kwargs: Any) -> Path:
-        name = f"robocore-it-run-{len(made)}-{int(time.time() * 1000) % 100000}"
-        made.append(name)
-        return copy_project(demo_project, tmp_path, name, **kwargs)
+
+@pytest.fixture
+def compose_project() -> Iterator[Callable[[str, Path], list[str]]]:
+    """``compose_project(name, file)``: the docker-compose command line of project ``name`` with that file;
+    ``down -v`` of each when the test ends."""
+    made: list[list[str]] = []
+
+    def make(name: str, path: Path) -> list[str]:
+        made.append([*compose_command(), "-p", name, "-f", str(path)])
+        return made[-1]
 
     yield make
-    for name in made:
-        remove_project_containers(docker_client, name)
+    for compose in made:
+        subprocess.run([*compose, "down", "-v"], capture_output=True, timeout=300)
 
 
 @pytest.fixture(scope="module")
 def running(demo_project: Path, tmp_path_factory: pytest.TempPathFactory, docker_client: Any,
-            run_robocore: Any) -> Iterator[Path]:
+            run_robocore: RobocoreCli) -> Iterator[Path]:
     """One copy deployed with `robocore run` for the read-only tests (status, logs, connect)."""
     name = f"robocore-it-obs-{int(time.time()) % 100000}"
     root = copy_project(demo_project, tmp_path_factory.mktemp("running"), name)
@@ -60,7 +70,7 @@ def running(demo_project: Path, tmp_path_factory: pytest.TempPathFactory, docker
 
 
 def test_run_is_idempotent_and_recreates_only_what_changed(project_copy: Any, docker_client: Any,
-                                                          run_robocore: Any) -> None:
+                                                          run_robocore: RobocoreCli) -> None:
     root = project_copy()
     run_robocore(root, "run")
     first = ids(docker_client, root.name)
@@ -104,7 +114,7 @@ def test_run_is_idempotent_and_recreates_only_what_changed(project_copy: Any, do
 
 
 def test_generated_compose_file_is_accepted_and_matches_run(project_copy: Any, docker_client: Any,
-                                                           run_robocore: Any) -> None:
+                                                           run_robocore: RobocoreCli) -> None:
     root = project_copy()
     run_robocore(root, "run", "--quiet")
     files = list((root / ".robocore" / "compose").glob("*.yaml"))
@@ -120,7 +130,8 @@ def test_generated_compose_file_is_accepted_and_matches_run(project_copy: Any, d
             assert service["ipc"] == container.attrs["HostConfig"]["IpcMode"] == "host"
 
 
-def test_missing_install_tree_says_build_first(project_copy: Any, docker_client: Any, run_robocore: Any) -> None:
+def test_missing_install_tree_says_build_first(project_copy: Any, docker_client: Any,
+                                               run_robocore: RobocoreCli) -> None:
     root = project_copy()
     shutil.rmtree(root / ".robocore" / "build" / "listener")
     proc = run_robocore(root, "run", check=False)
@@ -136,7 +147,7 @@ def _lan_address() -> str:
 
 
 def test_unreachable_host_is_named_and_the_others_are_deployed(project_copy: Any, docker_client: Any,
-                                                               run_robocore: Any) -> None:
+                                                               run_robocore: RobocoreCli) -> None:
     def add_ghost(data: dict[str, Any]) -> None:
         first = data["hosts"][0]
         first["ip"] = _lan_address()  # a LAN address, so that a remote host could reach the server
@@ -157,7 +168,7 @@ def test_unreachable_host_is_named_and_the_others_are_deployed(project_copy: Any
 
 
 def test_an_empty_never_deployed_host_is_not_contacted(project_copy: Any, docker_client: Any,
-                                                        run_robocore: Any) -> None:
+                                                        run_robocore: RobocoreCli) -> None:
     """A spare machine listed in robot.yaml with nothing on it, and offline, must not fail the run;
     asked for by name (--host), it is contacted and named as unreachable (the control)."""
     def add_spare(data: dict[str, Any]) -> None:
@@ -172,7 +183,7 @@ def test_an_empty_never_deployed_host_is_not_contacted(project_copy: Any, docker
     assert named.returncode == 8 and "spare" in named.stderr and "192.0.2.1" in named.stderr, named.stderr
 
 
-def test_status_shows_components_and_nodes(running: Path, run_robocore: Any) -> None:
+def test_status_shows_components_and_nodes(running: Path, run_robocore: RobocoreCli) -> None:
     status = json.loads(run_robocore(running, "status", "--json").stdout)
     rows = {row["component"]: row for row in status["results"] if row["kind"] == "container"}
     assert set(rows) == {"discovery-0", "talker", "listener"}
@@ -184,7 +195,7 @@ def test_status_shows_components_and_nodes(running: Path, run_robocore: Any) -> 
     assert "running" in table and "/listener" in table
 
 
-def test_logs_prefix_and_filter(running: Path, run_robocore: Any) -> None:
+def test_logs_prefix_and_filter(running: Path, run_robocore: RobocoreCli) -> None:
     lines = run_robocore(running, "logs", "--tail", "5").stdout.splitlines()
     prefixes = {line.split("|", 1)[0].strip() for line in lines if "|" in line}
     assert {"talker", "listener"} <= prefixes
@@ -193,24 +204,19 @@ def test_logs_prefix_and_filter(running: Path, run_robocore: Any) -> None:
     assert only and all(line.startswith("talker ") for line in only)
 
 
-def test_logs_follow_merges_live_streams(running: Path) -> None:
-    argv = [sys.executable, "-m", "robocore", "-p", str(running), "logs", "-f", "--tail", "0"]
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def test_logs_follow_merges_live_streams(running: Path, run_robocore: RobocoreCli) -> None:
+    proc = run_robocore.start(running, "logs", "-f", "--tail", "0")
     seen: set[str] = set()
-    try:
-        deadline = time.monotonic() + 30
-        assert proc.stdout is not None
-        while time.monotonic() < deadline and not {"talker", "listener"} <= seen:
-            line = proc.stdout.readline()
-            if "|" in line:
-                seen.add(line.split("|", 1)[0].strip())
-    finally:
-        proc.kill()
-        proc.wait()
+    deadline = time.monotonic() + 30
+    assert proc.stdout is not None
+    while time.monotonic() < deadline and not {"talker", "listener"} <= seen:
+        line = proc.stdout.readline()
+        if "|" in line:
+            seen.add(line.split("|", 1)[0].strip())
     assert {"talker", "listener"} <= seen, f"followed streams: {seen}"
 
 
-def test_connect_runs_commands_as_super_client(running: Path, run_robocore: Any) -> None:
+def test_connect_runs_commands_as_super_client(running: Path, run_robocore: RobocoreCli) -> None:
     proc = run_robocore(running, "connect", "--component", "listener", "--cmd", "exit 7", check=False)
     assert proc.returncode == 7
     out = run_robocore(running, "connect", "--component", "talker", "--cmd",
@@ -221,42 +227,19 @@ def test_connect_runs_commands_as_super_client(running: Path, run_robocore: Any)
     assert missing.returncode == 2 and "unknown component" in missing.stderr
 
 
-def test_connect_opens_an_interactive_shell_in_a_tty(running: Path) -> None:
+def test_connect_opens_an_interactive_shell_in_a_tty(running: Path, run_robocore: RobocoreCli) -> None:
     """`connect` without --cmd: docker exec -it in the live container, ROS sourced, super client."""
-    import os
-    import pty
-    import select
-
-    pid, fd = pty.fork()
-    if pid == 0:  # child: the CLI on the pty
-        os.execv(sys.executable, [sys.executable, "-m", "robocore", "-p", str(running), "connect",
-                                  "--component", "listener"])
-    output = b""
-    try:
-        os.write(fd, b"echo tty=$(tty) super=$ROS_SUPER_CLIENT prefix=$AMENT_PREFIX_PATH; exit 5\n")
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            ready, _, _ = select.select([fd], [], [], 1.0)
-            if not ready:
-                continue
-            try:
-                chunk = os.read(fd, 4096)
-            except OSError:  # the child closed the pty
-                break
-            if not chunk:
-                break
-            output += chunk
-    finally:
-        _, status = os.waitpid(pid, 0)
-        os.close(fd)
-    text = output.decode(errors="replace")
-    assert os.waitstatus_to_exitcode(status) == 5, text
+    proc = run_robocore.in_terminal(running, "connect", "--component", "listener",
+                                    typed="echo tty=$(tty) super=$ROS_SUPER_CLIENT prefix=$AMENT_PREFIX_PATH; exit 5\n")
+    text = proc.stdout
+    assert proc.returncode == 5, text
     assert "tty=/dev/pts/" in text and "super=TRUE" in text, text
     # Sourcing the component's install tree puts it on AMENT_PREFIX_PATH (the echoed command itself has no match).
     assert re.search(r"prefix=\S*/robocore/install", text), f"the install tree is not sourced:\n{text}"
 
 
-def test_compose_up_runs_the_robot_and_run_keeps_it(project_copy: Any, docker_client: Any, run_robocore: Any) -> None:
+def test_compose_up_runs_the_robot_and_run_keeps_it(project_copy: Any, docker_client: Any, run_robocore: RobocoreCli,
+                                                    compose_project: Callable[[str, Path], list[str]]) -> None:
     """The generated compose file is a working artifact: `docker-compose up` starts the robot, and robocore
     then sees exactly its own specs (same spec labels, same images) and recreates nothing."""
     from robocore.commands.composefiles import write_compose_files
@@ -265,19 +248,16 @@ def test_compose_up_runs_the_robot_and_run_keeps_it(project_copy: Any, docker_cl
     root = project_copy()
     project = Project.load(root)
     (path,) = write_compose_files(project)
-    compose = [*compose_command(), "-p", root.name, "-f", str(path)]
-    try:
-        up = subprocess.run([*compose, "up", "-d"], capture_output=True, text=True, timeout=300)
-        assert up.returncode == 0, up.stderr
-        listener = docker_client.containers.get(f"{root.name}-listener")
-        assert wait_for(lambda: log_lines(listener, HEARD), HEAR_WITHIN), "compose-started listener heard nothing"
-        started = ids(docker_client, root.name)
-        assert set(started) == {"discovery-0", "talker", "listener"}
-        out = json.loads(run_robocore(root, "run", "--json").stdout)
-        assert {a["verb"] for host in out["results"] for a in host["actions"]} == {"keep"}
-        assert ids(docker_client, root.name) == started
-    finally:
-        subprocess.run([*compose, "down", "-v"], capture_output=True, timeout=300)
+    compose = compose_project(root.name, path)
+    up = subprocess.run([*compose, "up", "-d"], capture_output=True, text=True, timeout=300)
+    assert up.returncode == 0, up.stderr
+    listener = docker_client.containers.get(f"{root.name}-listener")
+    assert wait_for(lambda: log_lines(listener, HEARD), HEAR_WITHIN), "compose-started listener heard nothing"
+    started = ids(docker_client, root.name)
+    assert set(started) == {"discovery-0", "talker", "listener"}
+    out = json.loads(run_robocore(root, "run", "--json").stdout)
+    assert {a["verb"] for host in out["results"] for a in host["actions"]} == {"keep"}
+    assert ids(docker_client, root.name) == started
 
 
 def test_golden_compose_files_are_accepted_by_docker_compose() -> None:
@@ -290,7 +270,8 @@ def test_golden_compose_files_are_accepted_by_docker_compose() -> None:
         assert "variable is not set" not in proc.stderr, f"{path.name}: unescaped $: {proc.stderr}"
 
 
-def test_discovery_port_taken_is_reported(project_copy: Any, docker_client: Any, run_robocore: Any) -> None:
+def test_discovery_port_taken_is_reported(project_copy: Any, docker_client: Any, run_robocore: RobocoreCli,
+                                          tracked_containers: list[Any]) -> None:
     """Another server on the same UDP port (another project): run says so instead of reporting success."""
     root = project_copy()
     data = yaml.safe_load((root / "robot.yaml").read_text())
@@ -298,17 +279,15 @@ def test_discovery_port_taken_is_reported(project_copy: Any, docker_client: Any,
     image = f"{data['image_prefix']}base:latest"
     squatter = docker_client.containers.run(image, ["fastdds", "discovery", "-i", "0", "-p", str(port)],
                                             name=f"{root.name}-squatter", network_mode="host", detach=True)
-    try:
-        assert wait_for(lambda: b"Server is running" in squatter.logs(), 30), squatter.logs().decode()
-        proc = run_robocore(root, "run", check=False)
-        assert proc.returncode == 8, proc.stderr
-        assert "discovery-0 did not start" in proc.stderr and "UDP port" in proc.stderr
-    finally:
-        squatter.remove(force=True)
+    tracked_containers.append(squatter)
+    assert wait_for(lambda: b"Server is running" in squatter.logs(), 30), squatter.logs().decode()
+    proc = run_robocore(root, "run", check=False)
+    assert proc.returncode == 8, proc.stderr
+    assert "discovery-0 did not start" in proc.stderr and "UDP port" in proc.stderr
 
 
 def test_edit_build_run_restarts_only_the_rebuilt_component(project_copy: Any, docker_client: Any,
-                                                            run_robocore: Any) -> None:
+                                                            run_robocore: RobocoreCli) -> None:
     """Local install trees are mounted in place: after `build`, `run` recreates the rebuilt component
     (whose process still runs the old code) and nothing else; the listener hears the new text."""
     root = project_copy()

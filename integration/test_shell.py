@@ -10,23 +10,29 @@ container does not see the first container's files.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import importlib
 import io
 import os
 import secrets
 import shutil
+import socket
 import subprocess
-import sys
 import tempfile
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pytest
+from deploy_helpers import wait_for
 
 from robocore.plan import naming
+
+if TYPE_CHECKING:
+    from conftest import Env, RobocoreCli
 
 pytestmark = pytest.mark.docker
 
@@ -118,32 +124,31 @@ def project(docker_client: Any, shell_image: str, root_image: str) -> Iterator[P
         shutil.rmtree(parent, ignore_errors=True)
 
 
-def robocore(project: Path, *args: str, env: dict[str, str] | None = None, timeout: float = 180,
-             stdin: Any = subprocess.DEVNULL) -> subprocess.CompletedProcess[str]:
-    """Run ``robocore -p PROJECT ARGS`` with a controlled environment (no display unless given)."""
-    full = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "XAUTHORITY")}
-    full.update(env or {})
-    return subprocess.run([sys.executable, "-m", "robocore", "-p", str(project), *args], env=full,
-                          capture_output=True, text=True, timeout=timeout, stdin=stdin)
+#: The developer's display, removed from the CLI's environment unless a test gives one.
+NO_DISPLAY: dict[str, str | None] = {"DISPLAY": None, "WAYLAND_DISPLAY": None, "XAUTHORITY": None}
 
 
-def shell(project: Path, component: str, cmd: str, *extra: str, env: dict[str, str] | None = None) -> (
-        subprocess.CompletedProcess[str]):
-    return robocore(project, "shell", "--component", component, "--cmd", cmd, *extra, env=env)
+class Shell:
+    """``robocore shell`` through conftest's ``run_robocore``, with no display unless a test gives one."""
+
+    def __init__(self, cli: RobocoreCli) -> None:
+        self.cli = cli
+
+    def __call__(self, project: Path, component: str, cmd: str, *extra: str, env: Env | None = None,
+                 check: bool = False) -> subprocess.CompletedProcess[str]:
+        """``shell --component COMPONENT --cmd CMD EXTRA`` to its end (``check``: must exit 0)."""
+        return self.cli(project, "shell", "--component", component, "--cmd", cmd, *extra,
+                        env={**NO_DISPLAY, **(env or {})}, check=check, timeout=180)
+
+    def background(self, project: Path, component: str, cmd: str) -> subprocess.Popen[str]:
+        """``shell --cmd`` left running (no DISPLAY), for tests that join or change it meanwhile."""
+        return self.cli.start(project, "shell", "--component", component, "--cmd", cmd, env={"DISPLAY": None})
 
 
-def background_shell(project: Path, component: str, cmd: str) -> subprocess.Popen[str]:
-    """``robocore shell --cmd`` left running (no DISPLAY), for tests that join or change it meanwhile."""
-    return subprocess.Popen(
-        [sys.executable, "-m", "robocore", "-p", str(project), "shell", "--component", component, "--cmd", cmd],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
-        env={k: v for k, v in os.environ.items() if k != "DISPLAY"},
-    )
-
-
-def ok(proc: subprocess.CompletedProcess[str]) -> str:
-    assert proc.returncode == 0, f"exit {proc.returncode}\n--- stdout\n{proc.stdout}\n--- stderr\n{proc.stderr}"
-    return proc.stdout
+@pytest.fixture(scope="session")
+def shell(run_robocore: RobocoreCli) -> Shell:
+    """``shell(project, component, cmd, *extra, env=None, check=False)`` and ``shell.background(...)``."""
+    return Shell(run_robocore)
 
 
 # --- X server ----------------------------------------------------------------------------
@@ -164,12 +169,11 @@ def xvfb(tmp_path: Path) -> Iterator[Display]:
     subprocess.run(["xauth", "-q", "-f", str(auth), "add", f":{number}", ".", secrets.token_hex(16)], check=True)
     server = subprocess.Popen(["Xvfb", f":{number}", "-auth", str(auth), "-nolisten", "tcp",
                                "-screen", "0", "1234x567x24"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    deadline = time.monotonic() + 20
-    while not Path(f"/tmp/.X11-unix/X{number}").exists():
-        if server.poll() is not None or time.monotonic() > deadline:
-            server.kill()
-            pytest.fail(f"Xvfb :{number} did not start: {server.stderr.read().decode() if server.stderr else ''}")
-        time.sleep(0.05)
+    socket_file = Path(f"/tmp/.X11-unix/X{number}")
+    wait_for(lambda: socket_file.exists() or server.poll() is not None, 20, interval=0.05)
+    if not socket_file.exists():
+        server.kill()
+        pytest.fail(f"Xvfb :{number} did not start: {server.stderr.read().decode() if server.stderr else ''}")
     try:
         yield Display(number, auth)
     finally:
@@ -181,27 +185,27 @@ def _wait_for_file(client: Any, container: str, path: str, session: subprocess.P
     """Wait (asking Docker directly, not through another shell) until ``path`` exists in ``container``."""
     from docker.errors import APIError, NotFound
 
-    deadline = time.monotonic() + 60
-    while True:
+    def exists() -> bool:
         try:
             if client.containers.get(container).exec_run(["test", "-e", path]).exit_code == 0:
-                return
+                return True
         except (NotFound, APIError):
             pass
         assert session.poll() is None, session.communicate()
-        assert time.monotonic() < deadline, f"{path} never appeared in {container}"
-        time.sleep(0.1)
+        return False
+
+    assert wait_for(exists, 60, interval=0.1), f"{path} never appeared in {container}"
 
 
 # --- tests -------------------------------------------------------------------------------
 
 
 def test_x_client_reaches_the_display_with_the_cookie_and_is_refused_without(project: Path, xvfb: Display,
-                                                                            tmp_path: Path) -> None:
+                                                                            tmp_path: Path, shell: Shell) -> None:
     env = {"DISPLAY": xvfb.name, "XAUTHORITY": str(xvfb.auth), "USER": "alice"}
     if os.getuid() == 0:  # CI runs as root: be a UID 1000 developer (robocore hands the cookie file to that UID)
         env["ROBOCORE_UID"] = "1000"
-    out = ok(shell(project, "ws", "xdpyinfo | grep -E 'name of display|dimensions'", env=env))
+    out = shell(project, "ws", "xdpyinfo | grep -E 'name of display|dimensions'", env=env, check=True).stdout
     assert f"name of display:    {xvfb.name}" in out
     assert "1234x567 pixels" in out  # the Xvfb this test started, not another display
 
@@ -212,8 +216,8 @@ def test_x_client_reaches_the_display_with_the_cookie_and_is_refused_without(pro
     assert refused.returncode != 0
     assert "unable to open display" in refused.stderr
     # and without any display the shell is quietly headless
-    headless = shell(project, "ws", "echo \"[$DISPLAY]\"; ls /robocore", env={"ROBOCORE_UID": "1000"})
-    assert ok(headless).splitlines()[0] == "[]"
+    headless = shell(project, "ws", "echo \"[$DISPLAY]\"; ls /robocore", env={"ROBOCORE_UID": "1000"}, check=True)
+    assert headless.stdout.splitlines()[0] == "[]"
     assert "x11" not in headless.stdout.split()
     assert "xauth" not in headless.stderr and "DISPLAY" not in headless.stderr
 
@@ -228,15 +232,15 @@ def test_x_client_reaches_the_display_with_the_cookie_and_is_refused_without(pro
     ],
 )
 def test_files_made_in_the_shell_belong_to_the_developer(project: Path, uid: int | None, user: str | None,
-                                                          expected_name: str | None) -> None:
+                                                          expected_name: str | None, shell: Shell) -> None:
     env: dict[str, str] = {}
     if uid is not None:
         env["ROBOCORE_UID"] = str(uid)
     if user is not None:
         env["USER"] = user
     want_uid = os.getuid() if uid is None else uid
-    out = ok(shell(project, "ws", "touch mine && sudo -n touch by-sudo && id -un && id -u && pwd && echo $HOME "
-                   "&& sudo -n id -u && id -Gn | tr ' ' ,", env=env)).split()
+    out = shell(project, "ws", "touch mine && sudo -n touch by-sudo && id -un && id -u && pwd && echo $HOME "
+                "&& sudo -n id -u && id -Gn | tr ' ' ,", env=env, check=True).stdout.split()
     name, seen_uid, cwd, home, sudo_uid, groups = out[:6]
     assert int(seen_uid) == want_uid
     if expected_name is not None:
@@ -253,78 +257,68 @@ def test_files_made_in_the_shell_belong_to_the_developer(project: Path, uid: int
     assert (project / ".robocore" / "home" / name).stat().st_uid == want_uid
 
 
-def test_image_without_sudo_still_gets_the_user(project: Path) -> None:
-    out = ok(shell(project, "bare", "id -un; id -u; pwd; test -e /run/robocore/no-sudo && echo no-sudo",
-                   env={"ROBOCORE_UID": "1000", "USER": "alice"})).split()
+def test_image_without_sudo_still_gets_the_user(project: Path, shell: Shell) -> None:
+    out = shell(project, "bare", "id -un; id -u; pwd; test -e /run/robocore/no-sudo && echo no-sudo",
+                env={"ROBOCORE_UID": "1000", "USER": "alice"}, check=True).stdout.split()
     assert out == ["alice", "1000", "/home/alice", "no-sudo"]
 
 
-def test_second_shell_joins_the_first_and_new_starts_another(project: Path, docker_client: Any) -> None:
+def test_second_shell_joins_the_first_and_new_starts_another(project: Path, docker_client: Any,
+                                                             shell: Shell) -> None:
     name = project.name
-    first = background_shell(
+    first = shell.background(
         project, "ws", "echo here > /tmp/first-was-here; while [ ! -e /tmp/stop ]; do sleep 0.1; done; echo first-done")
-    try:
-        container_name = naming.shell_container_name(name, "ws")
-        _wait_for_file(docker_client, container_name, "/tmp/first-was-here", first)
-        first_id = docker_client.containers.get(container_name).id
+    container_name = naming.shell_container_name(name, "ws")
+    _wait_for_file(docker_client, container_name, "/tmp/first-was-here", first)
+    first_id = docker_client.containers.get(container_name).id
 
-        joined = ok(shell(project, "ws", "cat /tmp/first-was-here"))
-        assert joined.strip() == "here"  # /tmp is private to the container: same container
-        assert docker_client.containers.get(container_name).id == first_id
-        assert [c.name for c in _containers(docker_client, name)] == [container_name]
+    joined = shell(project, "ws", "cat /tmp/first-was-here", check=True).stdout
+    assert joined.strip() == "here"  # /tmp is private to the container: same container
+    assert docker_client.containers.get(container_name).id == first_id
+    assert [c.name for c in _containers(docker_client, name)] == [container_name]
 
-        # negative control: --new is another container, which has no such file
-        other = shell(project, "ws", "echo $ROBOCORE_CONTAINER; cat /tmp/first-was-here", "--new")
-        assert other.returncode != 0
-        assert other.stdout.split()[0] == naming.shell_container_name(name, "ws", 1)
-        assert docker_client.containers.get(container_name).id == first_id
+    # negative control: --new is another container, which has no such file
+    other = shell(project, "ws", "echo $ROBOCORE_CONTAINER; cat /tmp/first-was-here", "--new")
+    assert other.returncode != 0
+    assert other.stdout.split()[0] == naming.shell_container_name(name, "ws", 1)
+    assert docker_client.containers.get(container_name).id == first_id
 
-        ok(shell(project, "ws", "touch /tmp/stop"))
-        stdout, stderr = first.communicate(timeout=60)
-        assert first.returncode == 0, stderr
-        assert "first-done" in stdout
-    finally:
-        if first.poll() is None:
-            first.kill()
+    shell(project, "ws", "touch /tmp/stop", check=True)
+    stdout, stderr = first.communicate(timeout=60)
+    assert first.returncode == 0, stderr
+    assert "first-done" in stdout
     # the last session left: no dev container is left behind
     assert _containers(docker_client, name) == []
 
 
-def test_spec_change_is_reported_when_joining(project: Path, docker_client: Any) -> None:
-    first = background_shell(project, "ws", "while [ ! -e /tmp/stop ]; do sleep 0.1; done")
-    try:
-        _wait_for_file(docker_client, naming.shell_container_name(project.name, "ws"), "/run/robocore/ready", first)
-        same = shell(project, "ws", "true")
-        assert "differs" not in same.stderr  # negative control: same spec, no note
-        changed = shell(project, "ws", "touch /tmp/stop", "--devices", "all")
-        assert ok(changed) == ""
-        assert "differs" in changed.stderr and "--new" in changed.stderr
-        first.communicate(timeout=60)
-    finally:
-        if first.poll() is None:
-            first.kill()
+def test_spec_change_is_reported_when_joining(project: Path, docker_client: Any, shell: Shell) -> None:
+    first = shell.background(project, "ws", "while [ ! -e /tmp/stop ]; do sleep 0.1; done")
+    _wait_for_file(docker_client, naming.shell_container_name(project.name, "ws"), "/run/robocore/ready", first)
+    same = shell(project, "ws", "true")
+    assert "differs" not in same.stderr  # negative control: same spec, no note
+    changed = shell(project, "ws", "touch /tmp/stop", "--devices", "all", check=True)
+    assert changed.stdout == ""
+    assert "differs" in changed.stderr and "--new" in changed.stderr
+    first.communicate(timeout=60)
 
 
-def test_interactive_login_shell_has_prompt_aliases_and_persistent_history(project: Path) -> None:
-    script = shutil.which("script")
-    assert script, "util-linux `script` is needed to give the shell a terminal"
+def test_interactive_login_shell_has_prompt_aliases_and_persistent_history(project: Path, shell: Shell,
+                                                                            run_robocore: RobocoreCli) -> None:
     typed = "alias topic cb\necho \"PS1=$PS1\"\necho marker-$((6*7))\nexit 7\n"
-    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY",)}
-    env.update({"ROBOCORE_UID": "1000", "USER": "alice", "TERM": "dumb"})
-    command = f"{sys.executable} -m robocore -p {project} shell --component ws"
-    done = subprocess.run([script, "-qec", command, "/dev/null"], input=typed, capture_output=True, text=True,
-                          env=env, timeout=120)
-    assert done.returncode == 7, done.stdout + done.stderr
+    env = {"DISPLAY": None, "ROBOCORE_UID": "1000", "USER": "alice", "TERM": "dumb"}
+    done = run_robocore.in_terminal(project, "shell", "--component", "ws", typed=typed, env=env, timeout=120)
+    assert done.returncode == 7, done.stdout
     assert "alias topic='ros2 topic'" in done.stdout
     assert "marker-42" in done.stdout
     assert f"[{naming.shell_container_name(project.name, 'ws')}]" in done.stdout  # the rendered prompt
     history = (project / ".robocore" / "home" / "alice" / ".bash_history").read_text()
     assert "echo marker-$((6*7))" in history
     # a later container (the first was removed) has the same home
-    assert ok(shell(project, "ws", "tail -n 2 ~/.bash_history", env={"ROBOCORE_UID": "1000", "USER": "alice"}))
+    assert shell(project, "ws", "tail -n 2 ~/.bash_history", env={"ROBOCORE_UID": "1000", "USER": "alice"},
+                 check=True).stdout
 
 
-def test_staged_image_sources_ros_and_the_install_tree(demo_project: Path) -> None:
+def test_staged_image_sources_ros_and_the_install_tree(demo_project: Path, shell: Shell) -> None:
     """The template project after stage+build: ROS, the install tree and a SUPER_CLIENT DDS setup."""
     from robocore.project import Project
 
@@ -334,10 +328,10 @@ def test_staged_image_sources_ros_and_the_install_tree(demo_project: Path) -> No
     assert packages
     build_dir = demo_project / ".robocore" / "build" / comp.name
     stamp = time.time()
-    out = ok(robocore(demo_project, "shell", "--component", comp.name, "--cmd",
-                      "python3 -c 'import rclpy; print(\"rclpy-ok\")'; echo \"super=$ROS_SUPER_CLIENT\"; "
-                      "echo \"ament=$AMENT_PREFIX_PATH\"; "
-                      "cd /tmp && colcon build >/dev/null && echo built"))
+    out = shell(demo_project, comp.name,
+                "python3 -c 'import rclpy; print(\"rclpy-ok\")'; echo \"super=$ROS_SUPER_CLIENT\"; "
+                "echo \"ament=$AMENT_PREFIX_PATH\"; "
+                "cd /tmp && colcon build >/dev/null && echo built", check=True).stdout
     assert "rclpy-ok" in out
     assert "super=TRUE" in out
     assert f"{naming.CONTAINER_INSTALL}/" in out.split("ament=", 1)[1].splitlines()[0]
@@ -357,24 +351,24 @@ def _host_device() -> str:
     pytest.fail("none of /dev/cpu_dma_latency, /dev/loop-control, /dev/fuse exists on this host")
 
 
-def test_devices_from_the_component_and_devices_all(project: Path) -> None:
+def test_devices_from_the_component_and_devices_all(project: Path, shell: Shell) -> None:
     device = _host_device()
     probe = f"sudo -n sh -c 'exec 3<{device} && echo opened' 2>&1 || true; test -e {device} || echo absent"
     # negative control: by default the device is not there
-    default = ok(shell(project, "ws", probe)).split()
+    default = shell(project, "ws", probe, check=True).stdout.split()
     assert "absent" in default and "opened" not in default
     # --devices all: the whole /dev, and the device cgroup lets it be opened
-    assert "opened" in ok(shell(project, "ws", probe, "--devices", "all")).split()
+    assert "opened" in shell(project, "ws", probe, "--devices", "all", check=True).stdout.split()
     # a component's devices: list
     with (project / "robot.yaml").open("a") as handle:
         handle.write(f"  - name: hw\n    runs_on: dev\n    image: \"{TEST_IMAGE}\"\n    devices: [\"{device}\"]\n")
-    assert "opened" in ok(shell(project, "hw", probe)).split()
+    assert "opened" in shell(project, "hw", probe, check=True).stdout.split()
 
 
-def test_wayland_socket_reaches_the_container(project: Path) -> None:
-    import socket
-    import threading
-
+@pytest.fixture
+def compositor() -> Iterator[Path]:
+    """A stand-in Wayland compositor: a socket in a runtime folder of its own that answers its first client with
+    ``hello-from-the-compositor``; closed and removed when the test ends."""
     runtime = Path(tempfile.mkdtemp(prefix="rc-xdg-"))  # short: AF_UNIX paths are limited to 107 bytes
     path = runtime / "wayland-robocore-test"
     server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -383,38 +377,39 @@ def test_wayland_socket_reaches_the_container(project: Path) -> None:
     server.listen(1)
 
     def answer() -> None:
-        conn, _ = server.accept()
-        with conn:
-            conn.sendall(b"hello-from-the-compositor")
+        with contextlib.suppress(OSError):  # closed before anyone came
+            conn, _ = server.accept()
+            with conn:
+                conn.sendall(b"hello-from-the-compositor")
 
-    thread = threading.Thread(target=answer, daemon=True)
-    thread.start()
-    env = {"XDG_RUNTIME_DIR": str(runtime), "WAYLAND_DISPLAY": path.name, "ROBOCORE_UID": "1000", "USER": "alice"}
+    threading.Thread(target=answer, daemon=True).start()
+    yield path
+    server.close()
+    shutil.rmtree(runtime, ignore_errors=True)
+
+
+def test_wayland_socket_reaches_the_container(project: Path, compositor: Path, shell: Shell) -> None:
+    env = {"XDG_RUNTIME_DIR": str(compositor.parent), "WAYLAND_DISPLAY": compositor.name, "ROBOCORE_UID": "1000",
+           "USER": "alice"}
     connect = ("python3 -c \"import os, socket; s = socket.socket(socket.AF_UNIX); "
                "s.connect(os.path.join(os.environ['XDG_RUNTIME_DIR'], os.environ['WAYLAND_DISPLAY'])); "
                "print(s.recv(100).decode())\"; stat -c %a:%u \"$XDG_RUNTIME_DIR\"")
-    try:
-        out = ok(shell(project, "ws", connect, env=env)).split()
-    finally:
-        server.close()
-        shutil.rmtree(runtime, ignore_errors=True)
+    out = shell(project, "ws", connect, env=env, check=True).stdout.split()
     assert out == ["hello-from-the-compositor", "700:1000"]
     # negative control: no WAYLAND_DISPLAY, no socket
-    out = ok(shell(project, "ws", "echo \"[$WAYLAND_DISPLAY]\"; test -e /robocore/xdg || echo no-xdg",
-                   env={"ROBOCORE_UID": "1000"})).split()
+    out = shell(project, "ws", "echo \"[$WAYLAND_DISPLAY]\"; test -e /robocore/xdg || echo no-xdg",
+                env={"ROBOCORE_UID": "1000"}, check=True).stdout.split()
     assert out == ["[]", "no-xdg"]
 
 
-def test_a_foreign_container_with_the_shell_name_is_left_alone(project: Path, docker_client: Any,
-                                                               root_image: str) -> None:
+def test_a_foreign_container_with_the_shell_name_is_left_alone(project: Path, docker_client: Any, root_image: str,
+                                                               shell: Shell, tracked_containers: list[Any]) -> None:
     name = naming.shell_container_name(project.name, "ws")
     foreign = docker_client.containers.run(root_image, ["sleep", "60"], name=name, detach=True,
                                            labels={naming.LABEL_PROJECT: project.name})
-    try:
-        refused = shell(project, "ws", "true")
-        assert refused.returncode != 0
-        assert "is not a robocore dev shell" in refused.stderr
-        foreign.reload()
-        assert foreign.status == "running"
-    finally:
-        foreign.remove(force=True)
+    tracked_containers.append(foreign)
+    refused = shell(project, "ws", "true")
+    assert refused.returncode != 0
+    assert "is not a robocore dev shell" in refused.stderr
+    foreign.reload()
+    assert foreign.status == "running"

@@ -16,13 +16,17 @@ import shlex
 import shutil
 import signal
 import subprocess
-import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import pytest
-from robot_host.hosts import RobotFleet
+from deploy_helpers import wait_for
+
+if TYPE_CHECKING:
+    from conftest import Restorer, RobocoreCli
+    from robot_host.hosts import RobotFleet
 
 pytestmark = pytest.mark.docker
 
@@ -40,12 +44,6 @@ hosts:
     runs_on: robot-b
     folder: components/listener
 """
-
-
-@pytest.fixture(scope="module")
-def fleet() -> Iterator[RobotFleet]:
-    with RobotFleet(2) as hosts:
-        yield hosts
 
 
 @pytest.fixture(scope="module")
@@ -74,18 +72,18 @@ def project(fleet: RobotFleet, tmp_path_factory: pytest.TempPathFactory) -> Path
     return root
 
 
-def robocore(project: Path, *args: str, check: bool = True) -> subprocess.CompletedProcess[str]:
-    proc = subprocess.run([sys.executable, "-m", "robocore", "-p", str(project), *args],
-                          capture_output=True, text=True, timeout=600)
-    if check and proc.returncode != 0:
-        pytest.fail(f"robocore {' '.join(args)} exited {proc.returncode}\n{proc.stdout}\n{proc.stderr}", pytrace=False)
-    return proc
+SyncJson = Callable[..., dict[str, dict[str, Any]]]
 
 
-def sync_json(project: Path, *args: str) -> dict[str, dict[str, object]]:
-    proc = robocore(project, "sync", "--json", *args)
-    data = json.loads(proc.stdout)
-    return {row["host"]: row for row in data["results"]}
+@pytest.fixture(scope="module")
+def sync_json(run_robocore: RobocoreCli) -> SyncJson:
+    """``sync_json(project, *args)``: ``robocore sync --json ARGS`` (must succeed), its results by host."""
+
+    def sync(project: Path, *args: str) -> dict[str, dict[str, Any]]:
+        data = json.loads(run_robocore(project, "sync", "--json", *args).stdout)
+        return {row["host"]: row for row in data["results"]}
+
+    return sync
 
 
 def tree_digests(root: Path) -> dict[str, str]:
@@ -109,8 +107,9 @@ def current_target(fleet: RobotFleet, index: int, comp: str) -> str:
     return fleet.hosts[index].ssh(fleet, "readlink", f"/root/robocore/{comp}/current").strip()
 
 
-def test_dry_run_prints_commands_and_copies_nothing(fleet: RobotFleet, project: Path) -> None:
-    proc = robocore(project, "sync", "--dry-run")
+def test_dry_run_prints_commands_and_copies_nothing(fleet: RobotFleet, project: Path,
+                                                    run_robocore: RobocoreCli) -> None:
+    proc = run_robocore(project, "sync", "--dry-run")
     assert "rsync -a -R -s --delete" in proc.stdout
     assert "--link-dest=/root/robocore/talker/current/" in proc.stdout
     assert f"root@{fleet.hosts[1].ip}:/root/robocore/listener/staging/" in proc.stdout
@@ -118,7 +117,7 @@ def test_dry_run_prints_commands_and_copies_nothing(fleet: RobotFleet, project: 
     assert "robocore" not in listing.split()
 
 
-def test_sync_moves_trees_then_only_what_changed(fleet: RobotFleet, project: Path) -> None:
+def test_sync_moves_trees_then_only_what_changed(fleet: RobotFleet, project: Path, sync_json: SyncJson) -> None:
     talker_install = project / ".robocore" / "build" / "talker" / "install"
     tree_bytes = sum(p.stat().st_size for p in talker_install.rglob("*") if p.is_file())
 
@@ -165,7 +164,8 @@ def test_sync_moves_trees_then_only_what_changed(fleet: RobotFleet, project: Pat
     assert len(releases) == 3, releases  # older ones pruned
 
 
-def test_read_only_project_volumes_travel_with_the_release(fleet: RobotFleet, project: Path) -> None:
+def test_read_only_project_volumes_travel_with_the_release(fleet: RobotFleet, project: Path, sync_json: SyncJson,
+                                                           run_robocore: RobocoreCli, restore: Restorer) -> None:
     """./config:...:ro is copied into each release (where run mounts it from); ./data (writable) is not."""
     sync_json(project)
     files = "/root/robocore/talker/current/files"
@@ -178,41 +178,36 @@ def test_read_only_project_volumes_travel_with_the_release(fleet: RobotFleet, pr
     assert again["robot-a"]["changed"], "an edited project file must make a new release"
     assert fleet.hosts[0].ssh(fleet, "cat", f"{files}/config/maps/params.yaml") == "rate: 5\n"
     config = project / "config"
+    restore.keep(config, project / "config.moved")
     config.rename(project / "config.moved")
-    try:
-        proc = robocore(project, "sync", check=False)
-        assert proc.returncode != 0 and "Traceback" not in proc.stderr
-        assert f"component talker: volumes[0]: {config} does not exist" in proc.stderr
-    finally:
-        (project / "config.moved").rename(config)
+    proc = run_robocore(project, "sync", check=False)
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr
+    assert f"component talker: volumes[0]: {config} does not exist" in proc.stderr
 
 
-def test_interrupted_sync_leaves_current_on_a_complete_release(fleet: RobotFleet, project: Path) -> None:
+def test_interrupted_sync_leaves_current_on_a_complete_release(fleet: RobotFleet, project: Path, sync_json: SyncJson,
+                                                              run_robocore: RobocoreCli, restore: Restorer) -> None:
     talker_install = project / ".robocore" / "build" / "talker" / "install"
     sync_json(project, "--host", "robot-a")
     before = current_target(fleet, 0, "talker")
     before_tree = remote_digests(fleet, 0, "/root/robocore/talker/current/install")
     big = talker_install / "big.bin"
+    restore.keep(big)  # removed even when the test fails: later syncs would carry it
     with big.open("wb") as handle:
         for _ in range(40):
             handle.write(os.urandom(8 << 20))  # 320 MB: takes long enough to interrupt
     module = talker_install / "demo_talker" / "lib" / "talker.py"
     module.write_text(module.read_text().replace("LINE_5 = ", "LINE_5 = 2 + ", 1))
-    proc = subprocess.Popen([sys.executable, "-m", "robocore", "-p", str(project), "sync", "--host", "robot-a"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    try:
-        deadline = time.monotonic() + 60
-        partial = ""
-        while time.monotonic() < deadline:
-            partial = fleet.hosts[0].ssh(fleet, "sh", "-c", "ls -a /root/robocore/talker/staging/install 2>/dev/null",
-                                         check=False)
-            if ".big.bin." in partial:  # rsync is writing its temp file: interrupt now
-                break
-            time.sleep(0.05)
-        assert ".big.bin." in partial, "rsync never started copying big.bin"
-    finally:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
+    proc = run_robocore.start(project, "sync", "--host", "robot-a", stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL)
+
+    def copying_big() -> bool:  # rsync is writing its temp file: interrupt now
+        staging = "ls -a /root/robocore/talker/staging/install 2>/dev/null"
+        return ".big.bin." in fleet.hosts[0].ssh(fleet, "sh", "-c", staging, check=False)
+
+    assert wait_for(copying_big, 60, interval=0.05), "rsync never started copying big.bin"
+    os.killpg(proc.pid, signal.SIGKILL)  # the CLI and its rsync and ssh
+    proc.wait()
     # current still names the previous release, whose files are all intact
     assert current_target(fleet, 0, "talker") == before
     assert remote_digests(fleet, 0, "/root/robocore/talker/current/install") == before_tree
@@ -231,7 +226,8 @@ def test_interrupted_sync_leaves_current_on_a_complete_release(fleet: RobotFleet
 
 
 def test_a_second_sync_to_a_host_being_synced_is_refused_and_names_the_first(
-        fleet: RobotFleet, project: Path) -> None:
+        fleet: RobotFleet, project: Path, sync_json: SyncJson, run_robocore: RobocoreCli,
+        background: Callable[..., Any]) -> None:
     """Another developer's sync holds robot-a's lock: this sync must not touch robot-a (its staging
     would mix two trees), must say who holds it, and must still sync robot-b. Negative control: once
     the lock is free, the same sync goes through."""
@@ -240,37 +236,36 @@ def test_a_second_sync_to_a_host_being_synced_is_refused_and_names_the_first(
     module = project / ".robocore" / "build" / "talker" / "install" / "demo_talker" / "lib" / "talker.py"
     module.write_text(module.read_text() + "LOCKED_EDIT = 1\n")
     before = current_target(fleet, 0, "talker")
-    holder = subprocess.Popen(
+    holder = background(
         ["ssh", "-F", str(fleet.ssh_config), f"root@{fleet.hosts[0].ip}", "--",
          shlex.join(plan.session_argv("/root/robocore", "alice@her-laptop (pid 4242)", []))],
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    try:
-        assert holder.stdout is not None and holder.stdout.readline().strip() == plan.LOCKED
-        proc = robocore(project, "sync", "--json", check=False)
-        assert proc.returncode != 0
-        assert "host robot-a: another sync to this host is in progress: alice@her-laptop (pid 4242)" in proc.stderr
-        assert "Traceback" not in proc.stderr
-        assert current_target(fleet, 0, "talker") == before
-        assert "staging" not in fleet.hosts[0].ssh(fleet, "ls", "/root/robocore/talker").split()
-        assert {row["host"] for row in json.loads(proc.stdout)["results"]} == {"robot-b"}
-    finally:
-        assert holder.stdin is not None
-        holder.stdin.close()
-        holder.wait(timeout=30)
+        stdin=subprocess.PIPE, stderr=None)
+    assert holder.stdout is not None and holder.stdout.readline().strip() == plan.LOCKED
+    proc = run_robocore(project, "sync", "--json", check=False)
+    assert proc.returncode != 0
+    assert "host robot-a: another sync to this host is in progress: alice@her-laptop (pid 4242)" in proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert current_target(fleet, 0, "talker") == before
+    assert "staging" not in fleet.hosts[0].ssh(fleet, "ls", "/root/robocore/talker").split()
+    assert {row["host"] for row in json.loads(proc.stdout)["results"]} == {"robot-b"}
+    assert holder.stdin is not None
+    holder.stdin.close()  # alice's sync ends: the lock is free
+    holder.wait(timeout=30)
     after = sync_json(project)
     assert after["robot-a"]["changed"] and current_target(fleet, 0, "talker") != before
     remote = "/root/robocore/talker/current/install/demo_talker/lib/talker.py"
     assert "LOCKED_EDIT = 1" in fleet.hosts[0].ssh(fleet, "cat", remote)
 
 
-def test_stopped_host_is_named_fast_and_the_other_host_still_syncs(fleet: RobotFleet, project: Path) -> None:
+def test_stopped_host_is_named_fast_and_the_other_host_still_syncs(fleet: RobotFleet, project: Path,
+                                                                   run_robocore: RobocoreCli) -> None:
     # runs last in this module: it stops robot-b
     module = project / ".robocore" / "build" / "talker" / "install" / "demo_talker" / "lib" / "talker.py"
     module.write_text(module.read_text().replace("LINE_7 = ", "LINE_7 = 3 + ", 1))
     before = current_target(fleet, 0, "talker")
     fleet.stop(1)
     start = time.monotonic()
-    proc = robocore(project, "sync", check=False)
+    proc = run_robocore(project, "sync", check=False)
     elapsed = time.monotonic() - start
     assert proc.returncode != 0
     assert "robot-b" in proc.stderr and "succeeded: robot-a" in proc.stderr, proc.stderr
@@ -278,7 +273,7 @@ def test_stopped_host_is_named_fast_and_the_other_host_still_syncs(fleet: RobotF
     assert current_target(fleet, 0, "talker") != before  # robot-a got its new release anyway
 
     start = time.monotonic()
-    doctor = robocore(project, "doctor", check=False)
+    doctor = run_robocore(project, "doctor", check=False)
     assert time.monotonic() - start < 10
     assert doctor.returncode != 0
     assert "error: robot-b: " in doctor.stderr and "error: robot-a" not in doctor.stderr, doctor.stderr

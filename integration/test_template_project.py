@@ -16,6 +16,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from deploy_helpers import output_tails
 
 pytestmark = pytest.mark.docker
 
@@ -41,16 +42,12 @@ def _nox(root: Path, *sessions: str) -> subprocess.CompletedProcess[str]:
                           capture_output=True, text=True, timeout=1800)
 
 
-def _output(proc: subprocess.CompletedProcess[str]) -> str:
-    return f"exit {proc.returncode}\n--- stdout\n{proc.stdout[-6000:]}\n--- stderr\n{proc.stderr[-6000:]}"
-
-
 def test_the_generated_projects_nox_sessions_pass(copied_project: Path) -> None:
     proc = _nox(copied_project, "validate", "build", "unit", "graph")
-    assert proc.returncode == 0, _output(proc)
+    assert proc.returncode == 0, output_tails(proc)
     text = proc.stdout + proc.stderr
     for session in ("validate", "build", "unit", "graph"):
-        assert f"Session {session} was successful" in text, _output(proc)
+        assert f"Session {session} was successful" in text, output_tails(proc)
     assert "passed" in text and "failed" not in text.split("Session graph")[0].split("Running session graph")[-1]
 
 
@@ -62,6 +59,6 @@ def test_a_failing_package_test_fails_the_unit_session(copied_project: Path, tmp
     (tests[0].parent / "test_wrong_on_purpose.py").write_text(
         "def test_expects_a_wrong_value():\n    assert 1 + 1 == 3, 'wrong on purpose'\n")
     proc = _nox(root, "build", "unit")
-    assert proc.returncode != 0, _output(proc)
-    assert "Session build was successful" in proc.stderr, _output(proc)
-    assert "test_expects_a_wrong_value" in proc.stdout + proc.stderr, _output(proc)
+    assert proc.returncode != 0, output_tails(proc)
+    assert "Session build was successful" in proc.stderr, output_tails(proc)
+    assert "test_expects_a_wrong_value" in proc.stdout + proc.stderr, output_tails(proc)

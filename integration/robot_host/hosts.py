@@ -7,6 +7,8 @@ SYS_RESOURCE, seccomp/apparmor unconfined, /sys/fs/cgroup bind, exec tmpfs on /v
 its public half injected through ``AUTHORIZED_KEY``, and the host keys are collected with
 ssh-keyscan into a private known_hosts. ``ROBOCORE_SSH_CONFIG`` points robocore at that config,
 so robocore reaches each host exactly as it would a real robot: ``ssh://root@<ip>``.
+
+The suites get fleets from conftest's ``robot_fleets`` and ``fleet`` fixtures, which remove them.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from deploy_helpers import wait_for
 from testcontainers.core.container import DockerContainer
 from testcontainers.core.network import Network
 
@@ -54,7 +57,8 @@ class RobotHost:
         return proc.stdout
 
     def docker(self, fleet: RobotFleet) -> Any:
-        """A docker-py client of the host's inner daemon, through robocore's own ssh adapter."""
+        """A new docker-py client of the host's inner daemon, which the caller closes (for scripts such as
+        bench/deploy.py; the suites use the fleet's own clients, :meth:`RobotFleet.client`)."""
         from robocore.adapters.docker_hosts import client_for
         from robocore.config.model import Host
 
@@ -62,7 +66,10 @@ class RobotHost:
 
 
 class RobotFleet:
-    """``count`` robot hosts on one private network; a context manager that removes everything."""
+    """``count`` robot hosts on one private network: :meth:`start` them, :meth:`close` removes everything.
+
+    The suites get fleets from conftest's fixtures; a script uses a fleet as a context manager.
+    """
 
     def __init__(self, count: int = 2, tag: str = "", *, env: list[dict[str, str]] | None = None,
                  setup: Callable[[RobotHost], None] | None = None) -> None:
@@ -78,7 +85,9 @@ class RobotFleet:
         self.ssh_config = self.dir / "ssh_config"
         self.network: Network | None = None
         self.hosts: list[RobotHost] = []
+        self._clients: dict[int, Any] = {}
         self._saved_env: str | None = None
+        self._env_set = False
 
     def __enter__(self) -> RobotFleet:
         try:
@@ -136,51 +145,69 @@ class RobotFleet:
             self._wait_ready(host)
         self._saved_env = os.environ.get("ROBOCORE_SSH_CONFIG")
         os.environ["ROBOCORE_SSH_CONFIG"] = str(self.ssh_config)
+        self._env_set = True
 
     def _wait_ready(self, host: RobotHost, timeout: float = 90) -> None:
         deadline = time.monotonic() + timeout
-        last = ""
-        while time.monotonic() < deadline:
-            scan = subprocess.run(["ssh-keyscan", "-T", "2", "-t", "ed25519", host.ip],
-                                  capture_output=True, text=True)
-            if scan.returncode == 0 and scan.stdout.strip():
-                with self.known_hosts.open("a") as handle:
-                    handle.write(scan.stdout)
-                break
-            last = scan.stderr
-            time.sleep(0.5)
-        else:
-            raise AssertionError(f"sshd on {host.name} ({host.ip}) did not come up: {last}")
-        while time.monotonic() < deadline:
-            proc = subprocess.run(["ssh", "-F", str(self.ssh_config), f"root@{host.ip}", "--", "docker", "info",
-                                   "--format", "{{.ServerVersion}}"], capture_output=True, text=True)
-            if proc.returncode == 0:
-                return
-            last = proc.stderr
-            time.sleep(0.5)
-        raise AssertionError(f"dockerd on {host.name} ({host.ip}) did not come up: {last}")
+        last = [""]
+
+        def answered(argv: list[str]) -> str | None:
+            proc = subprocess.run(argv, capture_output=True, text=True)
+            last[0] = proc.stderr
+            return proc.stdout if proc.returncode == 0 and proc.stdout.strip() else None
+
+        keys = wait_for(lambda: answered(["ssh-keyscan", "-T", "2", "-t", "ed25519", host.ip]), timeout)
+        if keys is None:
+            raise AssertionError(f"sshd on {host.name} ({host.ip}) did not come up: {last[0]}")
+        with self.known_hosts.open("a") as handle:
+            handle.write(keys)
+        info = ["ssh", "-F", str(self.ssh_config), f"root@{host.ip}", "--", "docker", "info", "--format",
+                "{{.ServerVersion}}"]
+        if wait_for(lambda: answered(info), max(deadline - time.monotonic(), 0)) is None:
+            raise AssertionError(f"dockerd on {host.name} ({host.ip}) did not come up: {last[0]}")
 
     def host_yaml(self, names: list[str]) -> str:
         """robot.yaml ``hosts:`` entries naming the fleet's hosts ``names[i]``."""
         rows = zip(names, self.hosts, strict=False)
         return "".join(f"  - name: {n}\n    ip: {h.ip}\n    user: root\n" for n, h in rows)
 
+    def client(self, index: int) -> Any:
+        """A docker-py client of host ``index``'s inner daemon, through robocore's own ssh adapter (one per
+        host, closed with the fleet)."""
+        from robocore.adapters.docker_hosts import client_for
+        from robocore.config.model import Host
+
+        if index not in self._clients:
+            host = self.hosts[index]
+            self._clients[index] = client_for(Host(name=host.name, ip=host.ip), timeout=600)
+        return self._clients[index]
+
     def stop(self, index: int) -> None:
         """Stop host ``index`` (its address stops answering)."""
         self.hosts[index].container.get_wrapped_container().stop(timeout=2)
 
     def close(self) -> None:
-        """Remove the hosts, the network and the keys; restore ROBOCORE_SSH_CONFIG."""
-        for host in self.hosts:
+        """Close the clients; remove the hosts, the network and the keys; restore ROBOCORE_SSH_CONFIG."""
+        for client in self._clients.values():
             with contextlib.suppress(Exception):
-                host.container.get_wrapped_container().remove(force=True, v=True)
+                client.close()
+        self._clients.clear()
+        import docker
+
+        with contextlib.closing(docker.from_env()) as client:  # by name: also a host that failed halfway
+            for container in client.containers.list(all=True, filters={"name": f"{PREFIX}-{self.tag}-"}):
+                if container.name.startswith(f"{PREFIX}-{self.tag}-"):
+                    with contextlib.suppress(Exception):
+                        container.remove(force=True, v=True)
         self.hosts.clear()
         if self.network is not None:
             with contextlib.suppress(Exception):
                 self.network.remove()
             self.network = None
-        if self._saved_env is None:
-            os.environ.pop("ROBOCORE_SSH_CONFIG", None)
-        else:
-            os.environ["ROBOCORE_SSH_CONFIG"] = self._saved_env
+        if self._env_set:
+            if self._saved_env is None:
+                os.environ.pop("ROBOCORE_SSH_CONFIG", None)
+            else:
+                os.environ["ROBOCORE_SSH_CONFIG"] = self._saved_env
+            self._env_set = False
         shutil.rmtree(self.dir, ignore_errors=True)
