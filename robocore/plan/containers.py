@@ -17,7 +17,8 @@ from pathlib import PurePosixPath
 from typing import Any
 
 from robocore.config.model import Component, Host, is_project_path, port_pattern, read_only_project_path
-from robocore.plan import dds, layout, naming
+from robocore.plan import dds, gui, layout, naming
+from robocore.plan.addresses import extra_hosts, reachable_locators
 from robocore.plan.layout import host_paths
 from robocore.project import Project
 
@@ -26,7 +27,6 @@ ROLE_DISCOVERY = "discovery"
 DEFAULT_TAG = "latest"
 #: Command of a component that has no entrypoint: stay up so that ``connect`` can enter it.
 IDLE_COMMAND = ("sleep", "infinity")
-X11_SOCKET = "/tmp/.X11-unix"
 
 
 @dataclass(frozen=True)
@@ -71,6 +71,7 @@ class ContainerSpec:
     restart: str = "unless-stopped"
     depends_on: tuple[str, ...] = ()  # services started first (same host)
     extra_labels: tuple[tuple[str, str], ...] = field(default=())
+    extra_hosts: tuple[tuple[str, str], ...] = ()  # (name, address or "host-gateway") in /etc/hosts
 
     @property
     def env(self) -> dict[str, str]:
@@ -80,7 +81,10 @@ class ContainerSpec:
     @property
     def spec_hash(self) -> str:
         """A short content hash of the spec: equal hashes mean nothing to recreate."""
-        payload = json.dumps(asdict(self), sort_keys=True, separators=(",", ":"))
+        data = asdict(self)
+        if not data["extra_hosts"]:  # absent, as before the field existed: unchanged specs keep their hash
+            del data["extra_hosts"]
+        payload = json.dumps(data, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(payload.encode()).hexdigest()[:16]
 
     @property
@@ -126,6 +130,8 @@ class ContainerSpec:
             kwargs["devices"] = list(self.devices)
         if self.ports:
             kwargs["ports"] = docker_ports(self.ports)
+        if self.extra_hosts:
+            kwargs["extra_hosts"] = dict(self.extra_hosts)
         if self.gpus:
             from docker.types import DeviceRequest
 
@@ -157,6 +163,8 @@ class ContainerSpec:
             service["devices"] = list(self.devices)
         if self.ports:
             service["ports"] = list(self.ports)
+        if self.extra_hosts:
+            service["extra_hosts"] = [f"{name}:{address}" for name, address in self.extra_hosts]
         if self.privileged:
             service["privileged"] = True
         if self.gpus:
@@ -252,14 +260,17 @@ def component_spec(project: Project, component: Component, *, tag: str | None = 
     robot = project.robot
     host: Host = robot.host(component.runs_on)
     paths = host_paths(project, host, component.name)
+    network = component.network_mode
     env = dds.client_environment(robot)
+    if "ROS_DISCOVERY_SERVER" in env:  # a bridge container's loopback is its own, not the host's
+        env["ROS_DISCOVERY_SERVER"] = reachable_locators(env["ROS_DISCOVERY_SERVER"], network)
     mounts: list[Mount] = []
     if component.has_workspace:
         mounts.append(Mount(paths.install, naming.CONTAINER_INSTALL, read_only=True))
     mounts.append(Mount(paths.dds, naming.CONTAINER_DDS, read_only=True))
-    if component.gui:
-        env["DISPLAY"] = ":0"
-        mounts.append(Mount(X11_SOCKET, X11_SOCKET, read_only=True))
+    display = gui.gui_plan(project, component)
+    env.update(display.environment)
+    mounts.extend(Mount(b.source, b.target, read_only=b.read_only) for b in display.binds)
     base = PurePosixPath(str(project.root)) if host.is_local else PurePosixPath(host.deploy_root) / component.name
     mounts.extend(_user_mount(v, base, remote=not host.is_local) for v in component.volumes)
     env.update(component.environment)
@@ -269,7 +280,6 @@ def component_spec(project: Project, component: Component, *, tag: str | None = 
     else:
         image = image_ref(project, naming.component_image(robot, project.name, component.name), tag)
         entrypoint = (naming.ENTRYPOINT,)
-    network = component.network_mode
     servers_here = [s.index for s in dds.servers(robot) if s.host == host.name]
     return ContainerSpec(
         name=naming.container_name(project.name, component.name),
@@ -279,7 +289,7 @@ def component_spec(project: Project, component: Component, *, tag: str | None = 
         project=project.name,
         image=image,
         entrypoint=entrypoint,
-        command=component_command(component),
+        command=display.command or component_command(component),
         environment=tuple(sorted(env.items())),
         network_mode=network,
         ipc_mode=ipc_mode(project) if network == "host" else None,
@@ -289,7 +299,8 @@ def component_spec(project: Project, component: Component, *, tag: str | None = 
         gpus=component.nvidia,
         privileged=component.privileged,
         restart=component.restart,
-        depends_on=tuple(discovery_service(i) for i in servers_here),
+        depends_on=tuple(discovery_service(i) for i in servers_here) + display.depends_on,
+        extra_hosts=extra_hosts(network),
     )
 
 
