@@ -15,6 +15,7 @@ import importlib
 import io
 import os
 import secrets
+import shlex
 import shutil
 import subprocess
 import sys
@@ -322,6 +323,23 @@ def test_interactive_login_shell_has_prompt_aliases_and_persistent_history(proje
     assert "echo marker-$((6*7))" in history
     # a later container (the first was removed) has the same home
     assert ok(shell(project, "ws", "tail -n 2 ~/.bash_history", env={"ROBOCORE_UID": "1000", "USER": "alice"}))
+
+
+def test_cmd_gets_a_terminal_when_robocore_has_one(project: Path) -> None:
+    """``shell --cmd tmux`` needs a TTY: given when robocore runs on a terminal, not when its output is captured."""
+    script = shutil.which("script")
+    assert script, "util-linux `script` is needed to give robocore a terminal"
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY",)}
+    env["TERM"] = "xterm"
+    command = shlex.join([sys.executable, "-m", "robocore", "-p", str(project), "shell", "--component", "ws",
+                          "--cmd", "tty || true; echo term=$TERM"])
+    on_terminal = subprocess.run([script, "-qec", command, "/dev/null"], capture_output=True, text=True, env=env,
+                                 timeout=120, stdin=subprocess.DEVNULL)
+    assert on_terminal.returncode == 0, on_terminal.stdout + on_terminal.stderr
+    assert "/dev/pts/" in on_terminal.stdout and "term=xterm" in on_terminal.stdout, on_terminal.stdout
+    # negative control: the same command with robocore's output captured gets no terminal
+    captured = ok(shell(project, "ws", "tty || true"))
+    assert "not a tty" in captured and "/dev/pts/" not in captured
 
 
 def test_staged_image_sources_ros_and_the_install_tree(demo_project: Path) -> None:

@@ -66,8 +66,7 @@ def run(options: Options, *, component: str, cmd: str | None, new: bool, devices
     existing = frozenset(m.source for m in plan.volume_mounts(project, comp)[0] if Path(m.source).exists())
     spec = plan.plan_shell(project, request, machine, dds_env=dds.client_environment(project.robot, super_client=True),
                            existing_paths=existing)
-    stdin_tty = sys.stdin.isatty()
-    argv = plan.exec_argv(spec, cmd=cmd, stdin_tty=stdin_tty)
+    argv = plan.exec_argv(spec, cmd=cmd, stdin_tty=sys.stdin.isatty(), stdout_tty=sys.stdout.isatty())
 
     if options.dry_run or client is None:
         out = plan.describe(spec)

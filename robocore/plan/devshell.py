@@ -363,15 +363,21 @@ def plan_shell(
     return replace(spec, labels=labels)
 
 
-def exec_argv(spec: ShellSpec, *, cmd: str | None, stdin_tty: bool, docker: str = "docker") -> list[str]:
-    """``docker exec`` of a login bash (``cmd`` None) or of ``bash -lc CMD`` (never a TTY).
+def exec_argv(spec: ShellSpec, *, cmd: str | None, stdin_tty: bool, stdout_tty: bool = False,
+              docker: str = "docker") -> list[str]:
+    """``docker exec`` of a login bash (``cmd`` None) or of ``bash -lc CMD``.
 
-    The user is the numeric UID, so Docker applies the user's primary and supplementary
-    groups from the container's /etc/passwd and /etc/group (``-u UID:GID`` would drop them).
+    ``CMD`` gets a TTY when robocore has one (stdin and stdout both terminals), so that ``tmux``,
+    ``htop`` or an editor work; with its output piped or redirected it gets none, and its output
+    keeps plain line ends. The user is the numeric UID, so Docker applies the user's primary and
+    supplementary groups from the container's /etc/passwd and /etc/group (``-u UID:GID`` would
+    drop them).
     """
     argv = [docker, "exec"]
     if cmd is None:
         argv.append("-it" if stdin_tty else "-i")
+    elif stdin_tty and stdout_tty:
+        argv.append("-it")
     elif not stdin_tty:
         argv.append("-i")
     argv += ["-u", str(spec.uid), "-w", spec.workdir]
