@@ -44,6 +44,7 @@ from robocore.config.values import (
     Registry,
     UserName,
     schema_pattern,
+    shown,
 )
 
 #: ROS 2 distributions robocore knows, with the Fast DDS line each ships.
@@ -300,6 +301,13 @@ class Component(Strict):
     )
     privileged: bool = Field(default=False, description="Full access to the host's devices and kernel "
                              "(validate warns).")
+
+    @field_validator("gui", mode="before")
+    @classmethod
+    def _gui_kind(cls, value: object) -> object:
+        if not isinstance(value, (bool, str)):
+            raise ValueError(f"must be true, false or the name of a desktop component (got {shown(value)})")
+        return value
 
     @field_validator("environment", mode="before")
     @classmethod
