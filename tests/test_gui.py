@@ -94,6 +94,9 @@ def test_a_gui_component_of_the_desktops_host_is_valid() -> None:
     ("  - name: viz\n    runs_on: dev\n    gui: true\n    environment: {DISPLAY: 'laptop:0'}\n",
      "robot.yaml:13: components[1].environment.DISPLAY: 'laptop:0' sends X over the network to 'laptop', which "
      "robocore does not do; use this host's own display (':0') or a desktop component on this host (gui: <name>)"),
+    ("  - name: viz\n    runs_on: dev\n    gui: true\n    environment: {DISPLAY: '-display'}\n",
+     "robot.yaml:13: components[1].environment.DISPLAY: '-display' is not an X display of this host, such as ':0' "
+     "or ':1'"),
     ("  - name: viz\n    runs_on: dev\n    gui: vcn\n",
      "robot.yaml:12: components[1].gui: unknown component 'vcn' (known: vnc, viz); did you mean 'vnc'?"),
     ("  - name: viz\n    runs_on: dev\n    gui: viz\n",

@@ -77,7 +77,10 @@ def gui_problems(components: Sequence[tuple[int, Component]]) -> Iterator[Found]
         display = comp.environment.get("DISPLAY")
         if display is not None:
             host = display_host(display)
-            if host:
+            if host is None and comp.gui is True:
+                yield ((*base, "environment", "DISPLAY"),
+                       f"{shown(display)} is not an X display of this host, such as ':0' or ':1'")
+            elif host:
                 yield ((*base, "environment", "DISPLAY"),
                        f"{shown(display)} sends X over the network to {shown(host)}, which robocore does not do; "
                        "use this host's own display (':0') or a desktop component on this host (gui: <name>)")
