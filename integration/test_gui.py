@@ -193,3 +193,79 @@ def test_novnc_serves_its_page_and_reaches_the_vnc_server(desktop_robot: dict[st
     finally:
         conn.close()
     assert bytes(banner if isinstance(banner, bytes) else banner.encode()).startswith(b"RFB 003.008")
+
+
+# --------------------------------------------------------------------------- gui: true, the host's own display
+
+
+@pytest.fixture
+def host_display(tmp_path: Path) -> Iterator[tuple[str, Path]]:
+    """A real Xvfb on this machine that accepts only clients holding its cookie; (DISPLAY, its Xauthority)."""
+    import secrets
+    import subprocess
+
+    number = next(n for n in random.sample(range(64, 200), 136) if not _display_taken(n))
+    auth = tmp_path / "login.xauth"
+    subprocess.run(["xauth", "-q", "-f", str(auth), "add", f":{number}", ".", secrets.token_hex(16)], check=True)
+    server = subprocess.Popen(["Xvfb", f":{number}", "-auth", str(auth), "-nolisten", "tcp", "-screen", "0",
+                               "800x600x24"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    if not wait_for(lambda: Path(f"/tmp/.X11-unix/X{number}").exists() or server.poll() is not None, 20) or \
+            server.poll() is not None:
+        server.kill()
+        pytest.fail(f"Xvfb :{number} did not start", pytrace=False)
+    try:
+        yield f":{number}", auth
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+
+
+def _windows(display: str, auth: Path) -> str:
+    import subprocess
+
+    done = subprocess.run(["xwininfo", "-root", "-tree", "-display", display], capture_output=True, text=True,
+                          env={"PATH": "/usr/bin:/bin", "XAUTHORITY": str(auth)}, timeout=20)
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+def test_a_gui_true_component_draws_on_its_hosts_display_with_the_users_cookie(
+        desktop_robot: dict[str, Any], demo_project: Path, host_display: tuple[str, Path], tmp_path: Path,
+        docker_client: Any, run_robocore: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    import json
+
+    display, auth = host_display
+    name = f"robocore-it-hostx-{int(time.time()) % 100000}"
+    example = uncommented_desktop_example((demo_project / "robot.yaml").read_text())
+
+    def edit(data: dict[str, Any]) -> None:
+        clock = example[1]
+        clock.update(gui=True, environment={"DISPLAY": display}, launch_args="-geometry 300x200+10+10")
+        data["components"] = [clock]
+
+    root = copy_project(demo_project, tmp_path, name, edit=edit)
+    empty_home = tmp_path / "home"
+    empty_home.mkdir()
+    monkeypatch.setenv("HOME", str(empty_home))
+    try:
+        run_robocore(root, "stage", "--quiet", timeout=1200)  # the desktop suite's clock image: nothing to do
+        # control first: nobody's cookie for that display (no XAUTHORITY, an empty home) -> refused, and said
+        monkeypatch.delenv("XAUTHORITY", raising=False)
+        report = json.loads(run_robocore(root, "run", "--json").stdout)
+        (host,) = report
+        assert any(f"no X cookie of your user for display {display}" in note for note in report[host]["notes"])
+        clock = docker_client.containers.get(f"{name}-clock")
+        refused = wait_for(lambda: b"Authorization required" in clock.logs(), 30)
+        assert refused, clock.logs().decode(errors="replace")[-2000:]
+        assert '"xclock"' not in _windows(display, auth)
+
+        # the user's session cookie: the next run copies it, and the running container's client gets in
+        monkeypatch.setenv("XAUTHORITY", str(auth))
+        report = json.loads(run_robocore(root, "run", "--json").stdout)
+        assert report[host]["notes"] == [] and {a["verb"] for a in report[host]["actions"]} <= {"keep", "start"}
+        shown = wait_for(lambda: '"xclock"' in _windows(display, auth), 120, interval=2)
+        assert shown, f"no xclock window on {display}:\n{_windows(display, auth)}\n" + \
+            clock.logs().decode(errors="replace")[-1000:]
+        assert "300x200+10+10" in next(line for line in _windows(display, auth).splitlines() if '"xclock"' in line)
+    finally:
+        remove_project_containers(docker_client, name)
