@@ -318,6 +318,18 @@ def test_interactive_login_shell_has_prompt_aliases_and_persistent_history(proje
                  check=True).stdout
 
 
+def test_cmd_gets_a_terminal_when_robocore_has_one(project: Path, shell: Shell, run_robocore: RobocoreCli) -> None:
+    """``shell --cmd tmux`` needs a TTY: given when robocore runs on a terminal, not when its output is captured."""
+    on_terminal = run_robocore.in_terminal(project, "shell", "--component", "ws", "--cmd",
+                                           "tty || true; echo term=$TERM", typed="",
+                                           env={"DISPLAY": None, "TERM": "xterm"}, timeout=120)
+    assert on_terminal.returncode == 0, on_terminal.stdout
+    assert "/dev/pts/" in on_terminal.stdout and "term=xterm" in on_terminal.stdout, on_terminal.stdout
+    # negative control: the same command with robocore's output captured gets no terminal
+    captured = shell(project, "ws", "tty || true", check=True).stdout
+    assert "not a tty" in captured and "/dev/pts/" not in captured
+
+
 def test_staged_image_sources_ros_and_the_install_tree(demo_project: Path, shell: Shell) -> None:
     """The template project after stage+build: ROS, the install tree and a SUPER_CLIENT DDS setup."""
     from robocore.project import Project

@@ -12,6 +12,7 @@ command -v git >/dev/null || need_debs+=(git)
 if [ "${ROBOCORE_TEST_TOOLS:-0}" = 1 ]; then
   command -v Xvfb >/dev/null || need_debs+=(xvfb)
   command -v xauth >/dev/null || need_debs+=(xauth)
+  command -v xwininfo >/dev/null || need_debs+=(x11-utils)
   command -v docker-compose >/dev/null || docker compose version >/dev/null 2>&1 || need_debs+=(docker-compose)
   command -v docker-registry >/dev/null || need_debs+=(docker-registry)
   command -v ssh-keygen >/dev/null || need_debs+=(openssh-client)

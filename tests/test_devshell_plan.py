@@ -260,6 +260,15 @@ def test_exec_argv_interactive_and_command(project: Project) -> None:
     command = plan.exec_argv(spec, cmd="xdpyinfo | head -1", stdin_tty=True)
     assert "-t" not in command and "-it" not in command and "-i" not in command
     assert command[-3:] == ["bash", "-lc", "xdpyinfo | head -1"]
+    # robocore on a terminal: the command gets one too (seed 001's `--cmd tmux`)
+    tmux = plan.exec_argv(spec, cmd="tmux", stdin_tty=True, stdout_tty=True)
+    assert tmux[:3] == ["docker", "exec", "-it"] and tmux[-3:] == ["bash", "-lc", "tmux"]
+    assert "TERM=xterm" in tmux
+    # output redirected: no TTY, so the output keeps plain line ends
+    redirected = plan.exec_argv(spec, cmd="ros2 topic list", stdin_tty=True, stdout_tty=False)
+    assert "-it" not in redirected and "-t" not in redirected
+    # input piped in: stdin attached, no TTY, whatever stdout is
+    assert plan.exec_argv(spec, cmd="cat", stdin_tty=False, stdout_tty=True)[2] == "-i"
     piped = plan.exec_argv(spec, cmd="cat", stdin_tty=False)
     assert "-i" in piped and "-it" not in piped
     assert plan.exec_argv(spec, cmd=None, stdin_tty=False)[2] == "-i"

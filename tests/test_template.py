@@ -145,7 +145,7 @@ def test_base_wheels_and_distro_kilted(tmp_path: Path) -> None:
     assert robot.ros_distro.value == "kilted"
     assert robot.base.kind.value == "wheels"
     text = (project / "robot.yaml").read_text()
-    assert "ghcr.io/tiryoh/ros2-desktop-vnc:kilted" in text
+    assert "ros-kilted-rviz2" in text
     answers = yaml.safe_load((project / ".copier-answers.yml").read_text())
     assert (answers["ros_distro"], answers["base_kind"]) == ("kilted", "wheels")
 
@@ -210,26 +210,33 @@ def test_init_turns_an_awkward_folder_name_into_a_project_name(tmp_path: Path) -
     assert load_robot(project).image_prefix == "my-robot-"
 
 
-def test_vnc_example_is_commented_out_and_valid_once_uncommented(project: Path) -> None:
-    text = (project / "robot.yaml").read_text()
-    assert "vnc" not in [c.name for c in load_robot(project).components]
+def uncommented_desktop_example(text: str) -> str:
+    """The commented-out desktop example of a generated robot.yaml, uncommented (components' indent)."""
     lines = text.splitlines()
-    start = lines.index("  # - name: vnc")
+    start = lines.index("  # - name: desktop")
     block = []
     for line in lines[start:]:
         if not line.startswith("  # "):
             break
         block.append("  " + line[4:])
-    assert "image: ghcr.io/tiryoh/ros2-desktop-vnc:jazzy" in "\n".join(block)
-    comments = "\n".join(lines[:start])
-    assert "http://<host ip>:6080" in comments and "invoke shell --component" in comments
-    (project / "robot.yaml").write_text(text + "\n" + "\n".join(block) + "\n")
+    return "\n".join(block) + "\n"
+
+
+def test_desktop_example_is_commented_out_and_valid_once_uncommented(project: Path) -> None:
+    text = (project / "robot.yaml").read_text()
+    assert {"desktop", "clock"}.isdisjoint(c.name for c in load_robot(project).components)
+    comments = text[:text.index("  # - name: desktop")]
+    assert "http://<host ip>:6080/vnc.html" in comments and "invoke shell --component" in comments
+    assert "gui: true" in comments and "ghcr.io" not in text  # built from Debian packages: no registry
+    (project / "robot.yaml").write_text(text + "\n" + uncommented_desktop_example(text))
     try:
-        vnc = load_robot(project).component("vnc")
+        robot = load_robot(project)
     finally:
         (project / "robot.yaml").write_text(text)
-    assert vnc.image == "ghcr.io/tiryoh/ros2-desktop-vnc:jazzy"
-    assert vnc.ports == ["6080:80"] and vnc.folder is None and vnc.runs_on == "devmachine"
+    desktop, clock = robot.component("desktop"), robot.component("clock")
+    assert desktop.desktop is not None and desktop.desktop.web_port == 6080 and desktop.runs_on == "devmachine"
+    assert "tigervnc-standalone-server" in desktop.apt_packages and desktop.folder is None
+    assert clock.gui == "desktop" and clock.runs_on == "devmachine" and clock.entrypoint == "xclock -update 1"
 
 
 # ---------------------------------------------------------------- where init may write

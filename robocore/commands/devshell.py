@@ -31,7 +31,7 @@ from robocore.errors import DockerError, ToolMissing, UsageError
 from robocore.files import write_atomic
 from robocore.plan import devshell as plan
 from robocore.plan import discovery, naming
-from robocore.plan.containers import X11_SOCKET
+from robocore.plan.gui import X11_SOCKETS
 from robocore.project import Project
 
 if TYPE_CHECKING:
@@ -68,8 +68,7 @@ def run(options: Options, *, component: str, cmd: str | None, new: bool, devices
     spec = plan.plan_shell(project, request, machine,
                            dds_env=discovery.for_robot(project.robot).observer_environment(),
                            existing_paths=existing)
-    stdin_tty = sys.stdin.isatty()
-    argv = plan.exec_argv(spec, cmd=cmd, stdin_tty=stdin_tty)
+    argv = plan.exec_argv(spec, cmd=cmd, stdin_tty=sys.stdin.isatty(), stdout_tty=sys.stdout.isatty())
 
     report = options.report
     if options.dry_run or client is None:
@@ -144,7 +143,7 @@ def gather_machine(project: Project, request: plan.ShellRequest, *, uid: int, gi
     term = os.environ.get("TERM") if sys.stdin.isatty() else None
     return plan.DevMachine(
         uid=uid, gid=gid, user=os.environ.get("USER"), display=display,
-        x11_sockets=Path(X11_SOCKET).is_dir(), xauth_cookie=False, wayland_socket=wayland_socket,
+        x11_sockets=Path(X11_SOCKETS).is_dir(), xauth_cookie=False, wayland_socket=wayland_socket,
         nvidia_runtime=nvidia, device_gids=tuple(sorted(gids)), term=term,
     )
 

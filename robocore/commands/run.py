@@ -312,7 +312,11 @@ def run(options: Options, *, host: str | None, tag: str | None) -> None:
             # nothing to start and nothing this project could have left there: an offline spare
             # machine in robot.yaml must not fail the run
             return HostOutcome(h.name, notes=[NOT_CONTACTED])
+        from robocore.commands.displays import prepare_host_displays  # cookies of gui: true components
+
+        display_notes = prepare_host_displays(project, h, dry_run=options.dry_run)
         outcome = deploy_host(project, h, specs, dry_run=options.dry_run, report=options.report)
+        outcome.notes += display_notes
         if not options.dry_run:
             record_run(project, h, tag)
         return outcome

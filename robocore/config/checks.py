@@ -18,6 +18,7 @@ from typing import Any, TypeVar
 
 from pydantic import BaseModel, ValidationError
 
+from robocore.config.desktop import gui_problems
 from robocore.config.hints import Unknown, known_list
 from robocore.config.hints import did_you_mean as did_you_mean
 from robocore.config.mappings import device_problem, port_problem, read_only_project_path, volume_problem
@@ -149,6 +150,7 @@ def check_parts(parts: Parts, project: Path | None) -> list[Found]:
     found += _components(parts)
     found += _image_names(parts)
     found += _git_sources(parts)
+    found += gui_problems(parts.components)
     if project is not None:
         root = project.resolve()
         found += _folders(parts, root)

@@ -12,6 +12,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from robocore.config.desktop import Desktop
 from robocore.config.mappings import is_project_path as is_project_path
 from robocore.config.mappings import port_pattern as port_pattern
 from robocore.config.mappings import read_only_project_path as read_only_project_path
@@ -43,6 +44,7 @@ from robocore.config.values import (
     Registry,
     UserName,
     schema_pattern,
+    shown,
 )
 
 #: ROS 2 distributions robocore knows, with the Fast DDS line each ships.
@@ -300,9 +302,22 @@ class Component(Strict):
     )
     restart: Literal["no", "always", "unless-stopped", "on-failure"] = "unless-stopped"
     nvidia: bool = False
-    gui: bool = False
+    gui: bool | Name = Field(
+        default=False, description="Show windows: true on the host's own display (:0), or the name of a "
+        "desktop component on the same host to draw into its VNC desktop.",
+    )
+    desktop: Desktop | None = Field(
+        default=None, description="Serve a VNC desktop (Xvnc, noVNC) that gui components of this host draw into.",
+    )
     privileged: bool = Field(default=False, description="Full access to the host's devices and kernel "
                              "(validate warns).")
+
+    @field_validator("gui", mode="before")
+    @classmethod
+    def _gui_kind(cls, value: object) -> object:
+        if not isinstance(value, (bool, str)):
+            raise ValueError(f"must be true, false or the name of a desktop component (got {shown(value)})")
+        return value
 
     @field_validator("environment", mode="before")
     @classmethod

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import ipaddress
 
+from robocore.config.model import is_loopback_address
+
 
 def bare(address: str) -> str:
     """``address`` without the brackets of a bracketed IPv6 address (``[fe80::1]`` -> ``fe80::1``)."""
@@ -33,3 +35,27 @@ def bracketed(address: str) -> str:
 def url_host(address: str, port: int) -> str:
     """``host:port`` for a URL (``[fe80::1]:2376``)."""
     return f"{bracketed(address)}:{port}"
+
+
+#: The name by which a container on a bridge network reaches its own host: Docker maps it to the
+#: bridge's gateway when the container is created with ``extra_hosts: {name: host-gateway}``.
+HOST_GATEWAY_NAME = "host.docker.internal"
+HOST_GATEWAY = "host-gateway"
+
+
+def reachable_from_container(address: str, network_mode: str) -> str:
+    """``address`` (of a service on the container's host or elsewhere) as a container on ``network_mode`` reaches it.
+
+    With host networking a container shares its host's addresses, loopback included. On a bridge
+    network, loopback is the container's own: a loopback address becomes :data:`HOST_GATEWAY_NAME`,
+    the host as seen from the bridge (services listening on every interface answer there).
+    """
+    if network_mode == "bridge" and is_loopback_address(address):
+        return HOST_GATEWAY_NAME
+    return address
+
+
+def extra_hosts(network_mode: str) -> tuple[tuple[str, str], ...]:
+    """The ``extra_hosts`` entries a container on ``network_mode`` needs for :func:`reachable_from_container`."""
+    return ((HOST_GATEWAY_NAME, HOST_GATEWAY),) if network_mode == "bridge" else ()
+

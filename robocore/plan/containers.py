@@ -17,8 +17,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import PurePosixPath
 from typing import Any
 
-from robocore.config.model import Component, Host, is_project_path, port_pattern, read_only_project_path
-from robocore.plan import discovery, layout, naming
+from robocore.config.model import Component, Host, Robot, is_project_path, port_pattern, read_only_project_path
+from robocore.plan import discovery, gui, layout, naming
+from robocore.plan.addresses import extra_hosts, reachable_from_container
 from robocore.plan.layout import host_paths
 from robocore.project import Project
 
@@ -27,8 +28,6 @@ ROLE_DISCOVERY = "discovery"
 DEFAULT_TAG = "latest"
 #: Command of a component that has no entrypoint: stay up so that ``connect`` can enter it.
 IDLE_COMMAND = ("sleep", "infinity")
-#: The X server's socket folder, shared with containers that show windows.
-X11_SOCKET = "/tmp/.X11-unix"
 
 
 @dataclass(frozen=True)
@@ -78,6 +77,7 @@ class ContainerSpec:
     restart: str = "unless-stopped"
     depends_on: tuple[str, ...] = ()  # services started first (same host)
     extra_labels: tuple[tuple[str, str], ...] = field(default=())
+    extra_hosts: tuple[tuple[str, str], ...] = ()  # (name, address or "host-gateway") in /etc/hosts
 
     @property
     def env(self) -> dict[str, str]:
@@ -87,7 +87,10 @@ class ContainerSpec:
     @property
     def spec_hash(self) -> str:
         """A short content hash of the spec: equal hashes mean nothing to recreate."""
-        payload = json.dumps(asdict(self), sort_keys=True, separators=(",", ":"))
+        data = asdict(self)
+        if not data["extra_hosts"]:  # absent, as before the field existed: unchanged specs keep their hash
+            del data["extra_hosts"]
+        payload = json.dumps(data, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(payload.encode()).hexdigest()[:16]
 
     @property
@@ -133,6 +136,8 @@ class ContainerSpec:
             kwargs["devices"] = list(self.devices)
         if self.ports:
             kwargs["ports"] = docker_ports(self.ports)
+        if self.extra_hosts:
+            kwargs["extra_hosts"] = dict(self.extra_hosts)
         if self.gpus:
             from docker.types import DeviceRequest
 
@@ -164,6 +169,8 @@ class ContainerSpec:
             service["devices"] = list(self.devices)
         if self.ports:
             service["ports"] = list(self.ports)
+        if self.extra_hosts:
+            service["extra_hosts"] = [f"{name}:{address}" for name, address in self.extra_hosts]
         if self.privileged:
             service["privileged"] = True
         if self.gpus:
@@ -243,20 +250,34 @@ def _user_mount(text: str, base: PurePosixPath, *, remote: bool = False) -> Moun
     return Mount(source=source, target=target, read_only=read_only)
 
 
+def seen_from(robot: Robot, network_mode: str) -> Robot:
+    """``robot`` with each host at the address a container on ``network_mode`` reaches it by.
+
+    On a bridge network a container's loopback is its own, so a host at a loopback address (the
+    dev machine) is reached through the bridge's gateway; every discovery kind then hands out
+    addresses the container can use."""
+    hosts = [h.model_copy(update={"ip": reachable_from_container(h.ip, network_mode), "docker": h.access})
+             for h in robot.hosts]
+    if all(new.ip == old.ip for new, old in zip(hosts, robot.hosts, strict=True)):
+        return robot
+    return robot.model_copy(update={"hosts": hosts})
+
+
 def component_spec(project: Project, component: Component, *, tag: str | None = None) -> ContainerSpec:
     """The container of ``component`` on its host."""
     robot = project.robot
     host: Host = robot.host(component.runs_on)
     paths = host_paths(project, host, component.name)
-    kind = discovery.for_robot(robot)
+    network = component.network_mode
+    kind = discovery.for_robot(seen_from(robot, network))
     env = kind.client_environment(host.name)
     mounts: list[Mount] = []
     if component.has_workspace:
         mounts.append(Mount(paths.install, naming.CONTAINER_INSTALL, read_only=True))
     mounts.append(Mount(paths.dds, naming.CONTAINER_DDS, read_only=True))
-    if component.gui:
-        env["DISPLAY"] = ":0"
-        mounts.append(Mount(X11_SOCKET, X11_SOCKET, read_only=True))
+    display = gui.gui_plan(project, component)
+    env.update(display.environment)
+    mounts.extend(Mount(b.source, b.target, read_only=b.read_only) for b in display.binds)
     base = PurePosixPath(str(project.root)) if host.is_local else PurePosixPath(host.deploy_root) / component.name
     mounts.extend(_user_mount(v, base, remote=not host.is_local) for v in component.volumes)
     env.update(component.environment)
@@ -266,7 +287,6 @@ def component_spec(project: Project, component: Component, *, tag: str | None = 
     else:
         image = image_ref(project, naming.component_image(robot, project.name, component.name), tag)
         entrypoint = (naming.ENTRYPOINT,)
-    network = component.network_mode
     return ContainerSpec(
         name=naming.container_name(project.name, component.name),
         service=component.name,
@@ -275,7 +295,7 @@ def component_spec(project: Project, component: Component, *, tag: str | None = 
         project=project.name,
         image=image,
         entrypoint=entrypoint,
-        command=component_command(component),
+        command=display.command or component_command(component),
         environment=tuple(sorted(env.items())),
         network_mode=network,
         ipc_mode=kind.transport.ipc_mode(network),
@@ -285,7 +305,8 @@ def component_spec(project: Project, component: Component, *, tag: str | None = 
         gpus=component.nvidia,
         privileged=component.privileged,
         restart=component.restart,
-        depends_on=tuple(discovery_service(s.index) for s in kind.servers_on(host.name)),
+        depends_on=tuple(discovery_service(s.index) for s in kind.servers_on(host.name)) + display.depends_on,
+        extra_hosts=extra_hosts(network),
     )
 
 

@@ -19,7 +19,8 @@ from typing import Any
 
 from robocore.config.model import Component, Robot
 from robocore.plan import naming
-from robocore.plan.containers import X11_SOCKET, Mount
+from robocore.plan.containers import Mount
+from robocore.plan.gui import X11_SOCKETS
 from robocore.project import Project
 
 #: Where robocore's shell files (setup.sh, profile.sh, bashrc, colcon defaults) are mounted.
@@ -271,7 +272,7 @@ def plan_shell(
         session["TERM"] = machine.term
     if machine.display:
         if machine.x11_sockets:
-            mounts.append(Mount(X11_SOCKET, X11_SOCKET, read_only=True))
+            mounts.append(Mount(X11_SOCKETS, X11_SOCKETS, read_only=True))
         mounts.append(Mount(str(project.x11_dir(name)), CONTAINER_X11, read_only=True))
         env["QT_X11_NO_MITSHM"] = "1"
         session["DISPLAY"] = machine.display
@@ -330,15 +331,21 @@ def plan_shell(
     return replace(spec, labels=labels)
 
 
-def exec_argv(spec: ShellSpec, *, cmd: str | None, stdin_tty: bool, docker: str = "docker") -> list[str]:
-    """``docker exec`` of a login bash (``cmd`` None) or of ``bash -lc CMD`` (never a TTY).
+def exec_argv(spec: ShellSpec, *, cmd: str | None, stdin_tty: bool, stdout_tty: bool = False,
+              docker: str = "docker") -> list[str]:
+    """``docker exec`` of a login bash (``cmd`` None) or of ``bash -lc CMD``.
 
-    The user is the numeric UID, so Docker applies the user's primary and supplementary
-    groups from the container's /etc/passwd and /etc/group (``-u UID:GID`` would drop them).
+    ``CMD`` gets a TTY when robocore has one (stdin and stdout both terminals), so that ``tmux``,
+    ``htop`` or an editor work; with its output piped or redirected it gets none, and its output
+    keeps plain line ends. The user is the numeric UID, so Docker applies the user's primary and
+    supplementary groups from the container's /etc/passwd and /etc/group (``-u UID:GID`` would
+    drop them).
     """
     argv = [docker, "exec"]
     if cmd is None:
         argv.append("-it" if stdin_tty else "-i")
+    elif stdin_tty and stdout_tty:
+        argv.append("-it")
     elif not stdin_tty:
         argv.append("-i")
     argv += ["-u", str(spec.uid), "-w", spec.workdir]
