@@ -21,7 +21,13 @@ from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any
 
 from robocore.commands.context import DRY_RUN_UNKNOWN, Options
-from robocore.commands.workspace import check_workspace, local_docker, selected_components, workspace_files
+from robocore.commands.workspace import (
+    check_workspace,
+    local_docker,
+    selected_components,
+    wheels_cmake_packages,
+    workspace_files,
+)
 from robocore.config.loader import ROBOT_FILE
 from robocore.config.model import BaseKind, Component, docker_arch
 from robocore.errors import BuildError, ConfigError, DockerError, Problem, ToolMissing
@@ -308,7 +314,9 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
         else:
             entries.append(ContextEntry(f"common/{pkg.name}", source=source))
         common.append(pkg.name)
-    dockerfile = dockerfiles.base_dockerfile(robot, root_image=root_ref, has_ca=ca is not None, common=common)
+    cmake = wheels_cmake_packages(project, [e.source for e in entries if e.dest.startswith("common/") and e.source])
+    dockerfile = dockerfiles.base_dockerfile(robot, root_image=root_ref, has_ca=ca is not None, common=common,
+                                             cmake=cmake)
     plan = ImagePlan(role="base", name=naming.base_image(robot, project.name), tag=dockerfiles.base_tag(arch, native),
                      arch=arch, dockerfile=dockerfile, parent=root_ref, context=tuple(entries))
     return _planned(project, plan, root_id, known=known)
@@ -354,8 +362,11 @@ def plan_component(project: Project, component: Component, base: BaseRef, *, dry
         else:
             entries.append(ContextEntry(f"repos/{folder}", source=source))
         folders.append(folder)
+    sources = [check_workspace(project, component)] if component.folder else []
+    sources += [e.source for e in entries if e.dest.startswith("repos/") and e.source]
+    cmake = wheels_cmake_packages(project, sources)
     dockerfile = dockerfiles.component_dockerfile(robot, component, base_ref=base.ref, package_xmls=xmls,
-                                                  repo_folders=folders)
+                                                  repo_folders=folders, cmake=cmake)
     plan = ImagePlan(role="component", name=naming.component_image(robot, project.name, component.name),
                      tag="latest", arch=base.arch, dockerfile=dockerfile, parent=base.ref,
                      context=tuple(entries), component=component.name)
