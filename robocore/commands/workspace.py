@@ -109,3 +109,23 @@ def wheels_cmake_packages(project: Project, sources: Sequence[Path]) -> list[str
     if refusals:
         raise ConfigError([Problem(r.file, r.line, r.key, r.message) for r in refusals])
     return cmake_packages.cmake_packages(manifests)
+
+
+def check_wheels_packages(project: Project) -> None:
+    """Every package the wheels base cannot build, in component workspaces and local common packages, as
+    one ConfigError (a line each); nothing on other bases. Folders that do not exist yet are skipped."""
+    from robocore.config.model import BaseKind
+
+    if project.robot.base.kind is not BaseKind.wheels:
+        return
+    folders = [project.root / c.folder for c in project.robot.components if c.folder and c.image is None]
+    folders += [project.root / (p.folder or p.name) for p in project.robot.common_packages if not p.repo]
+    problems: list[Problem] = []
+    for folder in folders:
+        if folder.is_dir():
+            try:
+                wheels_cmake_packages(project, [folder])
+            except ConfigError as exc:
+                problems += exc.problems
+    if problems:
+        raise ConfigError(problems)

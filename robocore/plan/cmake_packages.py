@@ -62,7 +62,11 @@ CMAKE_WHEELS: dict[str, tuple[str, ...]] = {
     "jazzy": _pins(
         {"ament_cmake": "2.5.4", "core": "4.6.6", "typesupport": "3.2.2", "fastrtps": "3.6.2", "defaults_core": "0.2.0",
          "defaults": "1.6.0", "dynamic": "0.1.2", "dynamic_fastrtps": "0.1.0", "py": "0.22.2"},
-        {"ament-package": "0.16.4", "ament-index-python": "1.8.1", "ament-lint": "0.17.3", "gmock-vendor": "1.14.9000",
+        {"ament-cmake-ros": "0.12.0", "ament-cmake-cppcheck": "0.17.3", "ament-cmake-cpplint": "0.17.3",
+         "ament-cmake-flake8": "0.17.3", "ament-cmake-pep257": "0.17.3", "ament-cmake-uncrustify": "0.17.3",
+         "ament-cppcheck": "0.17.3", "ament-cpplint": "0.17.3", "ament-flake8": "0.17.3", "ament-pep257": "0.17.3",
+         "ament-uncrustify": "0.17.3", "ament-index-cpp": "1.8.1",
+         "ament-package": "0.16.4", "ament-index-python": "1.8.1", "ament-lint": "0.17.3", "gmock-vendor": "1.14.9000",
          "gtest-vendor": "1.14.9000", "python-cmake-module": "0.11.1", "fastcdr": "2.2.5", "fastrtps": "2.14.5",
          "fastrtps-cmake-module": "3.6.2", "rcutils": "6.7.4", "rcpputils": "2.11.2", "rpyutils": "0.4.2",
          "builtin-interfaces": "2.0.3", "service-msgs": "2.0.3", "action-msgs": "2.0.3",
