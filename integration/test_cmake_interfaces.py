@@ -3,6 +3,7 @@
 The project (sources in ``cmake_project/``): ``server`` and ``client`` each hold the interface
 package ``demo_interfaces`` (one message, one service) in their workspace beside their rclpy
 package; ``observer`` holds the client package only, so its install tree lacks the interfaces.
+A second project has the interface package in ``common_packages`` (built into the base) instead.
 Real images from ``prepare-base``/``stage``/``build``, real containers through the pytest plugin's
 bring-up. Controls: the same client code without the interface package cannot import it, a
 service nobody offers is not answered, and the observer's image got no compiler.
@@ -62,23 +63,24 @@ def _built(result: dict[str, Any]) -> dict[str, list[str]]:
     return {r["what"]: r["packages"] for r in result["results"] if r["action"] == "built"}
 
 
-def _make_project(parent: Path) -> Path:
-    root = parent / NAME
-    for component, packages in WORKSPACES.items():
+def _make_project(parent: Path, name: str = NAME, workspaces: dict[str, tuple[str, ...]] = WORKSPACES,
+                  common: tuple[str, ...] = ()) -> Path:
+    root = parent / name
+    for component, packages in workspaces.items():
         for package in packages:
             shutil.copytree(SOURCES / package, root / "components" / component / "src" / package)
+    for package in common:
+        shutil.copytree(SOURCES / package, root / "common" / package)
+    entrypoints = {"server": "ros2 run demo_server server", "client": "ros2 run demo_client client",
+                   "observer": "sleep infinity"}
     robot = {
         "ros_distro": "jazzy",
-        "image_prefix": f"{NAME}-",
+        "image_prefix": f"{name}-",
         "base": {"kind": "wheels"},
         "hosts": [{"name": "dev", "ip": "127.0.0.1", "user": getpass.getuser()}],
-        "components": [
-            {"name": "server", "folder": "components/server", "runs_on": "dev",
-             "entrypoint": "ros2 run demo_server server"},
-            {"name": "client", "folder": "components/client", "runs_on": "dev",
-             "entrypoint": "ros2 run demo_client client"},
-            {"name": "observer", "folder": "components/observer", "runs_on": "dev", "entrypoint": "sleep infinity"},
-        ],
+        "common_packages": [{"name": package, "folder": f"common/{package}"} for package in common],
+        "components": [{"name": component, "folder": f"components/{component}", "runs_on": "dev",
+                        "entrypoint": entrypoints[component]} for component in workspaces],
     }
     (root / "robot.yaml").write_text(yaml.safe_dump(robot, sort_keys=False))
     return root
@@ -177,3 +179,28 @@ def _ccache_hits(client: Any, cache: Path) -> int:
     stats = dict(line.split("\t", 1) for line in out.splitlines() if "\t" in line)
     return int(stats.get("direct_cache_hit", 0)) + int(stats.get("preprocessed_cache_hit", 0))
 
+
+
+COMMON_NAME = "robocore-it-cmake-common"
+
+
+def test_an_interface_package_in_common_packages_serves_every_component(
+        docker_client: Any, tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Built once into the base (which then has the tool chain); the components' workspaces hold only
+    their rclpy packages."""
+    from robocore.testing import bring_up
+
+    root = _make_project(tmp_path_factory.mktemp("cmake-common"), COMMON_NAME,
+                         {"server": ("demo_server",), "client": ("demo_client",)}, common=("demo_interfaces",))
+    _timed("prepare-base with a common interface package", root, "prepare-base")
+    _robocore(root, "stage", "--quiet")
+    _robocore(root, "build", "--quiet")
+    assert docker_client.images.get(f"{COMMON_NAME}-base:latest").labels.get("dev.robocore.toolchain") == "cmake"
+    installed = root / ".robocore" / "build" / "client" / "install"
+    assert not (installed / "demo_interfaces").exists()  # it comes from the base, not the workspace
+    run = bring_up(root, graph=False)
+    try:
+        assert run.wait_for_log("client", "answer: hello, client", timeout=ANSWER_WITHIN)
+        assert run.wait_for_log("client", "heard greeting #", timeout=ANSWER_WITHIN)
+    finally:
+        run.close()
