@@ -3,7 +3,8 @@
 The project (sources in ``cmake_project/``): ``server`` and ``client`` each hold the interface
 package ``demo_interfaces`` (one message, one service) in their workspace beside their rclpy
 package; ``observer`` holds the client package only, so its install tree lacks the interfaces.
-A second project has the interface package in ``common_packages`` (built into the base) instead.
+A second project has the interface package in ``common_packages`` (built into the base) instead,
+on Jazzy and on Kilted.
 Real images from ``prepare-base``/``stage``/``build``, real containers through the pytest plugin's
 bring-up. Controls: the same client code without the interface package cannot import it, a
 service nobody offers is not answered, and the observer's image got no compiler.
@@ -64,7 +65,7 @@ def _built(result: dict[str, Any]) -> dict[str, list[str]]:
 
 
 def _make_project(parent: Path, name: str = NAME, workspaces: dict[str, tuple[str, ...]] = WORKSPACES,
-                  common: tuple[str, ...] = ()) -> Path:
+                  common: tuple[str, ...] = (), distro: str = "jazzy") -> Path:
     root = parent / name
     for component, packages in workspaces.items():
         for package in packages:
@@ -74,7 +75,7 @@ def _make_project(parent: Path, name: str = NAME, workspaces: dict[str, tuple[st
     entrypoints = {"server": "ros2 run demo_server server", "client": "ros2 run demo_client client",
                    "observer": "sleep infinity"}
     robot = {
-        "ros_distro": "jazzy",
+        "ros_distro": distro,
         "image_prefix": f"{name}-",
         "base": {"kind": "wheels"},
         "hosts": [{"name": "dev", "ip": "127.0.0.1", "user": getpass.getuser()}],
@@ -181,21 +182,21 @@ def _ccache_hits(client: Any, cache: Path) -> int:
 
 
 
-COMMON_NAME = "robocore-it-cmake-common"
-
-
+@pytest.mark.parametrize("distro", ["jazzy", "kilted"])
 def test_an_interface_package_in_common_packages_serves_every_component(
-        docker_client: Any, tmp_path_factory: pytest.TempPathFactory) -> None:
+        distro: str, docker_client: Any, tmp_path_factory: pytest.TempPathFactory) -> None:
     """Built once into the base (which then has the tool chain); the components' workspaces hold only
-    their rclpy packages."""
+    their rclpy packages. Kilted's tool set is checked here too."""
     from robocore.testing import bring_up
 
-    root = _make_project(tmp_path_factory.mktemp("cmake-common"), COMMON_NAME,
-                         {"server": ("demo_server",), "client": ("demo_client",)}, common=("demo_interfaces",))
-    _timed("prepare-base with a common interface package", root, "prepare-base")
+    name = f"{NAME}-common-{distro}"
+    root = _make_project(tmp_path_factory.mktemp("cmake-common"), name,
+                         {"server": ("demo_server",), "client": ("demo_client",)}, common=("demo_interfaces",),
+                         distro=distro)
+    _timed(f"prepare-base with a common interface package ({distro})", root, "prepare-base")
     _robocore(root, "stage", "--quiet")
     _robocore(root, "build", "--quiet")
-    assert docker_client.images.get(f"{COMMON_NAME}-base:latest").labels.get("dev.robocore.toolchain") == "cmake"
+    assert docker_client.images.get(f"{name}-base:latest").labels.get("dev.robocore.toolchain") == "cmake"
     installed = root / ".robocore" / "build" / "client" / "install"
     assert not (installed / "demo_interfaces").exists()  # it comes from the base, not the workspace
     run = bring_up(root, graph=False)

@@ -81,6 +81,14 @@ def test_a_cpp_client_dependency_is_found_with_its_tag_and_line() -> None:
     assert read_manifest(doc, "p.xml", has_cmakelists=False).cpp_client is None
 
 
+def test_a_package_name_never_reaches_the_dockerfile_as_anything_but_a_name() -> None:
+    evil = INTERFACES.replace("<name>my_msgs</name>", "<name>x\nRUN touch /pwned</name>")
+    manifest = read_manifest(evil, "p.xml", has_cmakelists=True)
+    assert cmake_packages.cmake_packages([manifest]) == ["?"]
+    lines = cmake_packages.toolchain_lines("jazzy", "/v", ["x\nRUN touch /pwned", "ok_name"])
+    assert lines[0].startswith("# CMake packages (?, ok_name)") and "pwned" not in "\n".join(lines)
+
+
 def test_rclcpp_is_refused_on_the_wheels_base_in_one_line() -> None:
     node = read_manifest(CPP_NODE, "components/a/src/cpp_node/package.xml", has_cmakelists=True)
     msgs = read_manifest(INTERFACES, "components/a/src/my_msgs/package.xml", has_cmakelists=True)
@@ -93,15 +101,16 @@ def test_rclcpp_is_refused_on_the_wheels_base_in_one_line() -> None:
 def test_cmake_packages_on_a_distro_without_pinned_tools_are_refused() -> None:
     msgs = read_manifest(INTERFACES, "ws/my_msgs/package.xml", has_cmakelists=True)
     python = read_manifest(PYTHON.format(name="a"), "ws/a/package.xml", has_cmakelists=False)
-    assert wheels_refusals("kilted", [python]) == []
-    [refusal] = wheels_refusals("kilted", [python, msgs])
-    assert refusal.file == "ws/my_msgs/package.xml" and "for jazzy only, not kilted" in refusal.message
+    assert wheels_refusals("kilted", [python, msgs]) == []
+    assert wheels_refusals("rolling", [python]) == []
+    [refusal] = wheels_refusals("rolling", [python, msgs])
+    assert refusal.file == "ws/my_msgs/package.xml" and "for jazzy, kilted only, not rolling" in refusal.message
 
 
 # ------------------------------------------------------------------------------------------- pins
 
 
-def test_the_jazzy_tool_set_pins_every_wheel_cmake_needs() -> None:
+def test_the_tool_sets_pin_every_wheel_cmake_needs() -> None:
     pins = cmake_packages.CMAKE_WHEELS["jazzy"]
     names = [pin.split("==")[0] for pin in pins]
     assert len(names) == len(set(names))
@@ -116,6 +125,10 @@ def test_the_jazzy_tool_set_pins_every_wheel_cmake_needs() -> None:
     # the Jazzy releases of the base's wheels: ament_cmake 2.5, rosidl 4.6, Fast DDS 2.14
     assert "ros-ament-cmake==2.5.4" in pins and "ros-rosidl-parser==4.6.6" in pins and "ros-fastrtps==2.14.5" in pins
     assert "ros-rclpy==7.1.6" in dockerfiles.WHEELS["jazzy"]
+    kilted = cmake_packages.CMAKE_WHEELS["kilted"]
+    assert {"ros-ament-cmake==2.7.3", "ros-rosidl-parser==4.9.5", "ros-fastdds==3.2.3"} <= set(kilted)
+    assert "ros-rclpy==9.1.2" in dockerfiles.WHEELS["kilted"]
+    assert set(cmake_packages.CMAKE_WHEELS) == set(dockerfiles.WHEELS)
 
 
 # ------------------------------------------------------------------------------------------- Dockerfiles

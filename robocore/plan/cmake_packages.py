@@ -16,6 +16,7 @@ gained a CMake package since its image was staged.
 
 from __future__ import annotations
 
+import re
 import xml.parsers.expat
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -72,7 +73,21 @@ CMAKE_WHEELS: dict[str, tuple[str, ...]] = {
          "builtin-interfaces": "2.0.3", "service-msgs": "2.0.3", "action-msgs": "2.0.3",
          "unique-identifier-msgs": "2.5.0", "type-description-interfaces": "2.0.3"},
     ),
+    "kilted": _pins(
+        {"ament_cmake": "2.7.3", "core": "4.9.5", "typesupport": "3.3.3", "fastrtps": "3.8.1", "defaults_core": "0.3.1",
+         "defaults": "1.7.1", "dynamic": "0.3.1", "dynamic_fastrtps": "0.4.1", "py": "0.24.2"},
+        {"ament-cmake-ros": "0.14.5", "ament-cmake-ros-core": "0.14.5", "ament-cmake-cppcheck": "0.19.2",
+         "ament-cmake-cpplint": "0.19.2", "ament-cmake-flake8": "0.19.2", "ament-cmake-pep257": "0.19.2",
+         "ament-cmake-uncrustify": "0.19.2", "ament-cppcheck": "0.19.2", "ament-cpplint": "0.19.2",
+         "ament-flake8": "0.19.2", "ament-pep257": "0.19.2", "ament-uncrustify": "0.19.2", "ament-index-cpp": "1.11.0",
+         "ament-package": "0.17.2", "ament-index-python": "1.11.0", "ament-lint": "0.19.2", "gmock-vendor": "1.15.1",
+         "gtest-vendor": "1.15.1", "fastcdr": "2.3.3", "fastdds": "3.2.3", "rcutils": "6.9.8", "rcpputils": "2.13.5",
+         "rpyutils": "0.6.3", "builtin-interfaces": "2.3.0", "service-msgs": "2.3.0", "action-msgs": "2.3.0",
+         "unique-identifier-msgs": "2.7.0", "type-description-interfaces": "2.3.0"},
+    ),
 }
+
+_NAME_RE = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_\-]*")
 
 LABEL_TOOLCHAIN = "dev.robocore.toolchain"
 TOOLCHAIN_CMAKE = "cmake"
@@ -156,8 +171,9 @@ class _Scan:
 
 
 def cmake_packages(manifests: Iterable[Manifest]) -> list[str]:
-    """Names of the packages colcon builds with CMake, sorted."""
-    return sorted({m.name or m.path for m in manifests if m.uses_cmake})
+    """Names of the packages colcon builds with CMake, sorted; a name that is not a plain package name
+    (it ends up in a Dockerfile comment, where a newline would start an instruction) shows as ``?``."""
+    return sorted({m.name if _NAME_RE.fullmatch(m.name) else "?" for m in manifests if m.uses_cmake})
 
 
 @dataclass(frozen=True)
@@ -195,12 +211,13 @@ def toolchain_lines(distro: str, venv: str, packages: Sequence[str]) -> list[str
     it): apt runs only when a tool is missing, pip finds its pins satisfied, the links are replaced.
     """
     pins = " ".join(CMAKE_WHEELS.get(distro, ("CMAKE-WHEELS-UNAVAILABLE",)))
+    shown = ", ".join(name if _NAME_RE.fullmatch(name) else "?" for name in packages)
     tools = " ".join(f"command -v {tool} >/dev/null &&" for tool in ("cmake", "g++", "gcc", "make", "ccache"))
     apt = " ".join(CMAKE_APT)
     ver = "\"$(python3 -c 'import sys; print(\"%d.%d\" % sys.version_info[:2])')\""
     tag = "\"cp${v%.*}${v#*.}-cp${v%.*}${v#*.}\""
     return [
-        f"# CMake packages ({', '.join(packages)}): a C/C++ tool chain and the ament_cmake/rosidl wheels",
+        f"# CMake packages ({shown}): a C/C++ tool chain and the ament_cmake/rosidl wheels",
         f"LABEL {LABEL_TOOLCHAIN}={TOOLCHAIN_CMAKE}",
         f"RUN ({tools} ls /usr/include/python3*/Python.h >/dev/null 2>&1) "
         f"|| (apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends {apt} "
