@@ -362,8 +362,9 @@ def plan_component(project: Project, component: Component, base: BaseRef, *, dry
         else:
             entries.append(ContextEntry(f"repos/{folder}", source=source))
         folders.append(folder)
-    sources = [check_workspace(project, component)] if component.folder else []
-    sources += [e.source for e in entries if e.dest.startswith("repos/") and e.source]
+    sources = [e.source for e in entries if e.dest.startswith("repos/") and e.source]
+    if component.folder and robot.base.kind is BaseKind.wheels:
+        sources.append(check_workspace(project, component))
     cmake = wheels_cmake_packages(project, sources)
     dockerfile = dockerfiles.component_dockerfile(robot, component, base_ref=base.ref, package_xmls=xmls,
                                                   repo_folders=folders, cmake=cmake)
