@@ -26,6 +26,7 @@ from robocore.commands.images import (
 )
 from robocore.commands.machine import check_emulation, find_ca_bundle, local_docker, native_arch
 from robocore.commands.reporting import Outcome, report_outcomes
+from robocore.commands.workspace import wheels_cmake_packages
 from robocore.config.model import BaseKind
 from robocore.errors import DockerError
 from robocore.files import ROBOT_FILE, refuse_links_leaving
@@ -107,7 +108,9 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
         else:
             entries.append(ContextEntry(f"common/{pkg.name}", source=source))
         common.append(pkg.name)
-    dockerfile = dockerfiles.base_dockerfile(robot, root_image=root_ref, has_ca=ca is not None, common=common)
+    cmake = wheels_cmake_packages(project, [e.source for e in entries if e.dest.startswith("common/") and e.source])
+    dockerfile = dockerfiles.base_dockerfile(robot, root_image=root_ref, has_ca=ca is not None, common=common,
+                                             cmake=cmake)
     plan = ImagePlan(role="base", name=naming.base_image(robot, project.name), tag=dockerfiles.base_tag(arch, native),
                      arch=arch, dockerfile=dockerfile, parent=root_ref, context=tuple(entries))
     return planned(project, plan, root_id, known=known)

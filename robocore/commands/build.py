@@ -25,11 +25,11 @@ from robocore.commands.hosts import in_parallel
 from robocore.commands.machine import MAX_PARALLEL, check_emulation, local_docker, native_arch
 from robocore.commands.reporting import Outcome, Reporter, report_outcomes
 from robocore.commands.state import read_build_state, write_build_state
-from robocore.commands.workspace import check_workspace, selected_components, workspace_files
+from robocore.commands.workspace import check_workspace, selected_components, wheels_cmake_packages, workspace_files
 from robocore.config.model import Component
 from robocore.errors import BuildError, UsageError
 from robocore.files import write_atomic
-from robocore.plan import colcon, dockerfiles, install_patch, naming
+from robocore.plan import cmake_packages, colcon, dockerfiles, install_patch, naming
 from robocore.plan.inputs import FileDigest, digest_bytes, tree_hash
 from robocore.project import Project
 
@@ -88,11 +88,13 @@ class BuildPlan:
     reason: str
     patches: tuple[install_patch.Patch, ...] = ()  # non-empty: copy files instead of running colcon
     copies: Mapping[str, Mapping[str, list[str]]] | None = None  # the last build's plain copies
+    workers: int = 1  # packages and compile jobs at once: the cores
+    ccache: Path | None = None  # the host folder of ccache's cache, when the image has ccache
 
     @property
     def argv(self) -> list[str]:
         """The colcon command line."""
-        return colcon.workspace_build_argv(self.changed or ())
+        return colcon.workspace_build_argv(self.changed or (), self.workers)
 
 
 def _recorded_files(before: Mapping[str, Any]) -> WorkspaceFiles:
@@ -142,7 +144,19 @@ def plan_build(project: Project, comp: Component, image_id: str | None, *, full:
     return BuildPlan(component=comp, image=image, image_id=image_id, arch=project.robot.host(comp.runs_on).arch.value,
                      workspace=ws, out=out, state_file=state_file, packages=packages,
                      files=files, roots=roots, changed=changed, reason=reason,
-                     patches=tuple(patches), copies=copies)
+                     patches=tuple(patches), copies=copies, workers=os.cpu_count() or 1)
+
+
+def with_cmake_toolchain(project: Project, plan: BuildPlan, labels: Mapping[str, str]) -> BuildPlan:
+    """``plan`` building with ccache when its staged image (``labels``) has the CMake tool chain; a
+    BuildError when the wheels base lacks the tool chain that packages of the workspace need."""
+    if labels.get(cmake_packages.LABEL_TOOLCHAIN) == cmake_packages.TOOLCHAIN_CMAKE:
+        return dataclasses.replace(plan, ccache=project.state_dir / "ccache")
+    missing = wheels_cmake_packages(project, [plan.workspace])
+    if missing:
+        raise BuildError(f"component {plan.component.name}: {', '.join(missing)} build with CMake, but its image "
+                         "was staged without the CMake tool chain", hint="run `stage` first")
+    return plan
 
 
 def _log_tail(out: Path, package: str, lines: int = 30) -> str:
@@ -166,7 +180,9 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callabl
     for sub in ("build", "install", "log"):
         (plan.out / sub).mkdir(parents=True, exist_ok=True)
     uid, gid = os.getuid(), os.getgid()
-    volumes = colcon.workspace_mounts(plan.workspace, plan.out)
+    if plan.ccache is not None:
+        plan.ccache.mkdir(parents=True, exist_ok=True)
+    volumes = colcon.workspace_mounts(plan.workspace, plan.out, plan.ccache)
     events: list[colcon.PackageEvent] = []
     other: list[str] = []
     start = time.monotonic()
@@ -189,11 +205,11 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callabl
                 secs = f" {event.seconds:.1f}s" if event.seconds is not None else ""
                 report.info(f"{name}: {event.package} {event.state}{secs}")
 
-        attempts = [plan.argv] + ([colcon.workspace_build_argv()] if plan.changed else [])
+        attempts = [plan.argv] + ([colcon.workspace_build_argv((), plan.workers)] if plan.changed else [])
         for argv in attempts:
             code = run_streaming(
                 client, plan.image, argv, user=f"{uid}:{gid}", volumes=volumes,
-                environment=colcon.CONTAINER_ENV,
+                environment=colcon.build_env(plan.workers, ccache=plan.ccache is not None),
                 labels={naming.LABEL_PROJECT: project.name, naming.LABEL_COMPONENT: name,
                         naming.LABEL_ROLE: "build"},
                 platform=dockerfiles.platform(plan.arch) if plan.arch != native else None, on_line=on_line,
@@ -241,7 +257,8 @@ def build(options: Options, *, component: str | None, full: bool = False) -> Non
                     raise BuildError(f"component {comp.name}: no staged image {ref}", hint="run `stage` first")
                 check_emulation(project.robot.host(comp.runs_on).arch.value, native_arch(),
                                 f"component {comp.name}")
-                plans.append(plan_build(project, comp, state.id, full=full))
+                plans.append(with_cmake_toolchain(project, plan_build(project, comp, state.id, full=full),
+                                                  state.labels))
         finally:
             client.close()
     outcomes: list[Outcome] = []

@@ -28,7 +28,7 @@ from robocore.commands.images import (
 )
 from robocore.commands.machine import check_emulation, local_docker, native_arch
 from robocore.commands.reporting import Outcome, Reporter, report_outcomes
-from robocore.commands.workspace import check_workspace, selected_components, workspace_files
+from robocore.commands.workspace import check_workspace, selected_components, wheels_cmake_packages, workspace_files
 from robocore.config.model import BaseKind, Component
 from robocore.errors import BuildError
 from robocore.plan import dockerfiles, naming
@@ -79,8 +79,12 @@ def plan_component(project: Project, component: Component, base: BaseRef, *, dry
         else:
             entries.append(ContextEntry(f"repos/{folder}", source=source))
         folders.append(folder)
+    sources = [e.source for e in entries if e.dest.startswith("repos/") and e.source]
+    if component.folder and robot.base.kind is BaseKind.wheels:
+        sources.append(check_workspace(project, component))
+    cmake = wheels_cmake_packages(project, sources)
     dockerfile = dockerfiles.component_dockerfile(robot, component, base_ref=base.ref, package_xmls=xmls,
-                                                  repo_folders=folders)
+                                                  repo_folders=folders, cmake=cmake)
     plan = ImagePlan(role="component", name=naming.component_image(robot, project.name, component.name),
                      tag="latest", arch=base.arch, dockerfile=dockerfile, parent=base.ref,
                      context=tuple(entries), component=component.name)

@@ -45,6 +45,9 @@ def run(options: Options) -> None:
     found = wheels_problems(robot)
     if found:
         raise located(project.robot_file, found)
+    from robocore.commands.workspace import check_wheels_packages
+
+    check_wheels_packages(project)
     for warning in robot_warnings(project.robot_file, robot, project.root):
         report.warn(warning.message, warning)
     by_host: dict[str, list[str]] = {}

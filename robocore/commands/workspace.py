@@ -4,13 +4,17 @@ a command works on and the source files of a workspace."""
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from robocore.config.model import Component
-from robocore.errors import UsageError
+from robocore.errors import ConfigError, Problem, UsageError
 from robocore.files import refuse_links_leaving
 from robocore.project import Project
+
+if TYPE_CHECKING:
+    from robocore.plan.cmake_packages import Manifest
 
 #: Top-level folders of a workspace that hold colcon's output, not sources.
 SKIP_WS_DIRS = frozenset({"build", "install", "log"})
@@ -59,3 +63,59 @@ def check_workspace(project: Project, component: Component) -> Path:
     ws = project.root / component.folder
     refuse_links_leaving(ws, project.root, what=f"the workspace of component {component.name}", skip=_skipped(ws))
     return ws
+
+
+def package_manifests(folder: Path, project_root: Path) -> list[Manifest]:
+    """The package.xml files of a source tree (a workspace, a common package, a fetched repository), read;
+    paths in messages are relative to ``project_root`` when under it."""
+    from robocore.plan.cmake_packages import read_manifest
+
+    files = {rel for rel, _ in workspace_files(folder)}
+    found: list[Manifest] = []
+    for rel in sorted(files):
+        root, _, name = rel.rpartition("/")
+        if name != "package.xml":
+            continue
+        path = folder / rel
+        shown = path.relative_to(project_root).as_posix() if path.is_relative_to(project_root) else str(path)
+        cmakelists = f"{root}/CMakeLists.txt" if root else "CMakeLists.txt"
+        found.append(read_manifest(path.read_text(errors="replace"), shown, has_cmakelists=cmakelists in files))
+    return found
+
+
+def wheels_cmake_packages(project: Project, sources: Sequence[Path]) -> list[str]:
+    """The packages of ``sources`` that colcon builds with CMake, when the base is ``wheels`` (which then
+    adds the CMake tool chain to the image they are built in); empty on other bases.
+
+    A package the wheels base cannot build (one depending on rclcpp) is a ConfigError, one line each.
+    """
+    from robocore.config.model import BaseKind
+    from robocore.plan import cmake_packages
+
+    if project.robot.base.kind is not BaseKind.wheels:
+        return []
+    manifests = [m for source in sources for m in package_manifests(source, project.root)]
+    refusals = cmake_packages.wheels_refusals(project.robot.ros_distro.value, manifests)
+    if refusals:
+        raise ConfigError([Problem(r.file, r.line, r.key, r.message) for r in refusals])
+    return cmake_packages.cmake_packages(manifests)
+
+
+def check_wheels_packages(project: Project) -> None:
+    """Every package the wheels base cannot build, in component workspaces and local common packages, as
+    one ConfigError (a line each); nothing on other bases. Folders that do not exist yet are skipped."""
+    from robocore.config.model import BaseKind
+
+    if project.robot.base.kind is not BaseKind.wheels:
+        return
+    folders = [project.root / c.folder for c in project.robot.components if c.folder and c.image is None]
+    folders += [project.root / (p.folder or p.name) for p in project.robot.common_packages if not p.repo]
+    problems: list[Problem] = []
+    for folder in folders:
+        if folder.is_dir():
+            try:
+                wheels_cmake_packages(project, [folder])
+            except ConfigError as exc:
+                problems += exc.problems
+    if problems:
+        raise ConfigError(problems)

@@ -12,6 +12,7 @@ from robocore.plan import naming
 
 CONTAINER_BUILD = "/robocore/build"
 CONTAINER_LOG = "/robocore/log"
+CONTAINER_CCACHE = "/robocore/ccache"
 
 #: colcon event handlers: a line when a package starts and ends, no build output on the console (it is in
 #: the log folder). Only handlers of colcon-core: naming one that is not installed is an error.
@@ -26,23 +27,38 @@ _EVENT_RE = re.compile(r"^(?P<what>Starting|Finished|Failed|Aborted)\s+(?:>>>|<<
 CONTAINER_ENV = {"HOME": "/tmp", "ROBOCORE_NO_INSTALL": "1", "PYTHONDONTWRITEBYTECODE": "1"}
 
 
-def workspace_mounts(workspace: Path, out: Path) -> dict[str, str]:
-    """``{host path: container path}`` of colcon's build and test containers: the component's workspace
-    and its output folders ``out``/{build,install,log}."""
-    return {
+def build_env(cores: int, *, ccache: bool = False) -> dict[str, str]:
+    """The environment of colcon's build container: :data:`CONTAINER_ENV`, CMake and make running
+    ``cores`` jobs, and with ``ccache`` the compilers launched through ccache, whose cache is mounted at
+    :data:`CONTAINER_CCACHE` (it outlives the build folder, so ``build --full`` and a new image reuse it)."""
+    env = {**CONTAINER_ENV, "CMAKE_BUILD_PARALLEL_LEVEL": str(cores), "MAKEFLAGS": f"-j{cores}"}
+    if ccache:
+        env.update(CCACHE_DIR=CONTAINER_CCACHE, CMAKE_C_COMPILER_LAUNCHER="ccache",
+                   CMAKE_CXX_COMPILER_LAUNCHER="ccache")
+    return env
+
+
+def workspace_mounts(workspace: Path, out: Path, ccache: Path | None = None) -> dict[str, str]:
+    """``{host path: container path}`` of colcon's build and test containers: the component's workspace,
+    its output folders ``out``/{build,install,log} and, for builds with ccache, the ``ccache`` folder."""
+    mounts = {
         str(workspace): naming.CONTAINER_WS,
         str(out / "build"): CONTAINER_BUILD,
         str(out / "install"): naming.CONTAINER_INSTALL,
         str(out / "log"): CONTAINER_LOG,
     }
+    if ccache is not None:
+        mounts[str(ccache)] = CONTAINER_CCACHE
+    return mounts
 
 
-def workspace_build_argv(packages_above: Sequence[str] = ()) -> list[str]:
+def workspace_build_argv(packages_above: Sequence[str] = (), workers: int | None = None) -> list[str]:
     """``colcon build`` of the workspace mounted at :data:`naming.CONTAINER_WS`.
 
     Install tree at :data:`naming.CONTAINER_INSTALL` (the same absolute path at run time),
     build and log folders beside it. ``packages_above``: rebuild only those packages and
-    the packages that depend on them.
+    the packages that depend on them; ``workers``: packages built at once (colcon's default
+    otherwise).
     """
     argv = [
         "colcon", "--log-base", CONTAINER_LOG, "build",
@@ -50,6 +66,8 @@ def workspace_build_argv(packages_above: Sequence[str] = ()) -> list[str]:
         "--build-base", CONTAINER_BUILD,
         "--install-base", naming.CONTAINER_INSTALL,
     ]
+    if workers:
+        argv += ["--parallel-workers", str(workers)]
     if packages_above:
         argv += ["--packages-above", *packages_above]
     return [*argv, "--event-handlers", *EVENT_HANDLERS]

@@ -24,7 +24,7 @@ from pathlib import Path, PurePosixPath
 from robocore.config.loader import ROBOT_FILE
 from robocore.config.model import Arch, BaseKind, Component, Repository, Robot
 from robocore.errors import ConfigError, Problem
-from robocore.plan import colcon, naming
+from robocore.plan import cmake_packages, colcon, naming
 
 #: ROS 2 wheels from PyPI, pinned per distro (x86_64, CPython 3.11/3.12). See design.md §5.
 WHEELS: dict[str, tuple[str, ...]] = {
@@ -179,8 +179,10 @@ def _rosdep(paths: Sequence[str]) -> str:
             f"{froms} && rm -rf /var/lib/apt/lists/*")
 
 
-def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequence[str]) -> str:
-    """The base image's Dockerfile. ``common``: names of common packages in the context's ``common/``."""
+def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequence[str],
+                    cmake: Sequence[str] = ()) -> str:
+    """The base image's Dockerfile. ``common``: names of common packages in the context's ``common/``;
+    ``cmake``: those of them colcon builds with CMake (the wheels base then gets the CMake tool chain)."""
     distro = robot.ros_distro.value
     wheels = robot.base.kind is BaseKind.wheels
     lines = [f"# robocore base image, ROS 2 {distro} ({robot.base.kind.value}): {GENERATED}"]
@@ -203,6 +205,8 @@ def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequ
                                  ("PIP_NO_CACHE_DIR", "1"), ("PIP_BREAK_SYSTEM_PACKAGES", "1")]))
         lines.append(f"RUN {_apt_install(OFFICIAL_APT)} && rosdep update --rosdistro \"$ROS_DISTRO\"")
     lines.append(f"COPY entrypoint.sh {naming.ENTRYPOINT}")
+    if wheels and cmake:
+        lines += cmake_packages.toolchain_lines(distro, venv(distro), cmake)
     if common:
         lines.append(f"COPY common {STAGING}/common")
         if not wheels:
@@ -226,11 +230,14 @@ def component_dockerfile(
     base_ref: str,
     package_xmls: Sequence[str] = (),
     repo_folders: Sequence[str] = (),
+    cmake: Sequence[str] = (),
 ) -> str:
-    """A component's staged image: base + apt + pip + repositories + rosdep (official) + postinstall.
+    """A component's staged image: base + apt + pip + CMake tool chain (wheels) + repositories + rosdep
+    (official) + postinstall.
 
     ``package_xmls``: context paths (under ``rosdep/``) of the component's package.xml files, used
-    only when the base has rosdep; ``repo_folders``: folders under the context's ``repos/``.
+    only when the base has rosdep; ``repo_folders``: folders under the context's ``repos/``;
+    ``cmake``: the packages of its workspace and repositories that colcon builds with CMake.
     """
     official = robot.base.kind is BaseKind.official
     lines = [f"# robocore image of component {component.name}: {GENERATED}", f"FROM {base_ref}"]
@@ -239,6 +246,9 @@ def component_dockerfile(
         lines.append(_component_apt(component, f"{key}.apt_packages"))
     if component.pip_packages:
         lines.append(_component_pip(component, f"{key}.pip_packages"))
+    if cmake and robot.base.kind is BaseKind.wheels:
+        distro = robot.ros_distro.value
+        lines += cmake_packages.toolchain_lines(distro, venv(distro), cmake)
     rosdep_paths: list[str] = []
     if repo_folders:
         lines.append(f"COPY repos {STAGING}/deps")

@@ -10,9 +10,10 @@ starting a colcon container: the result is what colcon would have installed, in 
 the time.
 
 It falls back to colcon whenever that could differ: a file added, removed or made executable,
-a build description changed (``package.xml``, ``setup.py``, ``CMakeLists.txt``, ...), a
-changed file with no recorded copy (compiled, generated or not installed), or an output
-that no longer holds the content recorded for it.
+a build description changed (``package.xml``, ``setup.py``, ``CMakeLists.txt``, ...), a file
+that code is generated or compiled from (``.msg``, ``.srv``, headers, ...), a changed file with
+no recorded copy (compiled, generated or not installed), or an output that no longer holds the
+content recorded for it.
 """
 
 from __future__ import annotations
@@ -27,6 +28,11 @@ BUILD_DESCRIPTIONS = frozenset({
 })
 #: Suffixes of files that are build descriptions wherever they are.
 BUILD_SUFFIXES = (".cmake", ".cmake.in")
+#: Suffixes of files that code is generated or compiled from: installed as they are too (interface
+#: definitions under ``share/<pkg>/msg``, headers under ``include/``), but an edit must regenerate and
+#: recompile, so it always runs colcon.
+COMPILED_SUFFIXES = (".msg", ".srv", ".action", ".idl", ".h", ".hh", ".hpp", ".hxx", ".inl", ".c", ".cc", ".cpp",
+                     ".cxx")
 
 #: ``{package-relative path: (content digest, executable)}`` for one package's sources.
 PackageFiles = Mapping[str, tuple[str, bool]]
@@ -49,6 +55,11 @@ def is_build_description(rel: str) -> bool:
     return name in BUILD_DESCRIPTIONS or name.endswith(BUILD_SUFFIXES)
 
 
+def is_compiled(rel: str) -> bool:
+    """Whether a package-relative path is a file that code is generated or compiled from."""
+    return rel.endswith(COMPILED_SUFFIXES)
+
+
 def verbatim_copies(package: str, sources: PackageFiles, outputs: Mapping[str, str]) -> dict[str, list[str]]:
     """Source path -> output paths of ``package`` (under ``install/<package>/`` or ``build/<package>/``)
     that hold the same bytes at a path ending with ``/<source path>``.
@@ -63,7 +74,7 @@ def verbatim_copies(package: str, sources: PackageFiles, outputs: Mapping[str, s
             by_name.setdefault(out.rsplit("/", 1)[-1], []).append(out)
     copies: dict[str, list[str]] = {}
     for rel, (digest, _) in sorted(sources.items()):
-        if is_build_description(rel):
+        if is_build_description(rel) or is_compiled(rel):
             continue
         found = [out for out in by_name.get(rel.rsplit("/", 1)[-1], [])
                  if out.endswith("/" + rel) and outputs[out] == digest]
@@ -98,6 +109,8 @@ def plan_patches(
                 return [], f"{package}: {rel} changed its executable bit"
             if is_build_description(rel):
                 return [], f"{package}: {rel} describes the build"
+            if is_compiled(rel):
+                return [], f"{package}: code is generated or compiled from {rel}"
             targets = copies.get(package, {}).get(rel)
             if not targets:
                 return [], f"{package}: {rel} is not installed as a plain copy"
