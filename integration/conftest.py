@@ -263,15 +263,15 @@ def project_copies(demo_project: Path, tmp_path: Path, docker_client: Any) -> It
 
 @pytest.fixture
 def robot_run(project_copies: Callable[..., Path]) -> Iterator[Callable[..., Any]]:
-    """``robot_run(root=None, servers=True)``: project ``root`` (default: a ``robocore-it-probe-*`` copy of the
-    demo project) brought up by robocore's pytest plugin machinery (``robocore.testing.bring_up``); every run
-    is closed when the test ends."""
+    """``robot_run(root=None, servers=True, graph=True)``: project ``root`` (default: a ``robocore-it-probe-*``
+    copy of the demo project) brought up by robocore's pytest plugin machinery (``robocore.testing.bring_up``);
+    every run is closed when the test ends."""
     from robocore.testing import bring_up
 
     runs: list[Any] = []
 
-    def start(root: Path | None = None, *, servers: bool = True) -> Any:
-        runs.append(bring_up(root or project_copies("probe"), servers=servers))
+    def start(root: Path | None = None, *, servers: bool = True, graph: bool = True) -> Any:
+        runs.append(bring_up(root or project_copies("probe"), servers=servers, graph=graph))
         return runs[-1]
 
     yield start

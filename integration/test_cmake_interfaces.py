@@ -18,15 +18,16 @@ import getpass
 import json
 import os
 import shutil
-import subprocess
-import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pytest
 import yaml
+
+if TYPE_CHECKING:
+    from conftest import RobocoreCli
 
 pytestmark = pytest.mark.docker
 
@@ -41,18 +42,13 @@ ANSWER_WITHIN = 60.0
 TIMES: dict[str, float] = {}
 
 
-def _robocore(root: Path, *args: str, check: bool = True) -> subprocess.CompletedProcess[str]:
-    proc = subprocess.run([sys.executable, "-m", "robocore", "-p", str(root), *args],
-                          capture_output=True, text=True, timeout=3000)
-    if check and proc.returncode != 0:
-        pytest.fail(f"`robocore {' '.join(args)}` exited {proc.returncode}\n--- stdout\n{proc.stdout[-4000:]}\n"
-                    f"--- stderr\n{proc.stderr[-6000:]}", pytrace=False)
-    return proc
+#: Seconds a robocore step of these tests may take (a cold stage compiles type support on 2 cores).
+STEP_TIMEOUT = 3000
 
 
-def _timed(key: str, root: Path, *args: str) -> dict[str, Any]:
+def _timed(cli: RobocoreCli, key: str, root: Path, *args: str) -> dict[str, Any]:
     start = time.monotonic()
-    proc = _robocore(root, *args, "--json")
+    proc = cli(root, *args, "--json", timeout=STEP_TIMEOUT)
     TIMES[key] = time.monotonic() - start
     print(f"\n{key}: {TIMES[key]:.1f} s", flush=True)
     result: dict[str, Any] = json.loads(proc.stdout)
@@ -88,12 +84,12 @@ def _make_project(parent: Path, name: str = NAME, workspaces: dict[str, tuple[st
 
 
 @pytest.fixture(scope="module")
-def project(docker_client: Any, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+def project(docker_client: Any, tmp_path_factory: pytest.TempPathFactory, run_robocore: RobocoreCli) -> Iterator[Path]:
     """The project after prepare-base, stage and a first build (timed)."""
     root = _make_project(tmp_path_factory.mktemp("cmake"))
-    _robocore(root, "prepare-base", "--quiet")
-    _timed("stage (3 images; 2 with the CMake tool chain)", root, "stage")
-    first = _timed("first build (2 interface packages compiled side by side)", root, "build")
+    run_robocore(root, "prepare-base", "--quiet", timeout=STEP_TIMEOUT)
+    _timed(run_robocore, "stage (3 images; 2 with the CMake tool chain)", root, "stage")
+    first = _timed(run_robocore, "first build (2 interface packages compiled side by side)", root, "build")
     assert sorted(_built(first)["server"]) == ["demo_interfaces", "demo_server"], first
     yield root
     print("\nmeasured: " + "; ".join(f"{k}: {v:.1f} s" for k, v in TIMES.items()), flush=True)
@@ -146,12 +142,13 @@ def test_without_the_interface_package_the_type_cannot_be_imported(robot: Any) -
     assert out.strip() == "no-compiler", out
 
 
-def test_no_op_build_and_a_msg_edit_rebuild_only_that_package_and_its_users(project: Path) -> None:
-    noop = _timed("no-op build", project, "build")
+def test_no_op_build_and_a_msg_edit_rebuild_only_that_package_and_its_users(project: Path,
+                                                                          run_robocore: RobocoreCli) -> None:
+    noop = _timed(run_robocore, "no-op build", project, "build")
     assert _built(noop) == {}, noop
     msg = project / "components" / "server" / "src" / "demo_interfaces" / "msg" / "Greeting.msg"
     msg.write_text(msg.read_text() + "# the greeter's count starts at 1\n")
-    edited = _timed("rebuild after a .msg edit (server)", project, "build")
+    edited = _timed(run_robocore, "rebuild after a .msg edit (server)", project, "build")
     assert sorted(_built(edited)) == ["server"], edited  # the client's copy did not change
     assert sorted(_built(edited)["server"]) == ["demo_interfaces", "demo_server"], edited
     installed = project / ".robocore" / "build" / "server" / "install" / "demo_interfaces" / "share" / \
@@ -159,14 +156,14 @@ def test_no_op_build_and_a_msg_edit_rebuild_only_that_package_and_its_users(proj
     assert installed.read_text() == msg.read_text()
 
 
-def test_a_clean_rebuild_reuses_the_ccache(project: Path, docker_client: Any) -> None:
+def test_a_clean_rebuild_reuses_the_ccache(project: Path, docker_client: Any, run_robocore: RobocoreCli) -> None:
     """ccache's folder outlives the build folder: compiling the client's interfaces again from scratch
     hits it (the server's and the client's copies compiled at the same container paths)."""
     cache = project / ".robocore" / "ccache"
     assert any(cache.rglob("*")), "the first build left nothing in ccache's folder"
     before = _ccache_hits(docker_client, cache)
     shutil.rmtree(project / ".robocore" / "build" / "client")
-    clean = _timed("clean rebuild of the client (warm ccache)", project, "build", "--component", "client")
+    clean = _timed(run_robocore, "clean rebuild of the client (warm ccache)", project, "build", "--component", "client")
     assert sorted(_built(clean)["client"]) == ["demo_client", "demo_interfaces"], clean
     after = _ccache_hits(docker_client, cache)
     assert after > before, f"no ccache hits: {before} before, {after} after"
@@ -184,24 +181,20 @@ def _ccache_hits(client: Any, cache: Path) -> int:
 
 @pytest.mark.parametrize("distro", ["jazzy", "kilted"])
 def test_an_interface_package_in_common_packages_serves_every_component(
-        distro: str, docker_client: Any, tmp_path_factory: pytest.TempPathFactory) -> None:
+        distro: str, docker_client: Any, tmp_path_factory: pytest.TempPathFactory, run_robocore: RobocoreCli,
+        robot_run: Callable[..., Any]) -> None:
     """Built once into the base (which then has the tool chain); the components' workspaces hold only
     their rclpy packages. Kilted's tool set is checked here too."""
-    from robocore.testing import bring_up
-
     name = f"{NAME}-common-{distro}"
     root = _make_project(tmp_path_factory.mktemp("cmake-common"), name,
                          {"server": ("demo_server",), "client": ("demo_client",)}, common=("demo_interfaces",),
                          distro=distro)
-    _timed(f"prepare-base with a common interface package ({distro})", root, "prepare-base")
-    _robocore(root, "stage", "--quiet")
-    _robocore(root, "build", "--quiet")
+    _timed(run_robocore, f"prepare-base with a common interface package ({distro})", root, "prepare-base")
+    run_robocore(root, "stage", "--quiet", timeout=STEP_TIMEOUT)
+    run_robocore(root, "build", "--quiet", timeout=STEP_TIMEOUT)
     assert docker_client.images.get(f"{name}-base:latest").labels.get("dev.robocore.toolchain") == "cmake"
     installed = root / ".robocore" / "build" / "client" / "install"
     assert not (installed / "demo_interfaces").exists()  # it comes from the base, not the workspace
-    run = bring_up(root, graph=False)
-    try:
-        assert run.wait_for_log("client", "answer: hello, client", timeout=ANSWER_WITHIN)
-        assert run.wait_for_log("client", "heard greeting #", timeout=ANSWER_WITHIN)
-    finally:
-        run.close()
+    run = robot_run(root, graph=False)
+    assert run.wait_for_log("client", "answer: hello, client", timeout=ANSWER_WITHIN)
+    assert run.wait_for_log("client", "heard greeting #", timeout=ANSWER_WITHIN)

@@ -251,9 +251,8 @@ def test_a_gui_true_component_draws_on_its_hosts_display_with_the_users_cookie(
         run_robocore(root, "stage", "--quiet", timeout=1200)  # the desktop suite's clock image: nothing to do
         # control first: nobody's cookie for that display (no XAUTHORITY, an empty home) -> refused, and said
         monkeypatch.delenv("XAUTHORITY", raising=False)
-        report = json.loads(run_robocore(root, "run", "--json").stdout)
-        (host,) = report
-        assert any(f"no X cookie of your user for display {display}" in note for note in report[host]["notes"])
+        (result,) = json.loads(run_robocore(root, "run", "--json").stdout)["results"]
+        assert any(f"no X cookie of your user for display {display}" in note for note in result["notes"])
         clock = docker_client.containers.get(f"{name}-clock")
         refused = wait_for(lambda: b"Authorization required" in clock.logs(), 30)
         assert refused, clock.logs().decode(errors="replace")[-2000:]
@@ -261,8 +260,8 @@ def test_a_gui_true_component_draws_on_its_hosts_display_with_the_users_cookie(
 
         # the user's session cookie: the next run copies it, and the running container's client gets in
         monkeypatch.setenv("XAUTHORITY", str(auth))
-        report = json.loads(run_robocore(root, "run", "--json").stdout)
-        assert report[host]["notes"] == [] and {a["verb"] for a in report[host]["actions"]} <= {"keep", "start"}
+        (result,) = json.loads(run_robocore(root, "run", "--json").stdout)["results"]
+        assert result["notes"] == [] and {a["verb"] for a in result["actions"]} <= {"keep", "start"}
         shown = wait_for(lambda: '"xclock"' in _windows(display, auth), 120, interval=2)
         assert shown, f"no xclock window on {display}:\n{_windows(display, auth)}\n" + \
             clock.logs().decode(errors="replace")[-1000:]

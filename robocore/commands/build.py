@@ -173,6 +173,28 @@ def _log_tail(out: Path, package: str, lines: int = 30) -> str:
 # ---------------------------------------------------------------------------------------------- colcon
 
 
+def colcon_listener(component: str, doing: str, done: str, events: list[colcon.PackageEvent], other: list[str],
+                    update: Callable[[str, str], None], report: Reporter) -> Callable[[str], None]:
+    """A reader of colcon's output lines: package events go to ``events`` and are shown (``<doing> <pkg>``
+    in the progress line, ``<pkg> [<done> ]finished 2.1s`` as a message); other lines go to ``other``."""
+    prefix = f"{done} " if done else ""
+
+    def on_line(line: str) -> None:
+        event = colcon.parse_event(line)
+        if event is None:
+            if line.strip():
+                other.append(line)
+            return
+        events.append(event)
+        if event.state == "started":
+            update(component, f"{doing} {event.package}")
+        else:
+            secs = f" {event.seconds:.1f}s" if event.seconds is not None else ""
+            report.info(f"{component}: {event.package} {prefix}{event.state}{secs}")
+
+    return on_line
+
+
 def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callable[[str, str], None]) -> Outcome:
     """colcon build of one component in a throw-away container of its staged image."""
     from robocore.adapters.image_builder import run_streaming
@@ -192,19 +214,7 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callabl
     try:
         update(name, "colcon build")
 
-        def on_line(line: str) -> None:
-            event = colcon.parse_event(line)
-            if event is None:
-                if line.strip():
-                    other.append(line)
-                return
-            events.append(event)
-            if event.state == "started":
-                update(name, f"building {event.package}")
-            else:
-                secs = f" {event.seconds:.1f}s" if event.seconds is not None else ""
-                report.info(f"{name}: {event.package} {event.state}{secs}")
-
+        on_line = colcon_listener(name, "building", "", events, other, update, report)
         attempts = [plan.argv] + ([colcon.workspace_build_argv((), plan.workers)] if plan.changed else [])
         for argv in attempts:
             code = run_streaming(

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
 
-from robocore.commands.build import plan_build, workspace_packages
+from robocore.commands.build import colcon_listener, plan_build, workspace_packages
 from robocore.commands.context import Options
 from robocore.commands.hosts import in_parallel
 from robocore.commands.machine import MAX_PARALLEL, check_emulation, local_docker, native_arch
@@ -207,19 +207,7 @@ def _run(project: Project, plan: ComponentTests, report: Reporter,
     events: list[colcon.PackageEvent] = []
     other: list[str] = []
 
-    def on_line(line: str) -> None:
-        event = colcon.parse_event(line)
-        if event is None:
-            if line.strip():
-                other.append(line)
-            return
-        events.append(event)
-        if event.state == "started":
-            update(name, f"testing {event.package}")
-        else:
-            secs = f" {event.seconds:.1f}s" if event.seconds is not None else ""
-            report.info(f"{name}: {event.package} tests {event.state}{secs}")
-
+    on_line = colcon_listener(name, "testing", "tests", events, other, update, report)
     update(name, "colcon test")
     client = local_docker()
     try:
