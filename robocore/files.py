@@ -8,6 +8,7 @@ threads create files would give those files the wrong mode.
 from __future__ import annotations
 
 import os
+import stat
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -111,3 +112,15 @@ def refuse_links_leaving(root: Path, boundary: Path, *, what: str, allowed: bool
         raise UnsafePath(f"{shown}: a symlink to {target!r}, outside the project folder; robocore does not copy "
                          f"files from outside the project ({what})",
                          hint="copy what it points to into the project, or remove the link")
+
+
+def path_kind(path: Path) -> tuple[str, str]:
+    """What ``path`` is: ``dir``, ``file``, ``missing`` or ``unusable`` (a name too long, a symlink loop, no
+    permission: the reason comes second). Never raises, whatever robot.yaml names."""
+    try:
+        mode = path.stat().st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        return "missing", ""
+    except (OSError, ValueError) as error:  # ValueError: a NUL byte in the name
+        return "unusable", getattr(error, "strerror", None) or str(error)
+    return ("dir" if stat.S_ISDIR(mode) else "file"), ""

@@ -32,6 +32,7 @@ from robocore.config.model import (
 )
 from robocore.config.sources import checkout_folder_problem, protocol_problem
 from robocore.config.values import IMAGE_PATH, IMAGE_PREFIX, is_ipv6, shown
+from robocore.files import path_kind
 
 KeyPath = tuple[str | int, ...]
 Found = tuple[KeyPath, str]
@@ -313,10 +314,14 @@ def _folders(parts: Parts, project: Path) -> Iterator[Found]:
             yield path, f"{rel!r} points outside the project folder"
         elif target == project:
             yield path, f"{rel!r} is the project folder itself; name a folder inside it"
-        elif must_exist and not target.exists():
-            yield path, f"folder {rel!r} does not exist (in {project})"
-        elif target.exists() and not target.is_dir():
-            yield path, f"{rel!r} is a file, not a folder"
+        else:
+            kind, reason = path_kind(target)
+            if kind == "unusable":
+                yield path, f"{shown(rel)} cannot be used as a folder: {reason}"
+            elif must_exist and kind == "missing":
+                yield path, f"folder {rel!r} does not exist (in {project})"
+            elif kind == "file":
+                yield path, f"{rel!r} is a file, not a folder"
 
 
 def _tls_files(parts: Parts, project: Path) -> Iterator[Found]:
@@ -328,7 +333,10 @@ def _tls_files(parts: Parts, project: Path) -> Iterator[Found]:
             path = Path(value).expanduser()
             if not path.is_absolute():
                 path = project / path
-            if not path.is_file():
+            kind, reason = path_kind(path)
+            if kind == "unusable":
+                yield ("hosts", index, "tls", key), f"file {value!r} cannot be read: {reason}"
+            elif kind != "file":
                 yield ("hosts", index, "tls", key), f"file {value!r} not found"
 
 

@@ -27,6 +27,7 @@ from robocore.config.yamltext import MAX_FILE_BYTES as MAX_FILE_BYTES
 from robocore.config.yamltext import ROBOT_FILE as ROBOT_FILE
 from robocore.config.yamltext import KeyPath, LineMap, problem, read_yaml, too_big
 from robocore.errors import ConfigError, Problem
+from robocore.files import path_kind
 
 #: Problems reported one per line; the rest are counted in a last line.
 MAX_PROBLEMS = 200
@@ -216,13 +217,15 @@ def load_robot(project: Path, *, file_name: str = ROBOT_FILE) -> Robot:
     """Load ``project/robot.yaml``; raise :class:`ConfigError` naming every problem."""
     path = project / file_name
     shown_path = display_path(path)
-    if not project.is_dir():
-        what = "is a file, not a project folder" if project.exists() else "project folder does not exist"
+    folder, reason = path_kind(project)
+    if folder != "dir":
+        what = {"file": "is a file, not a project folder", "missing": "project folder does not exist"}.get(
+            folder, f"cannot be used as a project folder: {reason}")
         raise ConfigError([problem(display_path(project), None, "", what)])
-    if not path.is_file():
-        what = "is not a file" if path.exists() else (
-            "file not found (is this a robocore project? 'robocore init DIR' makes one)"
-        )
+    kind, reason = path_kind(path)
+    if kind != "file":
+        what = {"dir": "is not a file", "unusable": f"cannot be read: {reason}"}.get(
+            kind, "file not found (is this a robocore project? 'robocore init DIR' makes one)")
         raise ConfigError([problem(shown_path, None, "", what)])
     try:
         with path.open("rb") as stream:
