@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from robocore.project import Project
+
 MakeProject = Callable[..., Path]
 
 
@@ -27,3 +29,20 @@ def make_project(tmp_path: Path) -> MakeProject:
         return write_project(tmp_path / name, text, folders)
 
     return make
+
+
+def built_project(root: Path, text: str, components: Iterable[str] = ("talker", "listener")) -> Project:
+    """A project at ``root`` as after stage and build: robot.yaml = ``text``, one package per component's
+    workspace (``components/<c>/src/<c>_pkg``), compose files and DDS profiles written, install trees made."""
+    from robocore.commands.composefiles import write_compose_files
+
+    for comp in components:
+        pkg = root / "components" / comp / "src" / f"{comp}_pkg"
+        pkg.mkdir(parents=True)
+        (pkg / "package.xml").write_text(f"<package><name>{comp}_pkg</name></package>")
+    (root / "robot.yaml").write_text(text)
+    project = Project.load(root)
+    write_compose_files(project)
+    for comp in components:
+        (project.build_dir(comp) / "install").mkdir(parents=True)
+    return project

@@ -15,10 +15,9 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import built_project
 
-from robocore.commands.composefiles import write_compose_files
 from robocore.errors import GroupError, HostError
-from robocore.project import Project
 
 ROBOT_YAML = """\
 ros_distro: jazzy
@@ -38,15 +37,7 @@ PROBLEM = {"file", "line", "key", "message", "severity", "hint"}
 @pytest.fixture
 def world(tmp_path: Path) -> dict[str, object]:
     root = tmp_path / "robot"
-    for comp in ("talker", "listener"):
-        pkg = root / "components" / comp / "src" / f"{comp}_pkg"
-        pkg.mkdir(parents=True)
-        (pkg / "package.xml").write_text(f"<package><name>{comp}_pkg</name></package>")
-    (root / "robot.yaml").write_text(ROBOT_YAML)
-    project = Project.load(root)
-    write_compose_files(project)
-    for comp in ("talker", "listener"):
-        (project.build_dir(comp) / "install").mkdir(parents=True)
+    built_project(root, ROBOT_YAML)
     fake_bin = tmp_path / "bin"
     fake_bin.mkdir()
     for tool in ("ssh", "rsync", "git", "docker"):

@@ -18,10 +18,9 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from conftest import built_project
 
 from robocore.commands import warmup
-from robocore.commands.composefiles import write_compose_files
-from robocore.project import Project
 
 ROBOT_YAML = """\
 ros_distro: jazzy
@@ -56,15 +55,7 @@ TASKS = [
 @pytest.fixture
 def world(tmp_path: Path) -> Iterator[dict[str, object]]:
     root = tmp_path / "robot"
-    for comp in ("talker", "listener"):
-        pkg = root / "components" / comp / "src" / f"{comp}_pkg"
-        pkg.mkdir(parents=True)
-        (pkg / "package.xml").write_text(f"<package><name>{comp}_pkg</name></package>")
-    (root / "robot.yaml").write_text(ROBOT_YAML)
-    project = Project.load(root)
-    write_compose_files(project)
-    for comp in ("talker", "listener"):
-        (project.build_dir(comp) / "install").mkdir(parents=True)
+    project = built_project(root, ROBOT_YAML)
     history = project.state_dir / "history" / "main.json"
     history.parent.mkdir(parents=True)
     runs = [{"tag": "v0", "releases": {}}, {"tag": "v1", "releases": {}}]
