@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from robocore.errors import RobocoreError
-from robocore.plan import discovery, testrun
+from robocore.plan import discovery, naming, testrun
 from robocore.plan.containers import ContainerSpec
 from robocore.plan.testrun import TestRun
 from robocore.project import Project
@@ -99,7 +99,7 @@ def reap_leftovers(client: Any) -> int:
 
     found = client.containers.list(all=True, filters={"label": testrun.LABEL_OWNER})
     removed = 0
-    for container in sorted(found, key=lambda c: c.labels.get("dev.robocore.role") == testrun.ROLE_HOST):
+    for container in sorted(found, key=lambda c: c.labels.get(naming.LABEL_ROLE) == testrun.ROLE_HOST):
         if dead(container.labels):
             with contextlib.suppress(NotFound, APIError):
                 container.remove(force=True, v=True)
