@@ -99,6 +99,8 @@ def _yaml_error(exc: yaml.YAMLError, file: str) -> ConfigError:
     else:
         what = getattr(exc, "problem", None) or str(exc)
         context = getattr(exc, "context", None)
+        if "maximum nesting depth" in what:  # PyYAML >= 6.0.3 limits flow nesting in its scanner
+            return ConfigError([problem(file, line, "", f"YAML is nested more than {MAX_DEPTH} levels deep")])
         if context:
             what = f"{context}, {what}"
     label = "YAML error" if isinstance(exc, yaml.constructor.ConstructorError) else "YAML syntax error"
