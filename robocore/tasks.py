@@ -139,8 +139,8 @@ def validate(c: Context, dry_run: bool = False, json: bool = False) -> None:
 @task(
     help={
         "defaults": "Use default answers, ask nothing.",
-        "distro": "ROS 2 distribution (humble, jazzy, kilted, rolling).",
-        "base": "Base image kind: official or wheels.",
+        "distro": "ROS distribution (ROS 1: noetic, melodic; ROS 2: humble, jazzy, kilted, rolling).",
+        "base": "Base image kind: official, wheels (ROS 2 from PyPI) or debian (ROS 1 from Debian).",
         "dry_run": "Only print what would be written.",
         "source": "Template source: a robocore git repository (path or URL) or a template folder "
                   "(default: robocore's own repository at its version tag, else the bundled template).",

@@ -86,7 +86,7 @@ def test_every_project_form_validates(good: Path, tmp_path: Path, form: str) -> 
     assert f"{good / 'robot.yaml'}: ok — ROS 2 humble, 2 host(s), 2 component(s), base official" in done.stderr
     assert "  rpi5 (192.168.1.20, arm64, docker via ssh): talker" in done.stderr
     assert "  dev (127.0.0.1, amd64, docker via local): listener" in done.stderr
-    assert "  discovery server: rpi5:11811" in done.stderr
+    assert "  discovery (fastdds): rpi5:11811" in done.stderr
 
 
 def test_the_project_folder_reaches_the_task_as_an_argument(good: Path, tmp_path: Path,
@@ -117,7 +117,7 @@ def test_bad_config_exits_2_with_one_line_per_problem(bad: Path) -> None:
     assert done.returncode == 2
     assert done.stdout == ""
     assert done.stderr.splitlines() == [
-        "error: bad/robot.yaml:1: ros_distro: 'iron' is not one of: humble, jazzy, kilted, rolling",
+        "error: bad/robot.yaml:1: ros_distro: 'iron' is not one of: melodic, noetic, humble, jazzy, kilted, rolling",
         "error: bad/robot.yaml:15: components[0].runs_on: unknown host 'rpi6' (known: rpi5, dev); did you mean 'rpi5'?",
         "error: bad/robot.yaml:16: components[0].nvidia: expected true or false, got 'maybe'",
     ]

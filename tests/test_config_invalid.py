@@ -74,7 +74,7 @@ CASES = [
         "unknown-distro",
         edit({1: "ros_distro: iron"}),
         1,
-        "ros_distro: 'iron' is not one of: humble, jazzy, kilted, rolling",
+        "ros_distro: 'iron' is not one of: melodic, noetic, humble, jazzy, kilted, rolling",
     ),
     Case("distro-near-miss", edit({1: "ros_distro: jazy"}), 1, "did you mean 'jazzy'?"),
     Case(
@@ -574,7 +574,8 @@ def test_file_name_is_relative_to_the_current_folder(
     with pytest.raises(ConfigError) as caught:
         load_robot(project)
     assert caught.value.lines() == [
-        f"{project.name}/robot.yaml:1: ros_distro: 'iron' is not one of: humble, jazzy, kilted, rolling"
+        f"{project.name}/robot.yaml:1: ros_distro: 'iron' is not one of: "
+        "melodic, noetic, humble, jazzy, kilted, rolling"
     ]
 
 

@@ -71,7 +71,8 @@ class Master(Discovery):
     def _uri(self) -> str:
         return f"http://{self.servers()[0].locator}"
 
-    def client_environment(self, host: str, files: FileLocator = IN_CONTAINERS) -> dict[str, str]:
+    def client_environment(self, host: str, files: FileLocator = IN_CONTAINERS, *,
+                           network_mode: str = "host") -> dict[str, str]:
         env = {"ROS_MASTER_URI": self._uri(), "ROS_IP": self.robot.host(host).ip}
         path = files("master.txt")
         if path is not None:
@@ -109,13 +110,15 @@ def master(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_the_default_kind_is_fast_dds() -> None:
     kind = discovery.for_robot(robot())
-    assert isinstance(kind, fastdds.FastDds) and kind.kind == "fastdds" == robot().discovery.kind
+    assert isinstance(kind, fastdds.FastDds) and kind.kind == "fastdds" == robot().discovery_kind
+    assert robot().discovery.kind is None  # robot.yaml says nothing: the distro's kind
 
 
 def test_the_registry_refuses_an_unknown_kind_naming_the_setting() -> None:
     with pytest.raises(ConfigError) as error:
         discovery.for_robot(with_kind(robot(), "zenoh"))
-    assert error.value.lines() == ["robot.yaml: discovery.kind: unknown discovery kind 'zenoh' (known: fastdds)"]
+    assert error.value.lines() == [
+        "robot.yaml: discovery.kind: unknown discovery kind 'zenoh' (known: fastdds, rosmaster)"]
 
 
 def test_an_unregistered_kind_fails_the_container_plan_too() -> None:

@@ -289,7 +289,7 @@ def test_dry_run_writes_nothing(tmp_path: Path) -> None:
 
 
 def test_unknown_distro_or_base_is_a_usage_error(tmp_path: Path) -> None:
-    with pytest.raises(UsageError, match=r"--distro 'iron'.*humble, jazzy, kilted, rolling"):
+    with pytest.raises(UsageError, match=r"--distro 'iron'.*melodic, noetic, humble, jazzy, kilted, rolling"):
         make(tmp_path / "a", distro="iron")
     with pytest.raises(UsageError, match=r"--base 'docker'.*official, wheels"):
         make(tmp_path / "b", base="docker")

@@ -1,7 +1,7 @@
 """prepare-base: the base image (ROS plus ``common_packages``), one per arch of the hosts that need it.
 
 The base is rebuilt only when its inputs hash changes. Its parent is the official ROS image
-(pulled when missing) or, for the wheels base, a Debian root image robocore bootstraps itself.
+(pulled when missing) or, for the wheels and debian bases, a Debian root image robocore bootstraps itself.
 """
 
 from __future__ import annotations
@@ -37,6 +37,9 @@ from robocore.project import Project
 if TYPE_CHECKING:
     import docker
 
+#: Base kinds built on a Debian root image that robocore bootstraps (no image registry needed).
+ROOTFS_KINDS = frozenset({BaseKind.wheels, BaseKind.debian})
+
 
 def _base_parent(project: Project, client: docker.DockerClient | None, arch: str, *, dry_run: bool,
                  say: Callable[[str], None]) -> tuple[str, str]:
@@ -47,9 +50,9 @@ def _base_parent(project: Project, client: docker.DockerClient | None, arch: str
 
     robot = project.robot
     if client is None:
-        default = rootfs.BOOTSTRAPPED if robot.base.kind is BaseKind.wheels else dockerfiles.official_image(robot)
+        default = rootfs.BOOTSTRAPPED if robot.base.kind in ROOTFS_KINDS else dockerfiles.official_image(robot)
         return robot.base.image or default, DRY_RUN_UNKNOWN
-    if robot.base.kind is BaseKind.wheels:
+    if robot.base.kind in ROOTFS_KINDS:
         if dry_run:
             for ref in ([robot.base.image] if robot.base.image else [rootfs.BOOTSTRAPPED, rootfs.UPSTREAM]):
                 state = image_state(client, ref)
@@ -92,6 +95,8 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
 
         setup = resources.read("wheels-setup.bash").replace(b"@DISTRO@", robot.ros_distro.value.encode())
         entries += [ContextEntry("wheels-setup.bash", data=setup), resource_entry("ros2", "ros2", executable=True)]
+    elif robot.base.kind is BaseKind.debian:
+        entries.append(resource_entry("debian-setup.bash", "debian-setup.bash", executable=False))
     if ca is not None:
         entries.append(ContextEntry("host-ca.pem", data=ca.read_bytes()))
     common: list[str] = []

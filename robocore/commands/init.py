@@ -218,6 +218,7 @@ def _check(project: Path, report: Reporter) -> None:
 
     robot = load_robot(project)
     report.notice(
-        f"{ProjectFolder(project).robot_file}: ok — ROS 2 {robot.ros_distro.value}, base {robot.base.kind.value}, "
+        f"{ProjectFolder(project).robot_file}: ok — {robot.generation} {robot.ros_distro.value}, "
+        f"base {robot.base.kind.value}, "
         f"{len(robot.hosts)} host(s), {len(robot.components)} component(s)"
     )

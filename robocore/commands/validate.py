@@ -59,12 +59,12 @@ def run(options: Options) -> None:
         discovery_servers=[f"{s.host}:{s.port}" for s in robot.discovery_servers])
     report.add(summary)
     lines = [
-        f"{summary.file}: ok — ROS 2 {summary.ros_distro}, {len(robot.hosts)} host(s), "
+        f"{summary.file}: ok — {robot.generation} {summary.ros_distro}, {len(robot.hosts)} host(s), "
         f"{len(robot.components)} component(s), base {summary.base}"
     ]
     for host in summary.hosts:
         names = ", ".join(host.components) or "no components"
         lines.append(f"  {host.name} ({host.ip}, {host.arch}, docker via {host.docker}): {names}")
-    lines.append(f"  discovery server: {', '.join(summary.discovery_servers)}")
+    lines.append(f"  discovery ({robot.discovery_kind}): {', '.join(summary.discovery_servers)}")
     for line in lines:
         report.info(line)

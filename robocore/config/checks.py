@@ -19,6 +19,7 @@ from typing import Any, TypeVar
 from pydantic import BaseModel, ValidationError
 
 from robocore.config.desktop import gui_problems
+from robocore.config.generations import generation_problems
 from robocore.config.hints import Unknown, known_list
 from robocore.config.hints import did_you_mean as did_you_mean
 from robocore.config.mappings import device_problem, port_problem, read_only_project_path, volume_problem
@@ -136,7 +137,7 @@ def _salvage_item(item: object, model: type[M]) -> M | None:
 
 def check_robot(robot: Robot, project: Path | None) -> list[Found]:
     """Every cross-field problem of ``robot``; file-system checks only when ``project`` is given."""
-    return check_parts(Parts.of(robot), project)
+    return [*generation_problems(robot), *check_parts(Parts.of(robot), project)]
 
 
 def check_parts(parts: Parts, project: Path | None) -> list[Found]:
@@ -177,14 +178,15 @@ def _references(parts: Parts) -> Iterator[Found]:
     for index, comp in parts.components:
         if comp.runs_on not in hosts:
             yield ("components", index, "runs_on"), hosts.message(comp.runs_on)
-    seen: dict[tuple[str, int], int] = {}
+    seen: dict[tuple[str, int | None], int] = {}
     for index, server in parts.servers:
         if server.host not in hosts:
             yield ("discovery", "servers", index, "host"), hosts.message(server.host)
         endpoint = (server.host, server.port)
         if endpoint in seen:
             yield (("discovery", "servers", index),
-                   f"two discovery servers on {server.host}:{server.port} (also discovery.servers[{seen[endpoint]}])")
+                   f"two discovery servers on {server.host}:{server.port or 'the default port'} "
+                   f"(also discovery.servers[{seen[endpoint]}])")
         else:
             seen[endpoint] = index
 

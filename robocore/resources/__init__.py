@@ -1,4 +1,4 @@
-"""Files robocore bakes into images: entrypoint, wheels setup.bash, the ``ros2`` shim."""
+"""Files robocore bakes into images: entrypoint, the wheels and debian setup.bash files, the ``ros2`` shim."""
 
 from __future__ import annotations
 

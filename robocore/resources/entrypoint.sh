@@ -13,4 +13,9 @@ unset _robocore_underlay
 if [ -z "${ROBOCORE_NO_INSTALL:-}" ] && [ -f /robocore/install/local_setup.bash ]; then
     source /robocore/install/local_setup.bash
 fi
+# ROS 1 on a bridge network: advertise the container's own address (see plan/discovery/rosmaster.py)
+if [ -n "${ROBOCORE_ROS_IP_FROM_CONTAINER:-}" ] && [ -z "${ROS_IP:-}${ROS_HOSTNAME:-}" ]; then
+    ROS_IP="$(hostname -i 2>/dev/null | cut -d' ' -f1)"
+    export ROS_IP
+fi
 exec "$@"

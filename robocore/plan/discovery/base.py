@@ -181,8 +181,12 @@ class Discovery(ABC):
         """What the container of server ``index`` runs: command, environment, state folder."""
 
     @abstractmethod
-    def client_environment(self, host: str, files: FileLocator = IN_CONTAINERS) -> dict[str, str]:
-        """Environment of a node running on robot host ``host`` (a component), its files found by ``files``."""
+    def client_environment(self, host: str, files: FileLocator = IN_CONTAINERS, *,
+                           network_mode: str = "host") -> dict[str, str]:
+        """Environment of a node running on robot host ``host`` (a component), its files found by ``files``.
+
+        ``network_mode``: the container's network (``host`` or ``bridge``), for kinds whose nodes must
+        tell others their own address."""
 
     @abstractmethod
     def observer_environment(self, host: str | None = None, files: FileLocator = IN_CONTAINERS) -> dict[str, str]:

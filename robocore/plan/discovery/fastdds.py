@@ -67,7 +67,7 @@ def servers(robot: Robot) -> list[FastDdsServer]:
     out = []
     for index, server in enumerate(robot.discovery_servers):
         host = robot.host(server.host)
-        out.append(FastDdsServer(index=index, host=host.name, address=host.ip, port=server.port))
+        out.append(FastDdsServer(index=index, host=host.name, address=host.ip, port=robot.server_port(server)))
     return out
 
 
@@ -382,8 +382,9 @@ class FastDds(Discovery):
         """``fastdds discovery`` for server ``index``, behind the restart hold."""
         return server_process(self.robot, index, transport=self.transport)
 
-    def client_environment(self, host: str, files: FileLocator = IN_CONTAINERS) -> dict[str, str]:
-        """A client of every server (the host does not matter to Fast DDS)."""
+    def client_environment(self, host: str, files: FileLocator = IN_CONTAINERS, *,
+                           network_mode: str = "host") -> dict[str, str]:
+        """A client of every server (neither the host nor the network matters to Fast DDS)."""
         return client_environment(self.robot, transport=self.transport, files=files)
 
     def observer_environment(self, host: str | None = None, files: FileLocator = IN_CONTAINERS) -> dict[str, str]:

@@ -1,0 +1,13 @@
+# ROS 1 from Debian 12's own packages (written by robocore): they live under /usr, where roscore,
+# rospack and CMake find them without sourcing anything; this file gives the variables that a
+# sourced /opt/ros/<distro>/setup.bash gives on other installations.
+export ROS_VERSION=1
+export ROS_PYTHON_VERSION=3
+export ROS_ROOT="${ROS_ROOT:-/usr/share/ros}"
+export ROS_ETC_DIR="${ROS_ETC_DIR:-/etc/ros}"
+if [ -z "${ROS_PACKAGE_PATH:-}" ]; then
+    export ROS_PACKAGE_PATH=/usr/share
+fi
+if [ -z "${CMAKE_PREFIX_PATH:-}" ]; then
+    export CMAKE_PREFIX_PATH=/usr
+fi
