@@ -119,7 +119,7 @@ def ros_nodes(project: Project) -> tuple[list[str] | None, str]:
         try:
             container = _running(client, naming.discovery_container_name(project.name, server.index))
             if container is None:
-                notes.append(f"{where}: not running")
+                notes.append(f"{where}: not running" + (f"; {kind.server_down}" if kind.server_down else ""))
                 continue
             argv = kind.node_list_argv(GRAPH_SPIN_SECONDS)
             code, output = container.exec_run(argv, environment=super_client_exec_env(project, host.name), demux=False)
@@ -127,7 +127,8 @@ def ros_nodes(project: Project) -> tuple[list[str] | None, str]:
             client.close()
         text = (output or b"").decode(errors="replace")
         if code != 0:
-            notes.append(f"{where}: `ros2 node list` exited {code}: {text.strip().splitlines()[-1:] or ''}")
+            tool = " ".join(argv[1:3])
+            notes.append(f"{where}: `{tool}` exited {code}: {text.strip().splitlines()[-1:] or ''}")
             continue
         return kind.nodes_from_output(text), where
     return None, "; ".join(notes) or "no discovery server"

@@ -84,6 +84,19 @@ def decide(specs: Sequence[ContainerSpec], existing: Sequence[Existing], image_i
     return actions
 
 
+def with_node_restarts(actions: Sequence[Action], specs: Sequence[ContainerSpec], *,
+                       register_once: bool) -> list[Action]:
+    """``actions`` with every kept component replaced when a discovery server of the host (re)starts and the
+    kind's nodes register with it only when they start (``register_once``: the ROS master forgets its
+    nodes when it restarts, and they never tell it again)."""
+    servers = {s.name for s in specs if s.role == ROLE_DISCOVERY}
+    restarts = any(a.name in servers and a.verb in ("create", "replace", "start") for a in actions)
+    if not (register_once and restarts):
+        return list(actions)
+    reason = "the discovery server (re)starts: its nodes register with it only when they start"
+    return [Action("replace", a.name, reason) if a.verb == "keep" and a.name not in servers else a for a in actions]
+
+
 # --------------------------------------------------------------------------- run
 
 
@@ -196,12 +209,14 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
         image_ids = _image_ids(client, local, specs, project, host, dry_run=dry_run)
         containers = {c.name: c for c in managed_containers(client, project.name)}
         _check_name_conflicts(client, specs, containers, host)
-        actions = decide(specs, [_existing(c) for c in containers.values()], image_ids)
+        kind = discovery.for_robot(project.robot)
+        actions = with_node_restarts(decide(specs, [_existing(c) for c in containers.values()], image_ids), specs,
+                                     register_once=kind.nodes_register_once)
         outcome.actions = actions
         if dry_run:
             return outcome
         by_name = {s.name: s for s in specs}
-        ready = discovery.for_robot(project.robot).readiness
+        ready = kind.readiness
         for action in actions:
             _apply(client, action, by_name.get(action.name), containers.get(action.name), host, report=report,
                    ready=ready)

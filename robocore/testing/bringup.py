@@ -45,6 +45,11 @@ DOMAINS = range(1, 102)
 DOMAIN_LOCK_PORT = 22000
 
 
+#: What ``robot.graph`` says on a ROS 1 robot: the test process's node is an rclpy (ROS 2) node.
+ROS1_GRAPH = ("robot.graph joins ROS 2 graphs only, and {distro} is ROS 1: use robot.wait_for_log, robot.logs "
+              "or robot.exec (e.g. ['rostopic', 'echo', '-n', '1', '/chatter'])")
+
+
 class BringUpError(RobocoreError):
     """The robot could not be brought up for tests (build, Docker, a component dying at start)."""
 
@@ -182,7 +187,9 @@ class RobotUnderTest:
 
     @property
     def graph(self) -> Graph:
-        """The test process's node in the robot's graph."""
+        """The test process's node in the robot's graph (ROS 2 robots)."""
+        if self.graph_node is None and self.project.robot.ros_version == 1:
+            raise BringUpError(ROS1_GRAPH.format(distro=self.project.robot.ros_distro.value))
         if self.graph_node is None:
             raise BringUpError("this run has no graph node (brought up without one)")
         return self.graph_node
@@ -321,6 +328,7 @@ def bring_up(project_dir: Path, *, build: bool = True, servers: bool = True, gra
 
     started = time.monotonic()
     source = Project.load(project_dir)
+    graph = graph and source.robot.ros_version == 2  # the test process joins with rclpy: ROS 2 only
     if graph:
         ros_env.check_distro(source.robot.ros_distro.value)
     client = local_client(timeout=300)

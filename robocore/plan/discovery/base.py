@@ -163,6 +163,11 @@ class Discovery(ABC):
     kind: ClassVar[str]
     #: The file of :meth:`files` that an observer reads (None: observers read no file).
     observer_file: ClassVar[str | None] = None
+    #: What a stopped server means for the running nodes, said by ``status`` (empty: nothing to add).
+    server_down: ClassVar[str] = ""
+    #: Nodes register with a server only when they start (ROS 1): ``run`` restarts the nodes of a host
+    #: whose server it (re)starts.
+    nodes_register_once: ClassVar[bool] = False
 
     def __init__(self, robot: Robot, transport: Transport | None = None) -> None:
         self.robot = robot

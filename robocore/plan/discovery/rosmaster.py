@@ -59,6 +59,9 @@ class RosMaster(Discovery):
     """One ROS master (``roscore``) per robot; every node and tool a client of it."""
 
     kind = "rosmaster"
+    nodes_register_once = True
+    server_down = ("the ROS master is down: connected nodes keep exchanging messages, but nothing new can connect "
+                   "(a restarted node, a new subscriber, rostopic) until `robocore run` starts it again")
 
     def servers(self) -> list[ServerEndpoint]:
         """The master (robot.yaml allows one)."""
