@@ -89,21 +89,23 @@ def test_talker_and_listener_exchange_messages(docker_client: Any, demo_project:
     # negative control: the same listener on another domain must hear nothing
     containers.append(_start(docker_client, project, listener, shlex.split(listener.entrypoint), domain + 1))
     graph = None
-    deadline = time.monotonic() + 40
+    deadline = time.monotonic() + 60
     heard: set[str] = set()
     while time.monotonic() < deadline:
         time.sleep(2)
         published = _quoted(_logs(containers[0]))
         heard = published & _quoted(_logs(containers[1]))
-        if heard and graph is None:
-            # the ros2 command of the image sees the running nodes (a graph query over DDS)
+        if heard:
+            # the ros2 command of the image sees the running nodes (a graph query over DDS); a new participant
+            # on a loaded machine may not have discovered every node and topic within one spin: ask again
             graph = docker_client.containers.run(
                 _image(project, listener),
-                ["bash", "-c", "ros2 node list --no-daemon --spin-time 2 && ros2 topic list --no-daemon --spin-time 2"],
+                ["bash", "-c", "ros2 node list --no-daemon --spin-time 3 && ros2 topic list --no-daemon --spin-time 3"],
                 network_mode="host", ipc_mode="host", environment={"ROS_DOMAIN_ID": str(domain)}, remove=True,
                 name=f"{PREFIX}-graph-{uuid.uuid4().hex[:8]}",
             ).decode()
-            break
+            if all(name in graph for name in ("/talker", "/listener", "/chatter")):
+                break
     talker_out, listener_out, control_out = (_logs(c) for c in containers)
     assert heard, (f"listener heard nothing the talker published.\ntalker:\n{talker_out[-1500:]}\n"
                    f"listener:\n{listener_out[-1500:]}")

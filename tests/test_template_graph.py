@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 from template_repo import TEMPLATE
 
-GRAPH_TESTS = TEMPLATE / "tests" / "graph" / "test_talker_listener.py"
+GRAPH_TESTS = TEMPLATE / "tests" / "graph" / "{% if ros_version == 2 %}test_talker_listener.py{% endif %}"
 #: The documented API of the `robot` fixture (PLUGIN_API): attributes of robot and of robot.graph.
 ROBOT_API = {"graph", "logs", "wait_for_log", "restart", "stop", "start", "exec", "components"}
 GRAPH_API = {"node", "node_names", "topic_names", "wait_for_message", "publish", "call", "wait_for_node",

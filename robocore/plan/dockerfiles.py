@@ -46,11 +46,12 @@ OFFICIAL_APT: tuple[str, ...] = ("procps", "python3-pip", "python3-pytest")
 #: Debian packages the wheels base needs from its root image (installed only if missing).
 WHEELS_APT: tuple[str, ...] = ("python3", "python3-venv", "procps", "ca-certificates")
 #: Debian 12's own ROS 1 (1.15, the noetic generation) for the debian base: the core with roscpp, rospy,
-#: catkin and message generation, the command-line tools, a C++ tool chain with ccache, and pytest.
+#: catkin and message generation, the command-line tools, a C++ tool chain with ccache, gtest (catkin skips
+#: gtests without it) and pytest.
 DEBIAN_APT: tuple[str, ...] = (
     "ros-core-dev", "rosbash", "python3-rospy", "python3-roslaunch", "python3-rosnode", "python3-rostopic",
-    "python3-rosservice", "python3-rosmsg", "g++", "cmake", "make", "ccache", "python3-venv", "python3-pytest",
-    "procps", "ca-certificates",
+    "python3-rosservice", "python3-rosmsg", "g++", "cmake", "make", "ccache", "libgtest-dev", "python3-venv",
+    "python3-pip", "python3-pytest", "procps", "ca-certificates",
 )
 #: colcon from PyPI for the debian base (Debian has no colcon), in a venv that sees Debian's ROS modules.
 DEBIAN_TOOLS: tuple[str, ...] = (
@@ -202,12 +203,14 @@ def _debian_lines(distro: str) -> list[str]:
     """The debian base: Debian's ROS 1 packages, colcon in a venv that sees them, a generated setup.bash."""
     env = venv(distro)
     return [
+        # nodes run Debian's python3: a component's pip_packages go there, beside Debian's ROS modules
         _env_lines([("ROS_DISTRO", distro), ("LANG", "C.UTF-8"), ("PIP_DISABLE_PIP_VERSION_CHECK", "1"),
-                    ("PIP_NO_CACHE_DIR", "1")]),
+                    ("PIP_NO_CACHE_DIR", "1"), ("PIP_BREAK_SYSTEM_PACKAGES", "1")]),
         f"RUN {_apt_install(DEBIAN_APT)}",
         f"RUN python3 -m venv --system-site-packages {env} && {env}/bin/pip install {' '.join(DEBIAN_TOOLS)} "
         f"&& ln -sf {env}/bin/colcon /usr/local/bin/colcon",
         f"COPY debian-setup.bash /opt/ros/{distro}/setup.bash",
+        f"RUN ln -sfn {distro} /opt/ros/Debian",
         "# the C++ tool chain is in the base: builds use ccache",
         f"LABEL {cmake_packages.LABEL_TOOLCHAIN}={cmake_packages.TOOLCHAIN_CMAKE}",
     ]
@@ -246,7 +249,7 @@ def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequ
         lines += cmake_packages.toolchain_lines(distro, venv(distro), cmake)
     if common:
         lines.append(f"COPY common {STAGING}/common")
-        if not wheels:
+        if robot.base.kind is BaseKind.official:  # the others have no rosdep database
             lines.append(_rosdep([f"{STAGING}/common"]))
         lines.append(_colcon_underlay(f"{STAGING}/common", COMMON_PREFIX))
     lines.append(f'ENTRYPOINT ["{naming.ENTRYPOINT}"]')

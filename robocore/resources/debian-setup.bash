@@ -11,3 +11,7 @@ fi
 if [ -z "${CMAKE_PREFIX_PATH:-}" ]; then
     export CMAKE_PREFIX_PATH=/usr
 fi
+# Debian's catkin environment hook (/etc/catkin/profile.d/1.ros_distro.sh) sets ROS_DISTRO=Debian and
+# complains on stdout about any other value, which breaks catkin's generate_cached_setup.py; the
+# image links /opt/ros/Debian to this folder, so that sourcing /opt/ros/$ROS_DISTRO still works.
+export ROS_DISTRO=Debian

@@ -37,9 +37,10 @@ MASTER_READY = "started core service [/rosout]"
 MASTER_FAILED = ("Unable to start XML-RPC server", "another roscore/master is already running", "RLException")
 PORT_HINT = ("is another ROS master (or another program) using that port on the host? "
              "choose another port in robot.yaml (discovery.servers[0].port)")
-#: roscore, rospy and the ROS 1 tools are Python: without this their output reaches the container's log
-#: only when a buffer fills (the master's readiness is read from it).
-UNBUFFERED = {"PYTHONUNBUFFERED": "1"}
+#: roscore, rospy and the ROS 1 tools are Python, and roscpp's console is block-buffered off a terminal:
+#: without these their output reaches the container's log only when a buffer fills (the master's readiness
+#: is read from it).
+UNBUFFERED = {"PYTHONUNBUFFERED": "1", "ROSCONSOLE_STDOUT_LINE_BUFFERED": "1"}
 #: Set in a bridge container's environment: the entrypoint then advertises the container's own address.
 ROS_IP_FROM_CONTAINER = "ROBOCORE_ROS_IP_FROM_CONTAINER"
 
@@ -101,8 +102,9 @@ class RosMaster(Discovery):
     def readiness(self, log_text: str, state: ServerState) -> Readiness:
         """Ready once rosout runs; failed when roscore says it cannot serve, stopped, restarted or timed out."""
         text = plain_text(log_text)
-        if any(marker in text for marker in MASTER_FAILED):
-            return Readiness("failed", last_error_line(text)[-200:], hint=PORT_HINT)
+        said = [line.strip() for line in text.splitlines() if any(marker in line for marker in MASTER_FAILED)]
+        if said:
+            return Readiness("failed", said[-1][-200:], hint=PORT_HINT)
         if state.restart_count == 0 and MASTER_READY in text:
             return READY
         if state.restart_count > 0 or state.status in STOPPED or state.timed_out:

@@ -1,0 +1,86 @@
+"""C++ rebuilds of a ROS 1 project: a one-line edit beside full rebuilds, in one run.
+
+On the template's noetic project on the debian base (``robocore init --distro noetic --base debian``,
+built once first), ``robocore build --component talker``:
+
+1. clean, ccache cold: the talker's build folder and the ccache folder removed, ``build --full``;
+2. clean, ccache warm: the build folder removed, ``build --full`` (what ``--full`` after a clean costs);
+3. one-line edit of the roscpp talker's ``talker.cpp``: ``build`` (incremental);
+4. no change: ``build`` (nothing to do).
+
+For each: seconds, and how many C++ objects CMake compiled (``Building CXX object`` lines of the
+package's colcon log). Goal: the one-line edit compiles one object, several times faster than a clean
+rebuild.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def robocore(project: Path | None, *args: str) -> None:
+    argv = [sys.executable, "-m", "robocore", *(["-p", str(project)] if project else []), *args]
+    subprocess.run(argv, check=True, capture_output=True, text=True)
+
+
+def compiled_objects(project: Path) -> int:
+    """``Building CXX object`` lines of the talker package's last colcon log."""
+    logs = project / ".robocore" / "build" / "talker" / "log" / "latest_build" / "demo_talker"
+    text = "".join(p.read_text(errors="replace") for p in logs.glob("stdout*.log"))
+    return text.count("Building CXX object")
+
+
+def timed_build(project: Path, *flags: str) -> tuple[float, int]:
+    started = time.perf_counter()
+    robocore(project, "build", "--component", "talker", *flags)
+    return time.perf_counter() - started, compiled_objects(project)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--project", type=Path, help="a noetic project made from the template (default: a new one)")
+    args = parser.parse_args()
+    parent = None
+    if args.project is None:
+        parent = Path(tempfile.mkdtemp(prefix="robocore-bench-"))
+        project = parent / "bench-noetic"
+        robocore(None, "init", str(project), "--defaults", "--distro", "noetic", "--base", "debian")
+    else:
+        project = args.project
+    try:
+        for step in ("prepare-base", "stage", "build"):
+            robocore(project, step)
+        build_dir = project / ".robocore" / "build" / "talker" / "build"
+        code = next(p for p in (project / "components" / "talker").rglob("talker.cpp"))
+        rows = []
+        shutil.rmtree(build_dir, ignore_errors=True)
+        shutil.rmtree(project / ".robocore" / "ccache", ignore_errors=True)
+        rows.append(("clean, ccache cold (build --full)", *timed_build(project, "--full")))
+        shutil.rmtree(build_dir, ignore_errors=True)
+        rows.append(("clean, ccache warm (build --full)", *timed_build(project, "--full")))
+        original = code.read_text()
+        try:
+            code.write_text(original.replace("rate(2.0)", "rate(2.5)", 1))
+            rows.append(("one-line edit of talker.cpp (build)", *timed_build(project)))
+        finally:
+            code.write_text(original)
+        robocore(project, "build", "--component", "talker")  # back to the original source
+        rows.append(("no change (build)", *timed_build(project)))
+        edit = rows[2][1]
+        print(f"{'talker build':40} {'seconds':>8} {'objects':>8} {'x edit':>7}")
+        for label, seconds, objects in rows:
+            print(f"{label:40} {seconds:8.1f} {objects:8d} {seconds / edit:7.1f}")
+    finally:
+        if parent is not None:
+            shutil.rmtree(parent, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,199 @@
+"""A ROS 1 robot: the template's noetic project on the debian base (Debian 12's own ROS 1 packages).
+
+- one host: ``prepare-base stage build run``; the rospy listener hears the roscpp talker's
+  ``demo_msgs/Greeting`` through the ROS master, ``status`` lists both nodes through the master;
+  a probe pointed at a port with no master hears nothing (negative control) while the same probe
+  pointed at the robot's master hears the talker;
+- the master stopped: ``status`` says so, connected nodes keep talking, a new node hears nothing;
+  ``run`` starts the master and restarts the nodes (they register only at start), and the graph is
+  whole again;
+- a one-line edit of the C++ talker goes through ``build`` and ``run`` and is heard;
+- two Docker-in-Docker hosts over ssh: the talker and the master on robot-a, the listener on robot-b;
+  robot-b alone hears nothing (no master, no talker), then robot-b hears robot-a's talker.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import pytest
+import yaml
+from deploy_helpers import HEARD, free_tcp_port, log_lines, remove_project_containers, wait_for
+
+if TYPE_CHECKING:
+    from conftest import RobocoreCli
+    from robot_host.hosts import RobotFleet
+
+pytestmark = pytest.mark.docker
+
+NAME = "robocore-it-noetic"
+TALKER_TEXT = "hello from talker #"
+
+
+def _init(parent: Path, run_robocore: RobocoreCli, *, port: int) -> Path:
+    """``robocore init --distro noetic --base debian`` in ``parent``, its master on ``port``."""
+    root = parent / NAME
+    run_robocore(None, "init", str(root), "--defaults", "--distro", "noetic", "--base", "debian")
+    data = yaml.safe_load((root / "robot.yaml").read_text())
+    data["discovery"] = {"servers": [{"host": data["hosts"][0]["name"], "port": port}]}
+    (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    return root
+
+
+@pytest.fixture(scope="module")
+def noetic(docker_client: Any, run_robocore: RobocoreCli) -> Iterator[Path]:
+    """The template's noetic project on the debian base, after prepare-base, stage and build."""
+    parent = Path(tempfile.mkdtemp(prefix="robocore-it-"))
+    root = _init(parent, run_robocore, port=free_tcp_port())
+    for step in ("prepare-base", "stage", "build"):
+        run_robocore(root, step, "--quiet")
+    yield root
+    remove_project_containers(docker_client, NAME)
+    shutil.rmtree(parent, ignore_errors=True)
+
+
+def _container(docker_client: Any, component: str) -> Any:
+    return docker_client.containers.get(f"{NAME}-{component}")
+
+
+def _heard_since(docker_client: Any, since: float, needle: str = TALKER_TEXT) -> list[str]:
+    return [line for line in log_lines(_container(docker_client, "listener"), HEARD, since=since) if needle in line]
+
+
+def _master_uri(root: Path) -> str:
+    data = yaml.safe_load((root / "robot.yaml").read_text())
+    return f"http://127.0.0.1:{data['discovery']['servers'][0]['port']}"
+
+
+def _probe(docker_client: Any, tracked: list[Any], master_uri: str, seconds: int = 15) -> str:
+    """A new node in the base image (demo_msgs built in): ``rostopic echo -n 1 /chatter`` against ``master_uri``,
+    for at most ``seconds``; what it printed."""
+    container = docker_client.containers.run(
+        f"{NAME}-base:latest", ["timeout", str(seconds), "rostopic", "echo", "-n", "1", "/chatter"],
+        environment={"ROS_MASTER_URI": master_uri, "ROS_IP": "127.0.0.1", "PYTHONUNBUFFERED": "1"},
+        network_mode="host", detach=True)
+    tracked.append(container)
+    container.wait(timeout=seconds + 30)
+    return str(container.logs().decode(errors="replace"))
+
+
+def _status(run_robocore: RobocoreCli, root: Path) -> dict[str, Any]:
+    return dict(json.loads(run_robocore(root, "status", "--json", check=False).stdout))
+
+
+def _graph(status: dict[str, Any]) -> dict[str, Any]:
+    [graph] = [r for r in status["results"] if r["kind"] == "ros_graph"]
+    return dict(graph)
+
+
+def test_cpp_talker_heard_by_rospy_listener_through_the_master(noetic: Path, run_robocore: RobocoreCli,
+                                                                docker_client: Any,
+                                                                tracked_containers: list[Any]) -> None:
+    started = time.time()
+    run_robocore(noetic, "run", "--quiet")
+    assert wait_for(lambda: _heard_since(docker_client, started), 60, 1), \
+        "the rospy listener never heard the C++ talker"
+    graph = _graph(_status(run_robocore, noetic))
+    assert {"/talker", "/listener", "/rosout"} <= set(graph["nodes"] or []), graph
+    # negative control: the same probe, pointed at a port with no master, hears nothing
+    lost = _probe(docker_client, tracked_containers, f"http://127.0.0.1:{free_tcp_port()}", seconds=10)
+    assert TALKER_TEXT not in lost and "Unable to communicate with master" in lost, lost
+    found = _probe(docker_client, tracked_containers, _master_uri(noetic))
+    assert TALKER_TEXT in found, found
+    # the live container's shell has ROS 1 sourced
+    topics = run_robocore(noetic, "connect", "--component", "talker", "--cmd", "rostopic list")
+    assert "/chatter" in topics.stdout, topics.stdout
+
+
+def test_stopped_master_keeps_connections_and_run_brings_the_graph_back(noetic: Path, run_robocore: RobocoreCli,
+                                                                        docker_client: Any,
+                                                                        tracked_containers: list[Any]) -> None:
+    run_robocore(noetic, "run", "--quiet")
+    assert wait_for(lambda: _heard_since(docker_client, time.time() - 5), 60, 1)
+    docker_client.containers.get(f"{NAME}-discovery-0").stop(timeout=5)
+    stopped = time.time()
+    status = _status(run_robocore, noetic)
+    rows = {r["component"]: r["state"] for r in status["results"] if r["kind"] == "container"}
+    assert rows["discovery-0"] == "exited" and rows["talker"] == rows["listener"] == "running", rows
+    graph = _graph(status)
+    assert graph["nodes"] is None and "the ROS master is down" in graph["via"], graph
+    # connected nodes keep exchanging messages; a new node cannot join
+    assert wait_for(lambda: _heard_since(docker_client, stopped + 1), 30, 1), \
+        "the connected listener stopped hearing when the master stopped"
+    assert TALKER_TEXT not in _probe(docker_client, tracked_containers, _master_uri(noetic), seconds=10)
+    # run starts the master and restarts the nodes, which register only when they start
+    done = json.loads(run_robocore(noetic, "run", "--json").stdout)
+    verbs = {a["name"]: (a["verb"], a["reason"]) for r in done["results"] for a in r["actions"]}
+    assert verbs[f"{NAME}-discovery-0"][0] == "start", verbs
+    for component in ("talker", "listener"):
+        verb, reason = verbs[f"{NAME}-{component}"]
+        assert verb == "replace" and "register" in reason, verbs
+    restarted = time.time()
+    assert wait_for(lambda: _heard_since(docker_client, restarted), 60, 1)
+    graph = _graph(_status(run_robocore, noetic))
+    assert {"/talker", "/listener"} <= set(graph["nodes"] or []), graph
+    again = json.loads(run_robocore(noetic, "run", "--json").stdout)
+    assert {a["verb"] for r in again["results"] for a in r["actions"]} == {"keep"}, again
+
+
+def test_one_line_cpp_edit_is_built_and_heard(noetic: Path, run_robocore: RobocoreCli, docker_client: Any) -> None:
+    sources = list((noetic / "components" / "talker").rglob("*.[ch]*"))
+    [code] = [p for p in sources if TALKER_TEXT in p.read_text()]
+    original = code.read_text()
+    try:
+        code.write_text(original.replace(TALKER_TEXT, "edited talker #"))
+        run_robocore(noetic, "build", "--component", "talker", "--quiet")
+        since = time.time()
+        run_robocore(noetic, "run", "--quiet")
+        assert wait_for(lambda: _heard_since(docker_client, since, "edited talker #"), 60, 1), \
+            "the edited C++ talker was never heard"
+    finally:
+        code.write_text(original)
+
+
+# --------------------------------------------------------------------------- two hosts
+
+
+@pytest.fixture(scope="module")
+def noetic_fleet(robot_fleets: Callable[..., RobotFleet], noetic: Path, run_robocore: RobocoreCli,
+                 tmp_path_factory: pytest.TempPathFactory) -> tuple[RobotFleet, Path]:
+    """Two robot hosts and a copy of the noetic project: talker and master on robot-a, listener on robot-b."""
+    fleet = robot_fleets(2)
+    root = tmp_path_factory.mktemp("noetic-fleet") / NAME
+    shutil.copytree(noetic, root, symlinks=True, ignore=shutil.ignore_patterns("compose"))
+    data = yaml.safe_load((root / "robot.yaml").read_text())
+    data["hosts"] = [{"name": n, "ip": h.ip, "user": "root", "arch": "amd64"}
+                     for n, h in zip(["robot-a", "robot-b"], fleet.hosts, strict=True)]
+    data["discovery"] = {"servers": [{"host": "robot-a"}]}
+    for comp in data["components"]:
+        comp["runs_on"] = "robot-a" if comp["name"] == "talker" else "robot-b"
+    (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    for step in ("prepare-base", "stage", "build", "sync"):
+        run_robocore(root, step, "--quiet")
+    return fleet, root
+
+
+def test_two_hosts_one_ros1_graph(noetic_fleet: tuple[RobotFleet, Path], run_robocore: RobocoreCli) -> None:
+    fleet, root = noetic_fleet
+    listener = f"{NAME}-listener"
+
+    def heard() -> list[str]:
+        lines = log_lines(fleet.client(1).containers.get(listener), HEARD)
+        return [line for line in lines if TALKER_TEXT in line]
+
+    # robot-b alone: no master, no talker, nothing heard (negative control)
+    run_robocore(root, "run", "--host", "robot-b", "--quiet")
+    time.sleep(8)
+    assert heard() == []
+    run_robocore(root, "run", "--host", "robot-a", "--quiet")
+    assert wait_for(heard, 90, 1), "the listener on robot-b never heard the talker on robot-a"
+    env = fleet.client(1).containers.get(listener).attrs["Config"]["Env"]
+    assert f"ROS_IP={fleet.hosts[1].ip}" in env and f"ROS_MASTER_URI=http://{fleet.hosts[0].ip}:11311" in env, env
+    graph = _graph(_status(run_robocore, root))
+    assert {"/talker", "/listener"} <= set(graph["nodes"] or []), graph
