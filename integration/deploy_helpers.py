@@ -8,15 +8,18 @@
   share a discovery server or a graph; :func:`remove_project_containers` and
   :func:`remove_test_runs`, what fixture finalizers use to remove what a project left;
 - output: :func:`output_tails`, the exit code and the ends of a process's output for a failure message;
+- a project's own checks: :func:`run_nox`;
 - tools: :func:`compose_command`.
 """
 
 from __future__ import annotations
 
+import os
 import random
 import shutil
 import socket
 import subprocess
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -90,6 +93,13 @@ def copy_project(source: Path, parent: Path, name: str, *, transport: str = "shm
         edit(data)
     (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
     return root
+
+
+def run_nox(root: Path, *sessions: str) -> subprocess.CompletedProcess[str]:
+    """``nox --no-venv -s SESSIONS`` in project ``root`` with this interpreter's tools first on PATH."""
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
+    return subprocess.run([sys.executable, "-m", "nox", "--no-venv", "-s", *sessions], cwd=root, env=env,
+                          capture_output=True, text=True, timeout=1800)
 
 
 def wait_for(check: Callable[[], T], timeout: float, interval: float = 0.5) -> T | None:

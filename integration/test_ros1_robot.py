@@ -8,6 +8,8 @@
   ``run`` starts the master and restarts the nodes (they register only at start), and the graph is
   whole again;
 - a one-line edit of the C++ talker goes through ``build`` and ``run`` and is heard;
+- the project's own ``nox -s unit graph``: gtest and pytest package tests, then the ROS 1 graph tests
+  through robocore's pytest plugin;
 - two Docker-in-Docker hosts over ssh: the talker and the master on robot-a, the listener on robot-b;
   robot-b alone hears nothing (no master, no talker), then robot-b hears robot-a's talker.
 """
@@ -24,7 +26,15 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 import yaml
-from deploy_helpers import HEARD, free_tcp_port, log_lines, remove_project_containers, wait_for
+from deploy_helpers import (
+    HEARD,
+    free_tcp_port,
+    log_lines,
+    output_tails,
+    remove_project_containers,
+    run_nox,
+    wait_for,
+)
 
 if TYPE_CHECKING:
     from conftest import RobocoreCli
@@ -155,6 +165,17 @@ def test_one_line_cpp_edit_is_built_and_heard(noetic: Path, run_robocore: Roboco
             "the edited C++ talker was never heard"
     finally:
         code.write_text(original)
+
+
+def test_the_noetic_projects_own_unit_and_graph_sessions_pass(noetic: Path) -> None:
+    """The project's gtest and pytest package tests through ``robocore test``, then its ROS 1 graph tests
+    through robocore's pytest plugin (an isolated bring-up with its own master)."""
+    proc = run_nox(noetic, "unit", "graph")
+    text = proc.stdout + proc.stderr
+    assert proc.returncode == 0, output_tails(proc)
+    for session in ("unit", "graph"):
+        assert f"Session {session} was successful" in text, output_tails(proc)
+    assert "demo_talker" in text and "demo_listener" in text, output_tails(proc)  # both packages' tests ran
 
 
 # --------------------------------------------------------------------------- two hosts

@@ -8,15 +8,12 @@ wrong value makes ``unit`` fail, naming the test.
 
 from __future__ import annotations
 
-import os
 import shutil
-import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from deploy_helpers import output_tails
+from deploy_helpers import output_tails, run_nox
 
 pytestmark = pytest.mark.docker
 
@@ -36,14 +33,8 @@ def copied_project(docker_client: object, tmp_path_factory: pytest.TempPathFacto
     shutil.rmtree(root, ignore_errors=True)
 
 
-def _nox(root: Path, *sessions: str) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
-    return subprocess.run([sys.executable, "-m", "nox", "--no-venv", "-s", *sessions], cwd=root, env=env,
-                          capture_output=True, text=True, timeout=1800)
-
-
 def test_the_generated_projects_nox_sessions_pass(copied_project: Path) -> None:
-    proc = _nox(copied_project, "validate", "build", "unit", "graph")
+    proc = run_nox(copied_project, "validate", "build", "unit", "graph")
     assert proc.returncode == 0, output_tails(proc)
     text = proc.stdout + proc.stderr
     for session in ("validate", "build", "unit", "graph"):
@@ -58,7 +49,7 @@ def test_a_failing_package_test_fails_the_unit_session(copied_project: Path, tmp
     assert tests, "the template's talker package has no tests"
     (tests[0].parent / "test_wrong_on_purpose.py").write_text(
         "def test_expects_a_wrong_value():\n    assert 1 + 1 == 3, 'wrong on purpose'\n")
-    proc = _nox(root, "build", "unit")
+    proc = run_nox(root, "build", "unit")
     assert proc.returncode != 0, output_tails(proc)
     assert "Session build was successful" in proc.stderr, output_tails(proc)
     assert "test_expects_a_wrong_value" in proc.stdout + proc.stderr, output_tails(proc)
