@@ -153,11 +153,10 @@ def test_stopped_master_keeps_connections_and_run_brings_the_graph_back(noetic: 
 
 
 def test_one_line_cpp_edit_is_built_and_heard(noetic: Path, run_robocore: RobocoreCli, docker_client: Any) -> None:
-    sources = list((noetic / "components" / "talker").rglob("*.[ch]*"))
-    [code] = [p for p in sources if TALKER_TEXT in p.read_text()]
+    [code] = (noetic / "components" / "talker").rglob("greeting.h")  # the text talker.cpp publishes
     original = code.read_text()
     try:
-        code.write_text(original.replace(TALKER_TEXT, "edited talker #"))
+        code.write_text(original.replace(f'"{TALKER_TEXT}"', '"edited talker #"'))
         run_robocore(noetic, "build", "--component", "talker", "--quiet")
         since = time.time()
         run_robocore(noetic, "run", "--quiet")

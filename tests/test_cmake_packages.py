@@ -11,7 +11,7 @@ from robocore.commands import base_image, build, component_images
 from robocore.commands.workspace import check_wheels_packages, wheels_cmake_packages
 from robocore.errors import BuildError, ConfigError
 from robocore.plan import cmake_packages, colcon, dockerfiles
-from robocore.plan.cmake_packages import Manifest, read_manifest, wheels_refusals
+from robocore.plan.cmake_packages import read_manifest, wheels_refusals
 from robocore.project import Project
 
 GOLDEN = Path(__file__).parent / "golden"
@@ -56,7 +56,8 @@ CPP_REFUSAL = "no rclcpp wheels: C++ nodes cannot be built on the wheels base; u
 
 
 def test_build_types() -> None:
-    assert read_manifest(INTERFACES, "p.xml", has_cmakelists=True) == Manifest("p.xml", "my_msgs", "ament_cmake")
+    read = read_manifest(INTERFACES, "p.xml", has_cmakelists=True)
+    assert (read.path, read.name, read.build_type, read.cpp_client) == ("p.xml", "my_msgs", "ament_cmake", None)
     assert read_manifest(PYTHON.format(name="a"), "p.xml", has_cmakelists=False).build_type == "ament_python"
     assert read_manifest(INTERFACES, "p.xml", has_cmakelists=True).uses_cmake
     assert not read_manifest(PYTHON.format(name="a"), "p.xml", has_cmakelists=False).uses_cmake

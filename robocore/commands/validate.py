@@ -45,10 +45,10 @@ def run(options: Options) -> None:
     found = wheels_problems(robot)
     if found:
         raise located(project.robot_file, found)
-    from robocore.commands.workspace import check_wheels_packages
+    from robocore.commands.workspace import check_wheels_packages, debian_dependency_warnings
 
     check_wheels_packages(project)
-    for warning in robot_warnings(project.robot_file, robot, project.root):
+    for warning in [*robot_warnings(project.robot_file, robot, project.root), *debian_dependency_warnings(project)]:
         report.warn(warning.message, warning)
     by_host: dict[str, list[str]] = {}
     for comp in robot.components:

@@ -119,3 +119,25 @@ def check_wheels_packages(project: Project) -> None:
                 problems += exc.problems
     if problems:
         raise ConfigError(problems)
+
+
+def debian_dependency_warnings(project: Project) -> list[Problem]:
+    """On the debian base, one warning per package.xml dependency that nothing resolves (no rosdep there:
+    the base's ROS packages, the project's own packages or the component's apt_packages must); none on
+    other bases. Folders that do not exist yet are skipped."""
+    from robocore.config.model import BaseKind
+    from robocore.plan import debian_packages
+
+    robot = project.robot
+    if robot.base.kind is not BaseKind.debian:
+        return []
+    common = [project.root / (p.folder or p.name) for p in robot.common_packages if not p.repo]
+    common_manifests = [m for folder in common if folder.is_dir() for m in package_manifests(folder, project.root)]
+    workspaces = {c.name: project.root / c.folder for c in robot.components if c.folder and c.image is None}
+    manifests = {name: package_manifests(ws, project.root) for name, ws in workspaces.items() if ws.is_dir()}
+    provided = {m.name for m in common_manifests} | {p.name for p in robot.common_packages}
+    found = debian_packages.unresolved(common_manifests, provided=provided, apt=())
+    for comp in robot.components:
+        own = manifests.get(comp.name, [])
+        found += debian_packages.unresolved(own, provided=provided | {m.name for m in own}, apt=comp.apt_packages)
+    return [Problem(u.file, u.line, u.key, u.message, severity="warning") for u in found]

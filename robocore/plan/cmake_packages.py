@@ -104,6 +104,8 @@ class Manifest:
     name: str
     build_type: str
     cpp_client: tuple[str, str, int] | None = None
+    #: Every dependency: (tag, dependency, line, its ``condition`` attribute or ""), in file order.
+    depends: tuple[tuple[str, str, int, str], ...] = ()
 
     @property
     def uses_cmake(self) -> bool:
@@ -127,11 +129,13 @@ def read_manifest(text: str, path: str, *, has_cmakelists: bool) -> Manifest:
     try:
         parser.Parse(text, True)
     except xml.parsers.expat.ExpatError:
-        return Manifest(path=path, name="", build_type="unknown", cpp_client=found.cpp_client)
+        return Manifest(path=path, name="", build_type="unknown", cpp_client=found.cpp_client,
+                        depends=tuple(found.depends))
     build_type = found.build_type
     if not build_type:  # colcon's default is catkin; an ament_cmake buildtool with a CMakeLists.txt says otherwise
         build_type = "ament_cmake" if has_cmakelists and "ament_cmake" in found.buildtools else "catkin"
-    return Manifest(path=path, name=found.name, build_type=build_type, cpp_client=found.cpp_client)
+    return Manifest(path=path, name=found.name, build_type=build_type, cpp_client=found.cpp_client,
+                    depends=tuple(found.depends))
 
 
 class _Scan:
@@ -146,10 +150,13 @@ class _Scan:
         self.build_type = ""
         self.buildtools: list[str] = []
         self.cpp_client: tuple[str, str, int] | None = None
+        self.depends: list[tuple[str, str, int, str]] = []
+        self.condition = ""
 
     def start(self, tag: str, attrs: dict[str, str]) -> None:
         self.stack.append(tag)
         self.chunks = []
+        self.condition = attrs.get("condition", "")
         self.line = self.parser.CurrentLineNumber if self.parser else 0
 
     def text(self, data: str) -> None:
@@ -164,7 +171,9 @@ class _Scan:
             self.build_type = value
         elif tag == "buildtool_depend":
             self.buildtools.append(value)
-        elif tag in DEPEND_TAGS and value in CPP_CLIENT_LIBRARIES and self.cpp_client is None:
+        if tag in DEPEND_TAGS | {"buildtool_depend"} and value:
+            self.depends.append((tag, value, self.line, self.condition))
+        if tag in DEPEND_TAGS and value in CPP_CLIENT_LIBRARIES and self.cpp_client is None:
             self.cpp_client = (tag, value, self.line)
         self.stack.pop()
         self.chunks = []
