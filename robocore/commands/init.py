@@ -20,6 +20,7 @@ from typing import Any
 
 from robocore.adapters import origin
 from robocore.commands.reporting import Reporter
+from robocore.config.generations import base_problem
 from robocore.config.model import Arch, BaseKind, RosDistro, docker_arch
 from robocore.errors import UsageError
 from robocore.project import ProjectFolder
@@ -175,6 +176,9 @@ def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry
         data["ros_distro"] = value
     if (value := _choice(base, BaseKind, "--base")) is not None:
         data["base_kind"] = value
+    wanted = (data.get("ros_distro", RosDistro.jazzy.value), data.get("base_kind", BaseKind.official.value))
+    if (problem := base_problem(*wanted, setting="--base ")) is not None:
+        raise UsageError(f"--distro {wanted[0]} --base {wanted[1]}: {problem}")
     existing = check_destination(destination)
     if not defaults and not sys.stdin.isatty():
         raise UsageError(

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 
-from robocore.config.model import BaseKind, Robot
+from robocore.config.model import ROS1_DISTROS, BaseKind, Robot
 
 KeyPath = tuple[str | int, ...]
 Found = tuple[KeyPath, str]
@@ -26,16 +26,23 @@ def generation_problems(robot: Robot) -> Iterator[Found]:
     yield from _networks(robot)
 
 
+def base_problem(distro: str, kind: str, *, setting: str = "base.kind: ") -> str | None:
+    """Why base ``kind`` cannot serve ``distro`` (one line, naming ``setting`` as the thing to change), or None."""
+    ros1 = distro in ROS1_DISTROS
+    if kind == BaseKind.debian.value and distro not in DEBIAN_DISTROS:
+        other = "official" if ros1 else "wheels or official"
+        return (f"the debian base has Debian 12's ROS 1 packages (noetic generation) only, "
+                f"not ROS {1 if ros1 else 2} {distro}; use {setting}{other}")
+    if kind == BaseKind.wheels.value and ros1:
+        return (f"the wheels base has ROS 2 only (PyPI wheels), not ROS 1 {distro}; "
+                f"use {setting}debian (noetic) or official")
+    return None
+
+
 def _bases(robot: Robot) -> Iterator[Found]:
-    distro = robot.ros_distro.value
-    kind = robot.base.kind
-    if kind is BaseKind.debian and distro not in DEBIAN_DISTROS:
-        other = "official" if robot.ros_version == 1 else "wheels or official"
-        yield (("base", "kind"), f"the debian base has Debian 12's ROS 1 packages (noetic generation) only, "
-                                 f"not {robot.generation} {distro}; use base.kind: {other}")
-    if kind is BaseKind.wheels and robot.ros_version == 1:
-        yield (("base", "kind"), f"the wheels base has ROS 2 only (PyPI wheels), not ROS 1 {distro}; "
-                                 "use base.kind: debian (noetic) or official")
+    problem = base_problem(robot.ros_distro.value, robot.base.kind.value)
+    if problem is not None:
+        yield ("base", "kind"), problem
 
 
 def _discovery(robot: Robot) -> Iterator[Found]:
