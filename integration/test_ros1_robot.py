@@ -8,7 +8,7 @@
   ``run`` starts the master and restarts the nodes (they register only at start), and the graph is
   whole again;
 - a one-line edit of the C++ talker goes through ``build`` and ``run`` and is heard;
-- the project's own ``nox -s unit graph``: gtest and pytest package tests, then the ROS 1 graph tests
+- the project's own ``nox -s validate build unit graph``: gtest and pytest package tests, then the ROS 1 graph tests
   through robocore's pytest plugin;
 - two Docker-in-Docker hosts over ssh: the talker and the master on robot-a, the listener on robot-b;
   robot-b alone hears nothing (no master, no talker), then robot-b hears robot-a's talker.
@@ -164,15 +164,16 @@ def test_one_line_cpp_edit_is_built_and_heard(noetic: Path, run_robocore: Roboco
             "the edited C++ talker was never heard"
     finally:
         code.write_text(original)
+        run_robocore(noetic, "build", "--component", "talker", "--quiet")
 
 
-def test_the_noetic_projects_own_unit_and_graph_sessions_pass(noetic: Path) -> None:
+def test_the_noetic_projects_own_nox_sessions_pass(noetic: Path) -> None:
     """The project's gtest and pytest package tests through ``robocore test``, then its ROS 1 graph tests
     through robocore's pytest plugin (an isolated bring-up with its own master)."""
-    proc = run_nox(noetic, "unit", "graph")
+    proc = run_nox(noetic, "validate", "build", "unit", "graph")
     text = proc.stdout + proc.stderr
     assert proc.returncode == 0, output_tails(proc)
-    for session in ("unit", "graph"):
+    for session in ("validate", "build", "unit", "graph"):
         assert f"Session {session} was successful" in text, output_tails(proc)
     assert "demo_talker" in text and "demo_listener" in text, output_tails(proc)  # both packages' tests ran
 
