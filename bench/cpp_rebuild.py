@@ -3,8 +3,8 @@
 On the template's noetic project on the debian base (``robocore init --distro noetic --base debian``,
 built once first), ``robocore build --component talker``:
 
-1. clean, ccache cold: the talker's build folder and the ccache folder removed, ``build --full``;
-2. clean, ccache warm: the build folder removed, ``build --full`` (what ``--full`` after a clean costs);
+1. clean, ccache cold: the talker's build and install trees and the ccache folder removed, ``build``;
+2. clean, ccache warm: the build and install trees removed, ``build`` (ccache outlives them);
 3. one-line edit of the roscpp talker's ``talker.cpp``: ``build`` (incremental);
 4. no change: ``build`` (nothing to do).
 
@@ -29,17 +29,18 @@ def robocore(project: Path | None, *args: str) -> None:
     subprocess.run(argv, check=True, capture_output=True, text=True)
 
 
-def compiled_objects(project: Path) -> int:
-    """``Building CXX object`` lines of the talker package's last colcon log."""
-    logs = project / ".robocore" / "build" / "talker" / "log" / "latest_build" / "demo_talker"
-    text = "".join(p.read_text(errors="replace") for p in logs.glob("stdout*.log"))
-    return text.count("Building CXX object")
+def compiled_objects(project: Path, since: float) -> int:
+    """``Building CXX object`` lines of the talker package's colcon log, if colcon ran after ``since``."""
+    log = project / ".robocore" / "build" / "talker" / "log" / "latest_build" / "demo_talker" / "stdout_stderr.log"
+    if not log.is_file() or log.stat().st_mtime < since:
+        return 0  # colcon did not run
+    return log.read_text(errors="replace").count("Building CXX object")
 
 
 def timed_build(project: Path, *flags: str) -> tuple[float, int]:
-    started = time.perf_counter()
+    wall, started = time.time(), time.perf_counter()
     robocore(project, "build", "--component", "talker", *flags)
-    return time.perf_counter() - started, compiled_objects(project)
+    return time.perf_counter() - started, compiled_objects(project, wall)
 
 
 def main() -> int:
@@ -56,14 +57,19 @@ def main() -> int:
     try:
         for step in ("prepare-base", "stage", "build"):
             robocore(project, step)
-        build_dir = project / ".robocore" / "build" / "talker" / "build"
+        out = project / ".robocore" / "build" / "talker"
         code = next(p for p in (project / "components" / "talker").rglob("talker.cpp"))
         rows = []
-        shutil.rmtree(build_dir, ignore_errors=True)
+
+        def clean() -> None:  # no build or install tree: the next build is a first build
+            for tree in ("build", "install"):
+                shutil.rmtree(out / tree, ignore_errors=True)
+
+        clean()
         shutil.rmtree(project / ".robocore" / "ccache", ignore_errors=True)
-        rows.append(("clean, ccache cold (build --full)", *timed_build(project, "--full")))
-        shutil.rmtree(build_dir, ignore_errors=True)
-        rows.append(("clean, ccache warm (build --full)", *timed_build(project, "--full")))
+        rows.append(("clean, ccache cold", *timed_build(project)))
+        clean()
+        rows.append(("clean, ccache warm", *timed_build(project)))
         original = code.read_text()
         try:
             code.write_text(original.replace("rate(2.0)", "rate(2.5)", 1))
