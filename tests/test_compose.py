@@ -2,20 +2,18 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
 import pytest
 import yaml
+from golden_files import check_golden
 
 from robocore.commands.composefiles import write_compose_files
 from robocore.config.model import Robot
 from robocore.plan import compose, containers
 from robocore.plan.discovery import fastdds
 from robocore.project import Project
-
-GOLDEN = Path(__file__).parent / "golden" / "compose"
 
 CASES: dict[str, dict[str, Any]] = {
     "jazzy-two-hosts": {
@@ -56,20 +54,11 @@ def make(case: str, root: Path = Path("/srv/myrobot")) -> Project:
     return Project(root=root, robot=Robot.model_validate(CASES[case]))
 
 
-def check_golden(name: str, text: str) -> None:
-    path = GOLDEN / name
-    if os.environ.get("UPDATE_GOLDEN"):
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text)
-    assert path.exists(), f"missing golden file {path}; run with UPDATE_GOLDEN=1"
-    assert text == path.read_text(), f"{name} differs from its golden file (UPDATE_GOLDEN=1 rewrites it)"
-
-
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_golden(case: str) -> None:
     project = make(case)
     for host in project.robot.hosts:
-        check_golden(f"{case}-{host.name}.yaml", compose.render(project, host.name))
+        check_golden(f"compose/{case}-{host.name}.yaml", compose.render(project, host.name))
 
 
 @pytest.mark.parametrize("case", sorted(CASES))

@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
 import pytest
+from golden_files import check_golden
 
 from robocore.config.model import Robot
 from robocore.plan import dockerfiles
-
-GOLDEN = Path(__file__).parent / "golden"
 
 
 def robot(**overrides: Any) -> Robot:
@@ -33,14 +31,6 @@ def robot(**overrides: Any) -> Robot:
     }
     data.update(overrides)
     return Robot.model_validate(data)
-
-
-def check_golden(name: str, text: str) -> None:
-    path = GOLDEN / name
-    if os.environ.get("UPDATE_GOLDEN"):
-        path.write_text(text)
-    assert path.exists(), f"missing golden file {path}; run with UPDATE_GOLDEN=1"
-    assert text == path.read_text(), f"{name} differs from its golden file (UPDATE_GOLDEN=1 to accept)"
 
 
 def test_wheels_base_golden() -> None:

@@ -3,12 +3,12 @@ and golden base Dockerfiles of ROS 1 robots (set UPDATE_GOLDEN=1 to rewrite the 
 
 from __future__ import annotations
 
-import os
 import subprocess
 from pathlib import Path
 from typing import Any
 
 import pytest
+from golden_files import check_golden
 
 from robocore import resources
 from robocore.config.generations import generation_problems
@@ -16,8 +16,6 @@ from robocore.config.loader import parse_robot_text
 from robocore.config.model import Robot
 from robocore.errors import ConfigError
 from robocore.plan import cmake_packages, dockerfiles
-
-GOLDEN = Path(__file__).parent / "golden"
 
 BASE = """\
 ros_distro: noetic
@@ -286,14 +284,6 @@ def test_the_official_base_of_a_ros1_distro_gets_colcon_from_apt(distro: str) ->
 
 
 # ------------------------------------------------------------------ golden base Dockerfiles
-
-
-def check_golden(name: str, text: str) -> None:
-    path = GOLDEN / name
-    if os.environ.get("UPDATE_GOLDEN"):
-        path.write_text(text)
-    assert path.exists(), f"missing golden file {path}; run with UPDATE_GOLDEN=1"
-    assert text == path.read_text(), f"{name} differs from its golden file (UPDATE_GOLDEN=1 to accept)"
 
 
 def test_debian_noetic_base_golden() -> None:
