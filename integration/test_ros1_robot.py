@@ -11,7 +11,8 @@
 - the project's own ``nox -s validate build unit graph``: gtest and pytest package tests, then the ROS 1 graph tests
   through robocore's pytest plugin;
 - two Docker-in-Docker hosts over ssh: the talker and the master on robot-a, the listener on robot-b;
-  robot-b alone hears nothing (no master, no talker), then robot-b hears robot-a's talker.
+  robot-b alone hears nothing (no master, no talker), then robot-b hears robot-a's talker; after the
+  master stopped, ``run`` restarts it and the nodes of both hosts, and robot-b hears again.
 """
 
 from __future__ import annotations
@@ -216,5 +217,17 @@ def test_two_hosts_one_ros1_graph(noetic_fleet: tuple[RobotFleet, Path], run_rob
     assert wait_for(heard, 90, 1), "the listener on robot-b never heard the talker on robot-a"
     env = fleet.client(1).containers.get(listener).attrs["Config"]["Env"]
     assert f"ROS_IP={fleet.hosts[1].ip}" in env and f"ROS_MASTER_URI=http://{fleet.hosts[0].ip}:11311" in env, env
+    graph = _graph(_status(run_robocore, root))
+    assert {"/talker", "/listener"} <= set(graph["nodes"] or []), graph
+
+    # the master stopped behind robocore's back on robot-a: run starts it first, then restarts the nodes on
+    # both hosts (they register only when they start), and the graph is whole again
+    fleet.client(0).containers.get(f"{NAME}-discovery-0").stop(timeout=5)
+    done = json.loads(run_robocore(root, "run", "--json").stdout)
+    verbs = {(r["host"], a["name"]): (a["verb"], a["reason"]) for r in done["results"] for a in r["actions"]}
+    assert verbs[("robot-a", f"{NAME}-discovery-0")][0] == "start", verbs
+    for key in (("robot-a", f"{NAME}-talker"), ("robot-b", listener)):
+        assert verbs[key][0] == "replace" and "register" in verbs[key][1], verbs
+    assert wait_for(heard, 90, 1), "robot-b's listener never heard the talker again after the master restarted"
     graph = _graph(_status(run_robocore, root))
     assert {"/talker", "/listener"} <= set(graph["nodes"] or []), graph

@@ -8,9 +8,9 @@ from typing import Any
 
 import pytest
 
-from robocore.commands.run import Action, Existing, decide
 from robocore.config.model import Robot, read_only_project_path
 from robocore.plan import containers, naming
+from robocore.plan.actions import Action, Existing, decide
 from robocore.plan.containers import ContainerSpec, component_spec, discovery_spec, docker_ports, host_specs
 from robocore.plan.discovery import fastdds as dds
 

@@ -24,6 +24,7 @@ from robocore.commands.state import history, record_run, with_local_build, with_
 from robocore.config.model import Host
 from robocore.errors import DockerError, GroupError, UsageError
 from robocore.plan import discovery, naming
+from robocore.plan.actions import Action, Existing, decide, servers_started, with_node_restarts
 from robocore.plan.containers import ROLE_DISCOVERY, ContainerSpec, host_specs, state_volumes
 from robocore.project import Project
 
@@ -34,67 +35,6 @@ if TYPE_CHECKING:
 UNKNOWN = "unknown"
 #: Note of a host ``run`` leaves alone: nothing planned there, and no run of this project ever reached it.
 NOT_CONTACTED = "nothing planned, never deployed here: not contacted"
-
-
-# --------------------------------------------------------------------------- pure decisions
-
-
-@dataclass(frozen=True)
-class Existing:
-    """A managed container found on a host."""
-
-    name: str
-    spec_hash: str | None
-    image_id: str
-    running: bool
-    role: str
-
-
-@dataclass(frozen=True)
-class Action:
-    """One thing ``run`` does (or would do) to one container."""
-
-    verb: str  # create | replace | start | keep | remove
-    name: str
-    reason: str = ""
-
-
-def decide(specs: Sequence[ContainerSpec], existing: Sequence[Existing], image_ids: dict[str, str]) -> list[Action]:
-    """What to do on one host: obsolete containers are removed first, then specs in order.
-
-    ``image_ids`` maps each spec's image reference to the image ID it should run (a spec
-    whose image is not in it is compared by spec hash only).
-    """
-    found = {e.name: e for e in existing}
-    planned = {s.name for s in specs}
-    actions = [Action("remove", e.name, "no longer planned on this host") for e in existing if e.name not in planned]
-    for spec in specs:
-        current = found.get(spec.name)
-        wanted_image = image_ids.get(spec.image)
-        if current is None:
-            actions.append(Action("create", spec.name))
-        elif current.spec_hash != spec.spec_hash:
-            actions.append(Action("replace", spec.name, "configuration changed"))
-        elif wanted_image is not None and current.image_id != wanted_image:
-            actions.append(Action("replace", spec.name, "new image"))
-        elif not current.running:
-            actions.append(Action("start", spec.name, "was stopped"))
-        else:
-            actions.append(Action("keep", spec.name))
-    return actions
-
-
-def with_node_restarts(actions: Sequence[Action], specs: Sequence[ContainerSpec], *,
-                       register_once: bool) -> list[Action]:
-    """``actions`` with every kept component replaced when a discovery server of the host (re)starts and the
-    kind's nodes register with it only when they start (``register_once``: the ROS master forgets its
-    nodes when it restarts, and they never tell it again)."""
-    servers = {s.name for s in specs if s.role == ROLE_DISCOVERY}
-    restarts = any(a.name in servers and a.verb in ("create", "replace", "start") for a in actions)
-    if not (register_once and restarts):
-        return list(actions)
-    reason = "the discovery server (re)starts: its nodes register with it only when they start"
-    return [Action("replace", a.name, reason) if a.verb == "keep" and a.name not in servers else a for a in actions]
 
 
 # --------------------------------------------------------------------------- run
@@ -183,9 +123,10 @@ def _image_ids(
 
 
 def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *, dry_run: bool,
-                report: Reporter) -> HostOutcome:
+                report: Reporter, servers_restarted: bool = False) -> HostOutcome:
     """Bring one host to its planned containers (or, with ``dry_run``, say what that would take from what
-    is known here: the host is not contacted, so what it runs now is unknown)."""
+    is known here: the host is not contacted, so what it runs now is unknown). ``servers_restarted``: a
+    discovery server on another host was (re)started earlier in this run."""
     outcome = HostOutcome(host.name)
     if dry_run:
         try:
@@ -211,7 +152,7 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
         _check_name_conflicts(client, specs, containers, host)
         kind = discovery.for_robot(project.robot)
         actions = with_node_restarts(decide(specs, [_existing(c) for c in containers.values()], image_ids), specs,
-                                     register_once=kind.nodes_register_once)
+                                     register_once=kind.nodes_register_once, elsewhere=servers_restarted)
         outcome.actions = actions
         if dry_run:
             return outcome
@@ -320,7 +261,7 @@ def run(options: Options, *, host: str | None, tag: str | None) -> None:
     if not options.dry_run:
         write_compose_files(project, tag=tag)
 
-    def work(h: Host) -> HostOutcome:
+    def work(h: Host, servers_restarted: bool = False) -> HostOutcome:
         # a newly synced release restarts its component; the history is what rollback returns to
         specs = with_synced_release(project, h, host_specs(project, h.name, tag=tag))
         if not specs and not host and not history(project, h.name):
@@ -330,13 +271,27 @@ def run(options: Options, *, host: str | None, tag: str | None) -> None:
         from robocore.commands.displays import prepare_host_displays  # cookies of gui: true components
 
         display_notes = prepare_host_displays(project, h, dry_run=options.dry_run)
-        outcome = deploy_host(project, h, specs, dry_run=options.dry_run, report=options.report)
+        outcome = deploy_host(project, h, specs, dry_run=options.dry_run, report=options.report,
+                              servers_restarted=servers_restarted)
         outcome.notes += display_notes
         if not options.dry_run:
             record_run(project, h, tag)
         return outcome
 
-    results, failures = for_each_host(hosts, work)
+    kind = discovery.for_robot(project.robot)
+    if kind.nodes_register_once:
+        # the servers' hosts first: nodes elsewhere start once their server serves, and restart if it restarted
+        server_hosts = {s.host for s in kind.servers()}
+        results, failures = for_each_host([h for h in hosts if h.name in server_hosts], work)
+        restarted = any(servers_started(out.actions, [spec for spec in host_specs(project, name, tag=tag)
+                                                      if spec.role == ROLE_DISCOVERY])
+                        for name, out in results.items())
+        rest, rest_failures = for_each_host([h for h in hosts if h.name not in server_hosts],
+                                            lambda h: work(h, servers_restarted=restarted))
+        results.update(rest)
+        failures.update(rest_failures)
+    else:
+        results, failures = for_each_host(hosts, work)
     outcomes = [results.get(h.name) or HostOutcome(h.name, ok=False, error=failures[h.name].lines()[0])
                 for h in hosts]
     options.report.add(*outcomes)
