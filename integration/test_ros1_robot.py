@@ -6,13 +6,15 @@
   pointed at the robot's master hears the talker;
 - the master stopped: ``status`` says so, connected nodes keep talking, a new node hears nothing;
   ``run`` starts the master and restarts the nodes (they register only at start), and the graph is
-  whole again;
+  whole again; the master restarted behind robocore's back (``docker restart``): a new node hears
+  nothing until ``run`` restarts the nodes that started before it;
 - a one-line edit of the C++ talker goes through ``build`` and ``run`` and is heard;
 - the project's own ``nox -s validate build unit graph``: gtest and pytest package tests, then the ROS 1 graph tests
   through robocore's pytest plugin;
 - two Docker-in-Docker hosts over ssh: the talker and the master on robot-a, the listener on robot-b;
   robot-b alone hears nothing (no master, no talker), then robot-b hears robot-a's talker; after the
-  master stopped, ``run`` restarts it and the nodes of both hosts, and robot-b hears again.
+  master stopped, ``run`` restarts it and the nodes of both hosts, and robot-b hears again; after the
+  master restarted behind robocore's back, ``run`` restarts the nodes that started before it.
 """
 
 from __future__ import annotations
@@ -152,6 +154,18 @@ def test_stopped_master_keeps_connections_and_run_brings_the_graph_back(noetic: 
     again = json.loads(run_robocore(noetic, "run", "--json").stdout)
     assert {a["verb"] for r in again["results"] for a in r["actions"]} == {"keep"}, again
 
+    # the master restarted behind robocore's back (as Docker's restart policy does after a crash): it runs,
+    # but knows no node; run keeps it and restarts the nodes that started before it
+    docker_client.containers.get(f"{NAME}-discovery-0").restart(timeout=5)
+    assert TALKER_TEXT not in _probe(docker_client, tracked_containers, _master_uri(noetic), seconds=10)
+    done = json.loads(run_robocore(noetic, "run", "--json").stdout)
+    verbs = {a["name"]: (a["verb"], a["reason"]) for r in done["results"] for a in r["actions"]}
+    assert verbs[f"{NAME}-discovery-0"][0] == "keep", verbs
+    for component in ("talker", "listener"):
+        verb, reason = verbs[f"{NAME}-{component}"]
+        assert verb == "replace" and "before the discovery server's last start" in reason, verbs
+    assert TALKER_TEXT in _probe(docker_client, tracked_containers, _master_uri(noetic))
+
 
 def test_one_line_cpp_edit_is_built_and_heard(noetic: Path, run_robocore: RobocoreCli, docker_client: Any) -> None:
     [code] = (noetic / "components" / "talker").rglob("greeting.h")  # the text talker.cpp publishes
@@ -231,3 +245,12 @@ def test_two_hosts_one_ros1_graph(noetic_fleet: tuple[RobotFleet, Path], run_rob
     assert wait_for(heard, 90, 1), "robot-b's listener never heard the talker again after the master restarted"
     graph = _graph(_status(run_robocore, root))
     assert {"/talker", "/listener"} <= set(graph["nodes"] or []), graph
+
+    # restarted behind robocore's back on robot-a: run reads its start there and restarts robot-b's listener
+    fleet.client(0).containers.get(f"{NAME}-discovery-0").restart(timeout=5)
+    done = json.loads(run_robocore(root, "run", "--json").stdout)
+    verbs = {(r["host"], a["name"]): (a["verb"], a["reason"]) for r in done["results"] for a in r["actions"]}
+    assert verbs[("robot-a", f"{NAME}-discovery-0")][0] == "keep", verbs
+    for key in (("robot-a", f"{NAME}-talker"), ("robot-b", listener)):
+        assert verbs[key][0] == "replace" and "before the discovery server's last start" in verbs[key][1], verbs
+    assert wait_for(heard, 90, 1), "robot-b's listener never heard the talker after the master's restart"

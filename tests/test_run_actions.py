@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from robocore.plan.actions import Action, servers_started, with_node_restarts
+from datetime import datetime, timezone
+
+from robocore.plan.actions import Action, Existing, docker_time, servers_started, with_node_restarts
 from robocore.plan.containers import ROLE_COMPONENT, ROLE_DISCOVERY, ContainerSpec
 
 
@@ -41,3 +43,48 @@ def test_a_master_restarted_on_another_host_restarts_this_hosts_nodes() -> None:
     done = with_node_restarts(actions, here, register_once=True, elsewhere=True)
     assert verbs(done) == {"p-listener": "replace", "p-old": "remove"}
     assert with_node_restarts(actions, here, register_once=True, elsewhere=False) == actions
+
+
+def existing(name: str, role: str, started_at: str, running: bool = True) -> Existing:
+    return Existing(name=name, spec_hash="h", image_id="i", running=running, role=role, started_at=started_at)
+
+
+KEPT = [Action("keep", "p-discovery-0"), Action("keep", "p-talker"), Action("keep", "p-listener")]
+MASTER_AT = "2026-11-25T10:00:05.123456789Z"
+
+
+def test_nodes_started_before_the_masters_last_start_are_replaced() -> None:
+    """The master restarted behind robocore's back (Docker's restart policy, docker restart): it is kept, and
+    the nodes it forgot are replaced; a node that started after it is registered and kept."""
+    found = [existing("p-discovery-0", ROLE_DISCOVERY, MASTER_AT),
+             existing("p-talker", ROLE_COMPONENT, "2026-11-25T09:59:00Z"),
+             existing("p-listener", ROLE_COMPONENT, "2026-11-25T10:00:05.400Z")]
+    done = with_node_restarts(KEPT, SPECS, register_once=True, existing=found)
+    assert verbs(done) == {"p-discovery-0": "keep", "p-talker": "replace", "p-listener": "keep"}
+    assert "before the discovery server's last start" in done[1].reason
+    assert with_node_restarts(KEPT, SPECS, register_once=False, existing=found) == KEPT  # control: Fast DDS
+
+
+def test_a_stopped_master_or_an_unknown_start_dates_nothing() -> None:
+    old = existing("p-talker", ROLE_COMPONENT, "2026-11-25T09:00:00Z")
+    stopped = [existing("p-discovery-0", ROLE_DISCOVERY, MASTER_AT, running=False), old]
+    assert with_node_restarts(KEPT, SPECS, register_once=True, existing=stopped) == KEPT
+    unknown = [existing("p-discovery-0", ROLE_DISCOVERY, ""), old]
+    assert with_node_restarts(KEPT, SPECS, register_once=True, existing=unknown) == KEPT
+
+
+def test_another_hosts_master_dates_this_hosts_nodes() -> None:
+    here = [spec("p-listener", ROLE_COMPONENT)]
+    found = [existing("p-listener", ROLE_COMPONENT, "2026-11-25T09:59:59Z")]
+    master = docker_time(MASTER_AT)
+    assert verbs(with_node_restarts([Action("keep", "p-listener")], here, register_once=True, existing=found,
+                                    server_start=master)) == {"p-listener": "replace"}
+    later = [existing("p-listener", ROLE_COMPONENT, "2026-11-25T10:00:06Z")]
+    assert verbs(with_node_restarts([Action("keep", "p-listener")], here, register_once=True, existing=later,
+                                    server_start=master)) == {"p-listener": "keep"}
+
+
+def test_docker_times() -> None:
+    assert docker_time(MASTER_AT) == datetime(2026, 11, 25, 10, 0, 5, 123456, tzinfo=timezone.utc)
+    assert docker_time("2026-11-25T10:00:05Z") == datetime(2026, 11, 25, 10, 0, 5, tzinfo=timezone.utc)
+    assert docker_time("") is None and docker_time("yesterday") is None

@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -22,9 +23,9 @@ from robocore.commands.hosts import connect, for_each_host, managed_containers, 
 from robocore.commands.reporting import Reporter
 from robocore.commands.state import history, record_run, with_local_build, with_synced_release
 from robocore.config.model import Host
-from robocore.errors import DockerError, GroupError, UsageError
+from robocore.errors import DockerError, GroupError, RobocoreError, UsageError
 from robocore.plan import discovery, naming
-from robocore.plan.actions import Action, Existing, decide, servers_started, with_node_restarts
+from robocore.plan.actions import Action, Existing, decide, docker_time, servers_started, with_node_restarts
 from robocore.plan.containers import ROLE_DISCOVERY, ContainerSpec, host_specs, state_volumes
 from robocore.project import Project
 
@@ -63,6 +64,7 @@ def _existing(container: Any) -> Existing:
         image_id=container.attrs.get("Image", ""),
         running=container.status == "running",
         role=container.labels.get(naming.LABEL_ROLE, ""),
+        started_at=str(container.attrs.get("State", {}).get("StartedAt", "")),
     )
 
 
@@ -123,10 +125,12 @@ def _image_ids(
 
 
 def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *, dry_run: bool,
-                report: Reporter, servers_restarted: bool = False) -> HostOutcome:
+                report: Reporter, servers_restarted: bool = False,
+                server_start: datetime | None = None) -> HostOutcome:
     """Bring one host to its planned containers (or, with ``dry_run``, say what that would take from what
     is known here: the host is not contacted, so what it runs now is unknown). ``servers_restarted``: a
-    discovery server on another host was (re)started earlier in this run."""
+    discovery server on another host was (re)started earlier in this run; ``server_start``: when the
+    discovery server on another host last started."""
     outcome = HostOutcome(host.name)
     if dry_run:
         try:
@@ -151,8 +155,9 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
         containers = {c.name: c for c in managed_containers(client, project.name)}
         _check_name_conflicts(client, specs, containers, host)
         kind = discovery.for_robot(project.robot)
-        actions = with_node_restarts(decide(specs, [_existing(c) for c in containers.values()], image_ids), specs,
-                                     register_once=kind.nodes_register_once, elsewhere=servers_restarted)
+        existing = [_existing(c) for c in containers.values()]
+        actions = with_node_restarts(decide(specs, existing, image_ids), specs, register_once=kind.nodes_register_once,
+                                     elsewhere=servers_restarted, existing=existing, server_start=server_start)
         outcome.actions = actions
         if dry_run:
             return outcome
@@ -261,7 +266,7 @@ def run(options: Options, *, host: str | None, tag: str | None) -> None:
     if not options.dry_run:
         write_compose_files(project, tag=tag)
 
-    def work(h: Host, servers_restarted: bool = False) -> HostOutcome:
+    def work(h: Host, servers_restarted: bool = False, server_start: datetime | None = None) -> HostOutcome:
         # a newly synced release restarts its component; the history is what rollback returns to
         specs = with_synced_release(project, h, host_specs(project, h.name, tag=tag))
         if not specs and not host and not history(project, h.name):
@@ -272,7 +277,7 @@ def run(options: Options, *, host: str | None, tag: str | None) -> None:
 
         display_notes = prepare_host_displays(project, h, dry_run=options.dry_run)
         outcome = deploy_host(project, h, specs, dry_run=options.dry_run, report=options.report,
-                              servers_restarted=servers_restarted)
+                              servers_restarted=servers_restarted, server_start=server_start)
         outcome.notes += display_notes
         if not options.dry_run:
             record_run(project, h, tag)
@@ -286,8 +291,10 @@ def run(options: Options, *, host: str | None, tag: str | None) -> None:
         restarted = any(servers_started(out.actions, [spec for spec in host_specs(project, name, tag=tag)
                                                       if spec.role == ROLE_DISCOVERY])
                         for name, out in results.items())
-        rest, rest_failures = for_each_host([h for h in hosts if h.name not in server_hosts],
-                                            lambda h: work(h, servers_restarted=restarted))
+        others = [h for h in hosts if h.name not in server_hosts]
+        started = None if restarted or not others or options.dry_run else _servers_started_at(project, kind)
+        rest, rest_failures = for_each_host(others, lambda h: work(h, servers_restarted=restarted,
+                                                                   server_start=started))
         results.update(rest)
         failures.update(rest_failures)
     else:
@@ -298,6 +305,29 @@ def run(options: Options, *, host: str | None, tag: str | None) -> None:
     _report(options.report, outcomes, dry_run=options.dry_run)
     if failures:
         raise GroupError(failures, list(results))
+
+
+def _servers_started_at(project: Project, kind: discovery.Discovery) -> datetime | None:
+    """When the robot's running discovery servers last started (each read on its own host), None when none
+    runs or a host cannot be asked: nodes elsewhere that started before it are not registered with it."""
+    from docker.errors import DockerException
+
+    times = []
+    for server in kind.servers():
+        try:
+            client = connect(project, project.robot.host(server.host))
+        except RobocoreError:
+            continue
+        try:
+            container = client.containers.get(naming.discovery_container_name(project.name, server.index))
+            if container.status == "running":
+                times.append(docker_time(str(container.attrs.get("State", {}).get("StartedAt", ""))))
+        except (DockerException, OSError):  # a server that cannot be read dates nothing
+            continue
+        finally:
+            client.close()
+    known = [t for t in times if t is not None]
+    return max(known) if known else None
 
 
 def _report(report: Reporter, outcomes: Sequence[HostOutcome], *, dry_run: bool) -> None:

@@ -7,8 +7,10 @@ kind whose nodes register only when they start (the ROS 1 master) needs after it
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
+from datetime import datetime
 
 from robocore.plan.containers import ROLE_DISCOVERY, ContainerSpec
 
@@ -22,6 +24,8 @@ class Existing:
     image_id: str
     running: bool
     role: str
+    #: When the container last started (Docker's ``State.StartedAt``, RFC 3339), "" when unknown.
+    started_at: str = ""
 
 
 @dataclass(frozen=True)
@@ -68,14 +72,53 @@ def servers_started(actions: Sequence[Action], specs: Sequence[ContainerSpec]) -
     return any(a.name in servers and a.verb in STARTS for a in actions)
 
 
+_FRACTION = re.compile(r"(\.\d{6})\d*")
+
+
+def docker_time(text: str) -> datetime | None:
+    """A Docker timestamp (RFC 3339, nanoseconds, ``Z``) as an aware datetime; None when empty or unreadable
+    (Docker's ``0001-01-01T00:00:00Z`` of a container that never started is read as it is)."""
+    try:
+        return datetime.fromisoformat(_FRACTION.sub(r"\1", text.strip()).replace("Z", "+00:00"))
+    except ValueError:
+        return None
+
+
+def servers_last_started(existing: Sequence[Existing]) -> datetime | None:
+    """The latest start of the running discovery servers among ``existing``, None when none runs or it is unknown."""
+    times = [docker_time(e.started_at) for e in existing if e.role == ROLE_DISCOVERY and e.running]
+    known = [t for t in times if t is not None]
+    return max(known) if known else None
+
+
 def with_node_restarts(actions: Sequence[Action], specs: Sequence[ContainerSpec], *, register_once: bool,
-                       elsewhere: bool = False) -> list[Action]:
-    """``actions`` with every kept component replaced when a discovery server (re)starts, on this host or
-    ``elsewhere`` (on another host, earlier in the same run), and the kind's nodes register with it only
-    when they start (``register_once``: the ROS master forgets its nodes when it restarts, and they never
-    tell it again)."""
+                       elsewhere: bool = False, existing: Sequence[Existing] = (),
+                       server_start: datetime | None = None) -> list[Action]:
+    """``actions`` with the kept components replaced that a discovery server does not know, when the kind's
+    nodes register with it only when they start (``register_once``: the ROS master forgets its nodes when
+    it restarts, and they never tell it again).
+
+    Every kept component is replaced when a server (re)starts in this run, on this host or ``elsewhere``
+    (another host, earlier in the same run); otherwise those that started before the server's last start
+    (a server restarted behind robocore's back: Docker's restart policy, ``docker restart``), from
+    ``existing`` (this host's containers) and ``server_start`` (a server on another host).
+    """
     servers = {s.name for s in specs if s.role == ROLE_DISCOVERY}
-    if not (register_once and (elsewhere or servers_started(actions, specs))):
+    if not register_once:
         return list(actions)
-    reason = "the discovery server (re)starts: its nodes register with it only when they start"
-    return [Action("replace", a.name, reason) if a.verb == "keep" and a.name not in servers else a for a in actions]
+    if elsewhere or servers_started(actions, specs):
+        reason = "the discovery server (re)starts: its nodes register with it only when they start"
+        return [Action("replace", a.name, reason) if a.verb == "keep" and a.name not in servers else a
+                for a in actions]
+    starts = [t for t in (servers_last_started(existing), server_start) if t is not None]
+    if not starts:
+        return list(actions)
+    last = max(starts)
+    started = {e.name: docker_time(e.started_at) for e in existing}
+    reason = "started before the discovery server's last start: not registered with it"
+    out = []
+    for action in actions:
+        when = started.get(action.name)
+        stale = action.verb == "keep" and action.name not in servers and when is not None and when < last
+        out.append(Action("replace", action.name, reason) if stale else action)
+    return out
