@@ -6,8 +6,8 @@
   pointed at the robot's master hears the talker;
 - the master stopped: ``status`` says so, connected nodes keep talking, a new node hears nothing;
   ``run`` starts the master and restarts the nodes (they register only at start), and the graph is
-  whole again; the master restarted behind robocore's back (``docker restart``): a new node hears
-  nothing until ``run`` restarts the nodes that started before it;
+  whole again; the master restarted behind robocore's back (``docker restart``): ``status`` names the
+  nodes it does not know, and a new node hears nothing until ``run`` restarts them;
 - a one-line edit of the C++ talker goes through ``build`` and ``run`` and is heard;
 - the project's own ``nox -s validate build unit graph``: gtest and pytest package tests, then the ROS 1 graph tests
   through robocore's pytest plugin;
@@ -158,6 +158,9 @@ def test_stopped_master_keeps_connections_and_run_brings_the_graph_back(noetic: 
     # but knows no node; run keeps it and restarts the nodes that started before it
     docker_client.containers.get(f"{NAME}-discovery-0").restart(timeout=5)
     assert TALKER_TEXT not in _probe(docker_client, tracked_containers, _master_uri(noetic), seconds=10)
+    graph = _graph(_status(run_robocore, noetic))
+    assert sorted(graph["not_registered"]) == ["listener", "talker"], graph
+    assert not {"/talker", "/listener"} & set(graph["nodes"] or []), graph
     done = json.loads(run_robocore(noetic, "run", "--json").stdout)
     verbs = {a["name"]: (a["verb"], a["reason"]) for r in done["results"] for a in r["actions"]}
     assert verbs[f"{NAME}-discovery-0"][0] == "keep", verbs
@@ -165,6 +168,7 @@ def test_stopped_master_keeps_connections_and_run_brings_the_graph_back(noetic: 
         verb, reason = verbs[f"{NAME}-{component}"]
         assert verb == "replace" and "before the discovery server's last start" in reason, verbs
     assert TALKER_TEXT in _probe(docker_client, tracked_containers, _master_uri(noetic))
+    assert _graph(_status(run_robocore, noetic))["not_registered"] == []
 
 
 def test_one_line_cpp_edit_is_built_and_heard(noetic: Path, run_robocore: RobocoreCli, docker_client: Any) -> None:

@@ -332,11 +332,11 @@ def test_debian_setup_gives_a_clean_shell_the_ros1_variables(tmp_path: Path) -> 
     assert env["ROS_DISTRO"] == "Debian"
 
 
-def test_debian_setup_keeps_what_the_environment_already_says(tmp_path: Path) -> None:
+def test_debian_setup_keeps_what_the_environment_already_says_first(tmp_path: Path) -> None:
     env = source_setup(tmp_path, {"ROS_PACKAGE_PATH": "/ws/src", "CMAKE_PREFIX_PATH": "/opt/robocore/common",
                                   "ROS_ROOT": "/elsewhere/ros"})
-    assert env["ROS_PACKAGE_PATH"] == "/ws/src"
-    assert env["CMAKE_PREFIX_PATH"] == "/opt/robocore/common"
+    assert env["ROS_PACKAGE_PATH"] == "/ws/src:/usr/share"  # Debian's packages stay findable, after
+    assert env["CMAKE_PREFIX_PATH"] == "/opt/robocore/common:/usr"
     assert env["ROS_ROOT"] == "/elsewhere/ros"
     assert env["ROS_VERSION"] == "1"  # the generation is this image's whatever the caller said
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from datetime import datetime, timezone
 
+from robocore.commands.observe import Row, not_registered
 from robocore.plan.actions import Action, Existing, docker_time, servers_started, with_node_restarts
 from robocore.plan.containers import ROLE_COMPONENT, ROLE_DISCOVERY, ContainerSpec
 
@@ -88,3 +89,16 @@ def test_docker_times() -> None:
     assert docker_time(MASTER_AT) == datetime(2026, 11, 25, 10, 0, 5, 123456, tzinfo=timezone.utc)
     assert docker_time("2026-11-25T10:00:05Z") == datetime(2026, 11, 25, 10, 0, 5, tzinfo=timezone.utc)
     assert docker_time("") is None and docker_time("yesterday") is None
+
+
+def row(name: str, started_at: str | None) -> Row:
+    return Row(component=name, host="a", state="running" if started_at else "exited", uptime="-", restarts=0,
+               image="i", started_at=started_at)
+
+
+def test_status_names_the_nodes_a_restarted_master_does_not_know() -> None:
+    rows = [row("discovery-0", MASTER_AT), row("talker", "2026-11-25T09:59:00Z"),
+            row("listener", "2026-11-25T10:00:06Z"), row("camera", None)]
+    assert not_registered(rows, ["discovery-0"]) == ["talker"]
+    # a stopped master dates nothing (status says it is down instead)
+    assert not_registered([row("discovery-0", None), *rows[1:]], ["discovery-0"]) == []

@@ -8,8 +8,8 @@ import shlex
 import subprocess
 import sys
 import threading
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -48,6 +48,21 @@ class Row:
     uptime: str
     restarts: int
     image: str
+    #: When the container last started (Docker's RFC 3339 ``State.StartedAt``), None when it is not running.
+    started_at: str | None = None
+
+
+def not_registered(rows: Sequence[Row], servers: Sequence[str]) -> list[str]:
+    """The running components that started before the running discovery servers' last start (``servers``:
+    their component names): a server whose nodes register only when they start does not know them."""
+    from robocore.plan.actions import docker_time
+
+    starts = [docker_time(r.started_at) for r in rows if r.component in servers and r.started_at]
+    last = max((t for t in starts if t is not None), default=None)
+    if last is None:
+        return []
+    return [r.component for r in rows if r.component not in servers and r.started_at
+            and (when := docker_time(r.started_at)) is not None and when < last]
 
 
 def uptime_text(started_at: str, now: datetime | None = None) -> str:
@@ -92,6 +107,7 @@ def _rows(project: Project, host: Host) -> list[Row]:
             uptime=uptime_text(state.get("StartedAt", "")) if running else "-",
             restarts=int(container.attrs.get("RestartCount", 0)),
             image=str(container.attrs.get("Config", {}).get("Image", "")),
+            started_at=str(state.get("StartedAt", "")) if running else None,
         ))
     return rows
 
@@ -151,6 +167,8 @@ class RosGraph:
     kind: ClassVar[str] = "ros_graph"
     nodes: list[str] | None
     via: str
+    #: Running components the ROS master does not know: they started before its last start.
+    not_registered: list[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -182,9 +200,15 @@ def status(options: Options) -> None:
         return
     rows, failures = collect_status(project, hosts)
     nodes, where = ros_nodes(project)
-    report.add(*rows, RosGraph(nodes, where))
+    kind = discovery.for_robot(project.robot)
+    servers = [discovery_service(s.index) for s in kind.servers()]
+    stale = not_registered(rows, servers) if kind.nodes_register_once else []
+    report.add(*rows, RosGraph(nodes, where, stale))
     if not options.json:
         print_status(rows, failures, nodes, where, report=report)
+        if stale:
+            report.out(f"not registered with the ROS master, which started again after them: {', '.join(stale)} "
+                       "(`robocore run` restarts them)")
     if failures:
         raise GroupError(failures, sorted({r.host for r in rows}))
 

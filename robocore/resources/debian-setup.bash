@@ -5,12 +5,15 @@ export ROS_VERSION=1
 export ROS_PYTHON_VERSION=3
 export ROS_ROOT="${ROS_ROOT:-/usr/share/ros}"
 export ROS_ETC_DIR="${ROS_ETC_DIR:-/etc/ros}"
-if [ -z "${ROS_PACKAGE_PATH:-}" ]; then
-    export ROS_PACKAGE_PATH=/usr/share
-fi
-if [ -z "${CMAKE_PREFIX_PATH:-}" ]; then
-    export CMAKE_PREFIX_PATH=/usr
-fi
+# Debian's ROS packages are under /usr/share and its CMake files under /usr: after any path already given
+case ":${ROS_PACKAGE_PATH:-}:" in
+    *:/usr/share:*) ;;
+    *) export ROS_PACKAGE_PATH="${ROS_PACKAGE_PATH:+${ROS_PACKAGE_PATH}:}/usr/share" ;;
+esac
+case ":${CMAKE_PREFIX_PATH:-}:" in
+    *:/usr:*) ;;
+    *) export CMAKE_PREFIX_PATH="${CMAKE_PREFIX_PATH:+${CMAKE_PREFIX_PATH}:}/usr" ;;
+esac
 # Debian's catkin environment hook (/etc/catkin/profile.d/1.ros_distro.sh) sets ROS_DISTRO=Debian and
 # complains on stdout about any other value, which breaks catkin's generate_cached_setup.py; the
 # image links /opt/ros/Debian to this folder, so that sourcing /opt/ros/$ROS_DISTRO still works.
