@@ -84,6 +84,18 @@ def _prefetch_key(host: Host, timeout: int, connect_timeout: int) -> tuple[str, 
     return (host.user, host.ip, host.ssh_port, timeout, connect_timeout)
 
 
+def load_client_modules() -> None:
+    """Import docker-py, requests and the ssh transport in the calling thread.
+
+    Threads that import a package with import cycles (requests) at the same moment can find it half
+    initialized ("cannot import name ... from partially initialized module"): code that starts threads
+    which make Docker clients calls this first.
+    """
+    import docker  # noqa: F401
+
+    from robocore.adapters import docker_over_ssh  # noqa: F401
+
+
 def prefetch(host: Host, timeout: int = 120, *, connect_timeout: int = CONNECT_TIMEOUT) -> None:
     """Start connecting to an ssh host's daemon in the background, for a later :func:`client_for` with the
     same settings. Nothing is reported here: the error, if any, is raised by that call. Other kinds of
@@ -96,6 +108,7 @@ def prefetch(host: Host, timeout: int = 120, *, connect_timeout: int = CONNECT_T
             return
         pending: Future[docker.DockerClient] = Future()
         _prefetched[key] = pending
+    load_client_modules()
 
     def work() -> None:
         try:

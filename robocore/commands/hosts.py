@@ -72,6 +72,9 @@ def in_parallel(items: Sequence[T], work: Callable[[T], R], *, limit: int,
     exception it raised, in the order of ``items``. Every item is tried, whatever the others do."""
     if not items:
         return []
+    from robocore.adapters.docker_hosts import load_client_modules
+
+    load_client_modules()  # the threads below make Docker clients: no two of them import docker-py at once
     done: list[tuple[T, R | BaseException]] = []
     with ThreadPoolExecutor(max_workers=max(1, min(limit, len(items))), thread_name_prefix=name) as pool:
         futures = [(item, pool.submit(work, item)) for item in items]
