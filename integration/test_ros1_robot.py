@@ -105,6 +105,17 @@ def _graph(status: dict[str, Any]) -> dict[str, Any]:
     return dict(graph)
 
 
+def _run_restarts_nodes(run_robocore: RobocoreCli, root: Path, master_verb: str, reason: str) -> None:
+    """``run``: the master gets ``master_verb``, and the talker and the listener (wherever they run) are
+    replaced for ``reason``."""
+    done = json.loads(run_robocore(root, "run", "--json").stdout)
+    verbs = {a["name"]: (a["verb"], a["reason"]) for r in done["results"] for a in r["actions"]}
+    assert verbs[f"{NAME}-discovery-0"][0] == master_verb, verbs
+    for component in ("talker", "listener"):
+        verb, why = verbs[f"{NAME}-{component}"]
+        assert verb == "replace" and reason in why, verbs
+
+
 def test_cpp_talker_heard_by_rospy_listener_through_the_master(noetic: Path, run_robocore: RobocoreCli,
                                                                 docker_client: Any,
                                                                 tracked_containers: list[Any]) -> None:
@@ -141,12 +152,7 @@ def test_stopped_master_keeps_connections_and_run_brings_the_graph_back(noetic: 
         "the connected listener stopped hearing when the master stopped"
     assert TALKER_TEXT not in _probe(docker_client, tracked_containers, _master_uri(noetic), seconds=10)
     # run starts the master and restarts the nodes, which register only when they start
-    done = json.loads(run_robocore(noetic, "run", "--json").stdout)
-    verbs = {a["name"]: (a["verb"], a["reason"]) for r in done["results"] for a in r["actions"]}
-    assert verbs[f"{NAME}-discovery-0"][0] == "start", verbs
-    for component in ("talker", "listener"):
-        verb, reason = verbs[f"{NAME}-{component}"]
-        assert verb == "replace" and "register" in reason, verbs
+    _run_restarts_nodes(run_robocore, noetic, "start", "register")
     restarted = time.time()
     assert wait_for(lambda: _heard_since(docker_client, restarted), 60, 1)
     graph = _graph(_status(run_robocore, noetic))
@@ -161,12 +167,7 @@ def test_stopped_master_keeps_connections_and_run_brings_the_graph_back(noetic: 
     graph = _graph(_status(run_robocore, noetic))
     assert sorted(graph["not_registered"]) == ["listener", "talker"], graph
     assert not {"/talker", "/listener"} & set(graph["nodes"] or []), graph
-    done = json.loads(run_robocore(noetic, "run", "--json").stdout)
-    verbs = {a["name"]: (a["verb"], a["reason"]) for r in done["results"] for a in r["actions"]}
-    assert verbs[f"{NAME}-discovery-0"][0] == "keep", verbs
-    for component in ("talker", "listener"):
-        verb, reason = verbs[f"{NAME}-{component}"]
-        assert verb == "replace" and "before the discovery server's last start" in reason, verbs
+    _run_restarts_nodes(run_robocore, noetic, "keep", "before the discovery server's last start")
     assert TALKER_TEXT in _probe(docker_client, tracked_containers, _master_uri(noetic))
     assert _graph(_status(run_robocore, noetic))["not_registered"] == []
 
@@ -240,21 +241,13 @@ def test_two_hosts_one_ros1_graph(noetic_fleet: tuple[RobotFleet, Path], run_rob
 
     # the master stopped behind robocore's back on robot-a: run starts it first, then restarts the nodes on
     # both hosts (they register only when they start), and the graph is whole again
-    fleet.client(0).containers.get(f"{NAME}-discovery-0").stop(timeout=5)
-    done = json.loads(run_robocore(root, "run", "--json").stdout)
-    verbs = {(r["host"], a["name"]): (a["verb"], a["reason"]) for r in done["results"] for a in r["actions"]}
-    assert verbs[("robot-a", f"{NAME}-discovery-0")][0] == "start", verbs
-    for key in (("robot-a", f"{NAME}-talker"), ("robot-b", listener)):
-        assert verbs[key][0] == "replace" and "register" in verbs[key][1], verbs
+    master = fleet.client(0).containers.get(f"{NAME}-discovery-0")
+    master.stop(timeout=5)
+    _run_restarts_nodes(run_robocore, root, "start", "register")
     assert wait_for(heard, 90, 1), "robot-b's listener never heard the talker again after the master restarted"
     graph = _graph(_status(run_robocore, root))
     assert {"/talker", "/listener"} <= set(graph["nodes"] or []), graph
-
     # restarted behind robocore's back on robot-a: run reads its start there and restarts robot-b's listener
-    fleet.client(0).containers.get(f"{NAME}-discovery-0").restart(timeout=5)
-    done = json.loads(run_robocore(root, "run", "--json").stdout)
-    verbs = {(r["host"], a["name"]): (a["verb"], a["reason"]) for r in done["results"] for a in r["actions"]}
-    assert verbs[("robot-a", f"{NAME}-discovery-0")][0] == "keep", verbs
-    for key in (("robot-a", f"{NAME}-talker"), ("robot-b", listener)):
-        assert verbs[key][0] == "replace" and "before the discovery server's last start" in verbs[key][1], verbs
+    master.restart(timeout=5)
+    _run_restarts_nodes(run_robocore, root, "keep", "before the discovery server's last start")
     assert wait_for(heard, 90, 1), "robot-b's listener never heard the talker after the master's restart"
