@@ -55,22 +55,18 @@ class Row:
 def not_registered(rows: Sequence[Row], servers: Sequence[str]) -> list[str]:
     """The running components that started before the running discovery servers' last start (``servers``:
     their component names): a server whose nodes register only when they start does not know them."""
-    from robocore.plan.actions import docker_time
+    from robocore.plan.actions import started_before_servers
 
-    starts = [docker_time(r.started_at) for r in rows if r.component in servers and r.started_at]
-    last = max((t for t in starts if t is not None), default=None)
-    if last is None:
-        return []
-    return [r.component for r in rows if r.component not in servers and r.started_at
-            and (when := docker_time(r.started_at)) is not None and when < last]
+    stale = started_before_servers({r.component: r.started_at or "" for r in rows}, servers)
+    return [r.component for r in rows if r.component in stale]
 
 
 def uptime_text(started_at: str, now: datetime | None = None) -> str:
     """``3d 2h``, ``5m 10s``... from Docker's ``State.StartedAt`` (RFC 3339, nanoseconds)."""
-    try:  # Docker writes UTC with "Z" and up to 9 fraction digits; whole seconds are enough
-        stamp = datetime.strptime(started_at[:19], "%Y-%m-%dT%H:%M:%S").replace(tzinfo=timezone.utc)
-    except ValueError:
-        stamp = None
+    from robocore.plan.actions import docker_time
+
+    stamp = docker_time(started_at)  # whole seconds are enough
+    stamp = stamp.replace(microsecond=0) if stamp is not None else None
     if stamp is None or stamp.year < 2000:
         return "-"
     seconds = int(((now or datetime.now(timezone.utc)) - stamp).total_seconds())

@@ -25,7 +25,7 @@ from robocore.commands.state import history, record_run, with_local_build, with_
 from robocore.config.model import Host
 from robocore.errors import DockerError, GroupError, RobocoreError, UsageError
 from robocore.plan import discovery, naming
-from robocore.plan.actions import Action, Existing, decide, docker_time, servers_started, with_node_restarts
+from robocore.plan.actions import Action, Existing, decide, latest_start, servers_started, with_node_restarts
 from robocore.plan.containers import ROLE_DISCOVERY, ContainerSpec, host_specs, state_volumes
 from robocore.project import Project
 
@@ -64,8 +64,13 @@ def _existing(container: Any) -> Existing:
         image_id=container.attrs.get("Image", ""),
         running=container.status == "running",
         role=container.labels.get(naming.LABEL_ROLE, ""),
-        started_at=str(container.attrs.get("State", {}).get("StartedAt", "")),
+        started_at=_started_at(container),
     )
+
+
+def _started_at(container: Any) -> str:
+    """When ``container`` last started (Docker's RFC 3339 ``State.StartedAt``), "" when Docker does not say."""
+    return str(container.attrs.get("State", {}).get("StartedAt", ""))
 
 
 def check_install_trees(project: Project, host: Host) -> None:
@@ -288,9 +293,8 @@ def run(options: Options, *, host: str | None, tag: str | None) -> None:
         # the servers' hosts first: nodes elsewhere start once their server serves, and restart if it restarted
         server_hosts = {s.host for s in kind.servers()}
         results, failures = for_each_host([h for h in hosts if h.name in server_hosts], work)
-        restarted = any(servers_started(out.actions, [spec for spec in host_specs(project, name, tag=tag)
-                                                      if spec.role == ROLE_DISCOVERY])
-                        for name, out in results.items())
+        names = {naming.discovery_container_name(project.name, s.index) for s in kind.servers()}
+        restarted = any(servers_started(out.actions, names) for out in results.values())
         others = [h for h in hosts if h.name not in server_hosts]
         started = None if restarted or not others or options.dry_run else _servers_started_at(project, kind)
         rest, rest_failures = for_each_host(others, lambda h: work(h, servers_restarted=restarted,
@@ -312,7 +316,7 @@ def _servers_started_at(project: Project, kind: discovery.Discovery) -> datetime
     runs or a host cannot be asked: nodes elsewhere that started before it are not registered with it."""
     from docker.errors import DockerException
 
-    times = []
+    times: list[str] = []
     for server in kind.servers():
         try:
             client = connect(project, project.robot.host(server.host))
@@ -321,13 +325,12 @@ def _servers_started_at(project: Project, kind: discovery.Discovery) -> datetime
         try:
             container = client.containers.get(naming.discovery_container_name(project.name, server.index))
             if container.status == "running":
-                times.append(docker_time(str(container.attrs.get("State", {}).get("StartedAt", ""))))
+                times.append(_started_at(container))
         except (DockerException, OSError):  # a server that cannot be read dates nothing
             continue
         finally:
             client.close()
-    known = [t for t in times if t is not None]
-    return max(known) if known else None
+    return latest_start(times)
 
 
 def _report(report: Reporter, outcomes: Sequence[HostOutcome], *, dry_run: bool) -> None:

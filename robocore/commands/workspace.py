@@ -133,11 +133,10 @@ def debian_dependency_warnings(project: Project) -> list[Problem]:
         return []
     common = [project.root / (p.folder or p.name) for p in robot.common_packages if not p.repo]
     common_manifests = [m for folder in common if folder.is_dir() for m in package_manifests(folder, project.root)]
-    workspaces = {c.name: project.root / c.folder for c in robot.components if c.folder and c.image is None}
-    manifests = {name: package_manifests(ws, project.root) for name, ws in workspaces.items() if ws.is_dir()}
     provided = {m.name for m in common_manifests} | {p.name for p in robot.common_packages}
     found = debian_packages.unresolved(common_manifests, provided=provided, apt=())
     for comp in robot.components:
-        own = manifests.get(comp.name, [])
+        ws = project.root / comp.folder if comp.folder and comp.image is None else None
+        own = package_manifests(ws, project.root) if ws is not None and ws.is_dir() else []
         found += debian_packages.unresolved(own, provided=provided | {m.name for m in own}, apt=comp.apt_packages)
     return [Problem(u.file, u.line, u.key, u.message, severity="warning") for u in found]

@@ -60,10 +60,11 @@ def _discovery(robot: Robot) -> Iterator[Found]:
 
 def _networks(robot: Robot) -> Iterator[Found]:
     """ROS 1 nodes listen on random ports that other hosts connect to: no bridge network across hosts."""
-    if robot.ros_version != 1 or len(robot.hosts_in_use()) < 2:
+    in_use = {h.name for h in robot.hosts_in_use()}
+    if robot.ros_version != 1 or len(in_use) < 2:
         return
     for index, host in enumerate(robot.hosts):
-        if host.is_loopback and host in robot.hosts_in_use():
+        if host.is_loopback and host.name in in_use:
             yield (("hosts", index, "ip"),
                    f"{host.name}: ROS 1 nodes tell the others their host's address, and {host.ip!r} is a loopback "
                    "address that the robot's other hosts cannot reach; give this host its LAN address")

@@ -424,13 +424,14 @@ class Robot(Strict):
     def discovery_servers(self) -> list[DiscoveryServer]:
         """Configured discovery servers, or one on the first host; each with its port (the kind's default
         when robot.yaml gives none)."""
-        default = DEFAULT_PORTS.get(self.discovery_kind, DEFAULT_PORTS["fastdds"])
         servers = list(self.discovery.servers) or [DiscoveryServer(host=self.hosts[0].name)]
-        return [s if s.port is not None else s.model_copy(update={"port": default}) for s in servers]
+        return [s if s.port is not None else s.model_copy(update={"port": self.server_port(s)}) for s in servers]
 
     def server_port(self, server: DiscoveryServer) -> int:
         """The port of ``server``: its own, else the discovery kind's default."""
-        return server.port if server.port is not None else DEFAULT_PORTS.get(self.discovery_kind, 11811)
+        if server.port is not None:
+            return server.port
+        return DEFAULT_PORTS.get(self.discovery_kind, DEFAULT_PORTS["fastdds"])
 
     @property
     def fastdds_line(self) -> int:

@@ -8,9 +8,9 @@ kind whose nodes register only when they start (the ROS 1 master) needs after it
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from datetime import datetime
+from datetime import datetime, timezone
 
 from robocore.plan.containers import ROLE_DISCOVERY, ContainerSpec
 
@@ -66,29 +66,43 @@ def decide(specs: Sequence[ContainerSpec], existing: Sequence[Existing], image_i
 STARTS = frozenset({"create", "replace", "start"})
 
 
-def servers_started(actions: Sequence[Action], specs: Sequence[ContainerSpec]) -> bool:
-    """Whether ``actions`` (re)start a discovery server among ``specs``."""
-    servers = {s.name for s in specs if s.role == ROLE_DISCOVERY}
+def servers_started(actions: Sequence[Action], servers: Collection[str]) -> bool:
+    """Whether ``actions`` (re)start one of the discovery server containers named in ``servers``."""
     return any(a.name in servers and a.verb in STARTS for a in actions)
 
 
-_FRACTION = re.compile(r"(\.\d{6})\d*")
+_FRACTION = re.compile(r"\.(\d+)")
 
 
 def docker_time(text: str) -> datetime | None:
-    """A Docker timestamp (RFC 3339, nanoseconds, ``Z``) as an aware datetime; None when empty or unreadable
+    """A Docker timestamp (RFC 3339, up to nanoseconds, ``Z``) as an aware datetime; None when empty or unreadable
     (Docker's ``0001-01-01T00:00:00Z`` of a container that never started is read as it is)."""
+    micro = _FRACTION.sub(lambda m: "." + (m[1] + "000000")[:6], text.strip(), count=1)
     try:
-        return datetime.fromisoformat(_FRACTION.sub(r"\1", text.strip()).replace("Z", "+00:00"))
+        stamp = datetime.fromisoformat(micro.replace("Z", "+00:00"))
     except ValueError:
         return None
+    return stamp if stamp.tzinfo is not None else stamp.replace(tzinfo=timezone.utc)
 
 
-def servers_last_started(existing: Sequence[Existing]) -> datetime | None:
-    """The latest start of the running discovery servers among ``existing``, None when none runs or it is unknown."""
-    times = [docker_time(e.started_at) for e in existing if e.role == ROLE_DISCOVERY and e.running]
-    known = [t for t in times if t is not None]
+def latest_start(times: Iterable[str]) -> datetime | None:
+    """The latest of Docker start times ``times`` that can be read, None when there is none."""
+    known = [t for t in map(docker_time, times) if t is not None]
     return max(known) if known else None
+
+
+def started_before_servers(started: Mapping[str, str], servers: Collection[str],
+                           elsewhere: datetime | None = None) -> set[str]:
+    """The containers of ``started`` (name -> Docker start time, "" when not running) that started before the
+    last start of the running ``servers`` among them, or of a server ``elsewhere`` (another host): a server
+    whose nodes register only when they start does not know them."""
+    last = latest_start([started[name] for name in servers if started.get(name)])
+    starts = [t for t in (last, elsewhere) if t is not None]
+    if not starts:
+        return set()
+    newest = max(starts)
+    return {name for name, text in started.items() if name not in servers and text
+            and (when := docker_time(text)) is not None and when < newest}
 
 
 def with_node_restarts(actions: Sequence[Action], specs: Sequence[ContainerSpec], *, register_once: bool,
@@ -103,22 +117,14 @@ def with_node_restarts(actions: Sequence[Action], specs: Sequence[ContainerSpec]
     (a server restarted behind robocore's back: Docker's restart policy, ``docker restart``), from
     ``existing`` (this host's containers) and ``server_start`` (a server on another host).
     """
-    servers = {s.name for s in specs if s.role == ROLE_DISCOVERY}
     if not register_once:
         return list(actions)
-    if elsewhere or servers_started(actions, specs):
+    servers = {s.name for s in specs if s.role == ROLE_DISCOVERY}
+    if elsewhere or servers_started(actions, servers):
         reason = "the discovery server (re)starts: its nodes register with it only when they start"
-        return [Action("replace", a.name, reason) if a.verb == "keep" and a.name not in servers else a
-                for a in actions]
-    starts = [t for t in (servers_last_started(existing), server_start) if t is not None]
-    if not starts:
-        return list(actions)
-    last = max(starts)
-    started = {e.name: docker_time(e.started_at) for e in existing}
-    reason = "started before the discovery server's last start: not registered with it"
-    out = []
-    for action in actions:
-        when = started.get(action.name)
-        stale = action.verb == "keep" and action.name not in servers and when is not None and when < last
-        out.append(Action("replace", action.name, reason) if stale else action)
-    return out
+        stale = {a.name for a in actions} - servers
+    else:
+        reason = "started before the discovery server's last start: not registered with it"
+        stale = started_before_servers({e.name: e.started_at if e.running else "" for e in existing}, servers,
+                                       server_start)
+    return [Action("replace", a.name, reason) if a.verb == "keep" and a.name in stale else a for a in actions]

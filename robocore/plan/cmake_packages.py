@@ -187,7 +187,8 @@ def cmake_packages(manifests: Iterable[Manifest]) -> list[str]:
 
 @dataclass(frozen=True)
 class Refusal:
-    """A package that cannot build on the wheels base: file, line and the one-line reason."""
+    """A package.xml line a base cannot serve (a package the wheels base cannot build, a dependency the debian
+    base cannot resolve): file, line, the tag and the one-line reason."""
 
     file: str
     line: int | None

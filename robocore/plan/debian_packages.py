@@ -12,9 +12,8 @@ from __future__ import annotations
 
 import re
 from collections.abc import Collection, Iterable
-from dataclasses import dataclass
 
-from robocore.plan.cmake_packages import Manifest
+from robocore.plan.cmake_packages import Manifest, Refusal
 
 #: The ROS packages of the debian base (``/usr/share/<name>/package.xml`` after its apt install).
 DEBIAN_ROS_PACKAGES = frozenset({
@@ -29,16 +28,6 @@ DEBIAN_ROS_PACKAGES = frozenset({
     # system dependencies the base has (rosdep keys of the template and of common packages)
     "gtest", "python3", "python3-pytest", "python3-nose", "boost", "cmake", "git",
 })
-
-
-@dataclass(frozen=True)
-class Unresolved:
-    """A dependency the debian base cannot resolve: the package.xml, its line, the tag and the one-line message."""
-
-    file: str
-    line: int
-    key: str
-    message: str
 
 
 def debian_candidates(dependency: str) -> tuple[str, ...]:
@@ -71,7 +60,7 @@ def _holds(term: str) -> bool:
     return equal if match[2] == "==" else not equal
 
 
-def unresolved(manifests: Iterable[Manifest], *, provided: Collection[str], apt: Collection[str]) -> list[Unresolved]:
+def unresolved(manifests: Iterable[Manifest], *, provided: Collection[str], apt: Collection[str]) -> list[Refusal]:
     """The dependencies of ``manifests`` that neither the debian base, ``provided`` (the project's own
     packages) nor a candidate Debian package in ``apt`` (the component's apt_packages) resolves."""
     names = {a.split("=", 1)[0].split("/", 1)[0] for a in apt}
@@ -83,7 +72,7 @@ def unresolved(manifests: Iterable[Manifest], *, provided: Collection[str], apt:
             candidates = debian_candidates(dependency)
             if dependency in DEBIAN_ROS_PACKAGES or dependency in provided or names & set(candidates):
                 continue
-            found.append(Unresolved(manifest.path, line, tag,
+            found.append(Refusal(manifest.path, line, tag,
                                     f"{manifest.name or '?'} depends on {dependency}, which the debian base does not "
                                     "have and rosdep cannot install there: add its Debian package to the component's "
                                     f"apt_packages (e.g. {', '.join(candidates[:3])})"))

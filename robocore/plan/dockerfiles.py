@@ -60,7 +60,7 @@ DEBIAN_TOOLS: tuple[str, ...] = (
 )
 #: Debian packages the official base adds to ``ros:<distro>-ros-base`` of a ROS 1 distro (colcon: the
 #: ROS apt repository of those images has it).
-OFFICIAL_ROS1_APT: tuple[str, ...] = ("procps", "python3-pip", "python3-pytest", "python3-colcon-common-extensions")
+OFFICIAL_ROS1_APT: tuple[str, ...] = (*OFFICIAL_APT, "python3-colcon-common-extensions")
 
 CA_IN_IMAGE = "/etc/robocore/host-ca.pem"
 CA_ENV = ("PIP_CERT", "REQUESTS_CA_BUNDLE", "SSL_CERT_FILE", "GIT_SSL_CAINFO", "CURL_CA_BUNDLE")
