@@ -1,4 +1,11 @@
-"""Files robocore writes or copies: atomic writes with the user's umask, and symlinks that leave the project.
+"""Files robocore writes, removes, reads or copies: atomic writes with the user's umask, never through a link.
+
+Every path robocore writes or removes in a project lies under its state folder (:data:`STATE_DIR`). Before
+writing, creating or removing there, each folder from the project folder down (and the file itself) is
+checked without following symlinks: a link (a cloned repository can carry one where robocore writes) is
+refused with :class:`~robocore.errors.UnsafePath` naming it, before anything is written or removed.
+Files robocore reads from the project (robot.yaml, package.xml, ``.repos``, TLS files) are read with
+:func:`read_project_file`: inside the project after links are followed, a regular file, never a FIFO.
 
 The umask is read once, when this module is imported (from ``/proc/self/status`` where the kernel
 shows it, else by setting and restoring it): it is process-wide state, and setting it while other
@@ -7,15 +14,22 @@ threads create files would give those files the wrong mode.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import stat
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
 from robocore.errors import UnsafePath
 
 #: The file that describes a robot, at the top of its project folder.
 ROBOT_FILE = "robot.yaml"
+#: The folder of everything robocore writes in a project (generated files, builds, caches, records).
+STATE_DIR = ".robocore"
+#: Mode of the folders holding private files (compose files, cookies, the desktop password).
+PRIVATE_DIR = 0o700
+#: The record, in a folder of generated files, of the names robocore wrote there (what stale cleaning may remove).
+WRITTEN_RECORD = ".robocore-written"
 
 
 def _read_umask() -> int:
@@ -42,23 +56,104 @@ def default_mode() -> int:
     return 0o666 & ~UMASK
 
 
-def write_atomic(path: Path, content: str | bytes, *, mode: int | None = None) -> bool:
+def _anchor(path: Path) -> Path | None:
+    """The project folder of ``path``: the parent of its last :data:`STATE_DIR` part; None when it has none
+    (a file outside any project, such as the ssh folder in /tmp)."""
+    parts = path.parts
+    for index in range(len(parts) - 1, -1, -1):
+        if parts[index] == STATE_DIR:
+            return Path(*parts[:index])
+    return None
+
+
+def _unsafe_link(path: Path, anchor: Path) -> UnsafePath:
+    try:
+        target = os.readlink(path)
+    except OSError:
+        target = "?"
+    shown = path.relative_to(anchor) if path.is_relative_to(anchor) else path
+    return UnsafePath(f"{shown}: a symlink (to {target!r}) where robocore writes its own files; robocore does not "
+                      "write or remove through links", hint=f"remove the link {path} (robocore recreates the folder)")
+
+
+def check_no_links(path: Path, *, anchor: Path | None = None) -> None:
+    """Raise :class:`~robocore.errors.UnsafePath` when ``path`` or a folder between the project folder and it
+    is a symlink, or a folder on the way is not a folder. Checked with lstat (links are never followed); the
+    project folder is the parent of the :data:`STATE_DIR` part (or ``anchor``); a path outside any project
+    is not checked. Parts that do not exist yet are fine (robocore creates them)."""
+    anchor = _anchor(path) if anchor is None else anchor
+    if anchor is None or not path.is_relative_to(anchor):
+        return
+    current = anchor
+    rel = path.relative_to(anchor).parts
+    for index, part in enumerate(rel):
+        current = current / part
+        try:
+            info = os.lstat(current)
+        except FileNotFoundError:
+            return
+        except OSError as exc:
+            raise UnsafePath(f"{current}: cannot be checked: {exc.strerror or exc}") from None
+        if stat.S_ISLNK(info.st_mode):
+            raise _unsafe_link(current, anchor)
+        if index < len(rel) - 1 and not stat.S_ISDIR(info.st_mode):
+            raise UnsafePath(f"{current.relative_to(anchor)}: is not a folder; robocore keeps its files below it",
+                             hint=f"remove {current}")
+
+
+def make_folder(path: Path, *, private: bool = False) -> Path:
+    """Create ``path`` and its missing parents, refusing any symlink on the way (:func:`check_no_links`).
+
+    ``private`` makes ``path`` mode 0700 whatever the umask (folders holding 0600 files)."""
+    check_no_links(path)
+    anchor = _anchor(path)
+    missing = []
+    probe = path
+    while not os.path.lexists(probe) and probe != probe.parent:
+        missing.append(probe)
+        probe = probe.parent
+    for folder in reversed(missing):
+        with contextlib.suppress(FileExistsError):
+            os.mkdir(folder, PRIVATE_DIR if private and folder == path else 0o777)
+        check_no_links(folder, anchor=anchor)  # another process may have made it a link meanwhile
+    if not path.is_dir():
+        raise UnsafePath(f"{path}: is not a folder; robocore keeps its files in it", hint=f"remove {path}")
+    if private and stat.S_IMODE(os.lstat(path).st_mode) != PRIVATE_DIR:
+        os.chmod(path, PRIVATE_DIR)
+    return path
+
+
+def _read_own(path: Path) -> bytes | None:
+    """The content of ``path`` when it is a regular file (never following a link, never opening a FIFO)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_NOCTTY)
+    except OSError:
+        return None
+    with os.fdopen(fd, "rb") as handle:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return None
+        return handle.read()
+
+
+def write_atomic(path: Path, content: str | bytes, *, mode: int | None = None, private_dir: bool = False) -> bool:
     """Write ``content`` to ``path`` through a temp file and rename; return False if unchanged.
 
     ``mode`` None gives the mode any new file gets (``0o666`` less the umask); an explicit mode is
-    applied as given (:data:`PRIVATE` for files holding environment values). An unchanged file keeps
-    its content but still gets ``mode``, so a file written before with a wider mode is narrowed.
+    applied as given (:data:`PRIVATE` for files holding environment values), and a :data:`PRIVATE` file's
+    folder is made 0700 (as ``private_dir`` asks). An unchanged file keeps its content but still gets
+    ``mode``, so a file written before with a wider mode is narrowed. A symlink at ``path`` or on the way to
+    it from the project folder is refused (:func:`check_no_links`) before anything is written.
     """
     data = content.encode("utf-8") if isinstance(content, str) else content
     wanted = default_mode() if mode is None else mode
-    try:
-        if path.read_bytes() == data:
-            if mode is not None and not path.is_symlink() and (path.stat().st_mode & 0o7777) != wanted:
-                os.chmod(path, wanted)
-            return False
-    except OSError:
-        pass
-    path.parent.mkdir(parents=True, exist_ok=True)
+    check_no_links(path)
+    make_folder(path.parent, private=private_dir or mode == PRIVATE)
+    if os.path.lexists(path) and not stat.S_ISREG(os.lstat(path).st_mode):
+        raise UnsafePath(f"{path}: is not a regular file; robocore writes its own file there", hint=f"remove {path}")
+    if _read_own(path) == data:
+        if mode is not None and (os.lstat(path).st_mode & 0o7777) != wanted:
+            os.chmod(path, wanted)
+        return False
     import tempfile  # here, not at import: the command line's first steps read paths only
 
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -68,11 +163,80 @@ def write_atomic(path: Path, content: str | bytes, *, mode: int | None = None) -
             handle.flush()
             os.fsync(handle.fileno())
         os.chmod(tmp, wanted)
-        os.replace(tmp, path)
+        os.replace(tmp, path)  # a rename replaces a name, never what a link there points to
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
     return True
+
+
+def remove_file(path: Path) -> bool:
+    """Remove the regular file ``path`` (False when there is none); a link at it or on the way is refused."""
+    check_no_links(path)
+    try:
+        info = os.lstat(path)
+    except FileNotFoundError:
+        return False
+    if not stat.S_ISREG(info.st_mode):
+        raise UnsafePath(f"{path}: is not a regular file; robocore removes only files it wrote", hint=f"remove {path}")
+    path.unlink()
+    return True
+
+
+def remove_tree(path: Path, *, ignore_errors: bool = False) -> bool:
+    """Remove the folder ``path`` and everything below it (False when there is none), refusing a link at it
+    or on the way to it; links inside are removed as links, never followed (shutil.rmtree's fd-based walk).
+    ``ignore_errors`` leaves what cannot be removed (files a container made as another user)."""
+    import shutil
+
+    check_no_links(path)
+    if not os.path.lexists(path):
+        return False
+    shutil.rmtree(path, ignore_errors=ignore_errors)
+    return True
+
+
+def write_generated(folder: Path, files: Mapping[str, str | bytes], *, mode: int | None = None) -> list[Path]:
+    """Write ``files`` (name -> content) into ``folder`` and remove the ones robocore wrote there before that
+    are no longer wanted: only names listed in the folder's :data:`WRITTEN_RECORD`, never a file robocore did
+    not write. The folder is private (0700) when ``mode`` is :data:`PRIVATE`."""
+    make_folder(folder, private=mode == PRIVATE)
+    record = folder / WRITTEN_RECORD
+    before = (_read_own(record) or b"").decode("utf-8", errors="replace").splitlines()
+    paths = []
+    for name, content in files.items():
+        write_atomic(folder / name, content, mode=mode)
+        paths.append(folder / name)
+    for stale in sorted(set(before) - set(files)):
+        if stale and "/" not in stale and not stale.startswith("."):
+            with contextlib.suppress(UnsafePath):  # a name now held by something else is left alone
+                remove_file(folder / stale)
+    write_atomic(record, "".join(f"{name}\n" for name in sorted(files)))
+    return paths
+
+
+def read_project_file(path: Path, project: Path, *, limit: int | None = None, what: str = "file") -> bytes:
+    """The bytes of ``path``, a file of the project that robocore reads (robot.yaml, package.xml, ``.repos``,
+    TLS files): :class:`~robocore.errors.UnsafePath` in one line, at once, when a link leads it outside
+    ``project`` or it is not a regular file (a FIFO, a device, a folder), and reading never blocks. ``limit``
+    reads at most that many bytes plus one (the caller refuses what is over)."""
+    shown = path.relative_to(project) if path.is_relative_to(project) else path
+    try:
+        real = Path(os.path.realpath(path))
+    except (OSError, ValueError) as exc:
+        raise UnsafePath(f"{shown}: cannot be read: {getattr(exc, 'strerror', None) or exc}") from None
+    if not real.is_relative_to(Path(os.path.realpath(project))):
+        raise UnsafePath(f"{shown}: a symlink to {str(real)!r}, outside the project folder; robocore reads its "
+                         f"{what} only from inside the project", hint="copy the file into the project")
+    try:
+        fd = os.open(real, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | os.O_NOFOLLOW)
+    except OSError as exc:
+        raise UnsafePath(f"{shown}: cannot be read: {exc.strerror or exc}") from None
+    with os.fdopen(fd, "rb") as handle:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise UnsafePath(f"{shown}: is not a regular file (a FIFO, device or folder); robocore reads its {what} "
+                             "only from a regular file")
+        return handle.read() if limit is None else handle.read(limit + 1)
 
 
 def is_inside(path: Path, folder: Path) -> bool:

@@ -13,12 +13,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from robocore.errors import UsageError
-from robocore.files import ROBOT_FILE
+from robocore.files import ROBOT_FILE, STATE_DIR
 
 if TYPE_CHECKING:
     from robocore.config.model import Component, Host, Robot
 
-STATE_DIR = ".robocore"
 #: Inside a component's build folder: the state of its last successful build (package hashes, files, copies).
 BUILD_STATE = ".robocore-build.json"
 

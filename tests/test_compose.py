@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import stat
 from pathlib import Path
 from typing import Any
 
@@ -11,6 +12,7 @@ from golden_files import check_golden
 
 from robocore.commands.composefiles import write_compose_files
 from robocore.config.model import Robot
+from robocore.files import WRITTEN_RECORD
 from robocore.plan import compose, containers
 from robocore.plan.discovery import fastdds
 from robocore.project import Project
@@ -96,9 +98,13 @@ def test_write_compose_files(tmp_path: Path) -> None:
     stale = project.compose_file("old-host")
     stale.parent.mkdir(parents=True)
     stale.write_text("services: {}\n")
+    (stale.parent / WRITTEN_RECORD).write_text("old-host.yaml\n")  # robocore wrote it before
+    mine = project.compose_file("mine")
+    mine.write_text("services: {}\n")  # robocore never wrote this one: it stays
     paths = write_compose_files(project)
     assert [p.name for p in paths] == ["dev.yaml", "pi.yaml"]
-    assert not stale.exists()
+    assert not stale.exists() and mine.exists()
+    assert stat.S_IMODE(stale.parent.stat().st_mode) == 0o700  # it holds 0600 files
     assert paths[0].read_text() == compose.render(project, "dev")
     profile = tmp_path / ".robocore" / "dds" / "super_client.xml"
     assert "SUPER_CLIENT" in profile.read_text()

@@ -14,6 +14,7 @@ from robocore.commands.run import wait_server_ready
 from robocore.config.loader import parse_robot_text
 from robocore.config.model import Robot
 from robocore.errors import ConfigError, DockerError
+from robocore.files import WRITTEN_RECORD
 from robocore.plan import compose, containers, discovery, naming, testrun
 from robocore.plan.discovery import (
     IN_CONTAINERS,
@@ -169,13 +170,13 @@ def test_a_registered_kind_writes_its_files_and_drops_the_previous_kinds(master:
     before = Project(root=tmp_path, robot=robot())
     write_dds_profiles(before)
     folder = tmp_path / ".robocore" / "dds"
-    assert sorted(p.name for p in folder.iterdir()) == ["client.xml", "super_client.xml"]
+    assert sorted(p.name for p in folder.iterdir()) == [WRITTEN_RECORD, "client.xml", "super_client.xml"]
     (folder / ".client.xml.123.tmp").write_text("another writer's temp file")
     after = Project(root=tmp_path, robot=with_kind(robot(), "master"))
     written = write_dds_profiles(after)
     assert written == [folder / "master.txt"]
     assert (folder / "master.txt").read_text() == "http://192.168.1.10:11311\n"
-    assert sorted(p.name for p in folder.iterdir()) == [".client.xml.123.tmp", "master.txt"]
+    assert sorted(p.name for p in folder.iterdir()) == [".client.xml.123.tmp", WRITTEN_RECORD, "master.txt"]
 
 
 def test_a_registered_kind_reaches_status_and_the_test_run(master: None) -> None:

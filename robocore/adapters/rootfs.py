@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 
 from robocore.adapters.image_builder import image_state
 from robocore.errors import BuildError, DockerError, ToolMissing
+from robocore.files import make_folder
 
 if TYPE_CHECKING:
     import docker
@@ -80,7 +81,7 @@ def bootstrap(client: docker.DockerClient, *, work_dir: Path) -> str:
             hint="sudo apt-get install mmdebstrap (Debian/Ubuntu), or set base.image to a local Debian 12 image",
         )
     mirror = os.environ.get(MIRROR_ENV, DEFAULT_MIRROR)
-    work_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(work_dir)
     with tempfile.TemporaryDirectory(dir=work_dir, prefix="rootfs-") as tmp:
         tarball = Path(tmp) / "root.tar"
         argv = ["mmdebstrap", "--variant=apt", f"--include={INCLUDE}", "bookworm", str(tarball), mirror]

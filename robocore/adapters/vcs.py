@@ -22,6 +22,7 @@ from pathlib import Path
 
 from robocore.config.model import Repository
 from robocore.errors import BuildError, ToolMissing, UsageError
+from robocore.files import make_folder, remove_tree, write_atomic
 
 SOURCE_FILE = "robocore-source"
 #: Transports git may use to fetch robot.yaml's repositories without an opt-in.
@@ -98,9 +99,8 @@ def fetch(url: str, version: str | None, dest: Path, *, refresh: bool = False,
         head = _git(["rev-parse", "HEAD"], cwd=dest)
         if head.returncode == 0:
             return head.stdout.strip()
-    if dest.exists():
-        shutil.rmtree(dest)
-    dest.mkdir(parents=True)
+    remove_tree(dest)  # refused, removing nothing, when a link is on the way
+    make_folder(dest)
     steps: list[list[str]] = [
         ["init", "-q"],
         fetch_step,
@@ -109,13 +109,13 @@ def fetch(url: str, version: str | None, dest: Path, *, refresh: bool = False,
     for step in steps:
         done = _git(step, cwd=dest)
         if done.returncode != 0:
-            shutil.rmtree(dest, ignore_errors=True)
+            remove_tree(dest, ignore_errors=True)
             detail = (done.stderr or done.stdout).strip().splitlines()
             raise BuildError(
                 f"git: cannot fetch {url} ({version or 'default branch'}): {detail[-1] if detail else 'failed'}",
                 hint="check the URL and version in robot.yaml and that this machine can reach it",
             )
-    marker.write_text(source)
+    write_atomic(marker, source)
     return _git(["rev-parse", "HEAD"], cwd=dest).stdout.strip()
 
 

@@ -16,6 +16,7 @@ import tempfile
 from pathlib import Path
 
 from robocore.errors import ToolMissing
+from robocore.files import make_folder
 
 #: The xauth family meaning "any address" (FamilyWild).
 WILDCARD_FAMILY = "ffff"
@@ -67,7 +68,9 @@ def write_cookie_file(display: str, folder: Path, *, file_name: str = "xauth",
     entries = wildcard_entries(read_cookies(display, env=env))
     if not entries:
         return False
-    folder.mkdir(parents=True, exist_ok=True)
+    make_folder(folder, private=True)  # a cookie is a secret: 0700 whatever the umask, never through a link
+    if owner is not None and os.geteuid() == 0 and owner != (os.geteuid(), os.getegid()):
+        os.chown(folder, owner[0], owner[1])
     xauth = shutil.which("xauth") or "xauth"
     fd, tmp = tempfile.mkstemp(prefix=f".{file_name}.", dir=folder)
     os.close(fd)

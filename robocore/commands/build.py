@@ -27,8 +27,8 @@ from robocore.commands.reporting import Outcome, Reporter, report_outcomes
 from robocore.commands.state import read_build_state, write_build_state
 from robocore.commands.workspace import check_workspace, selected_components, wheels_cmake_packages, workspace_files
 from robocore.config.model import Component
-from robocore.errors import BuildError, UsageError
-from robocore.files import write_atomic
+from robocore.errors import BuildError, UnsafePath, UsageError
+from robocore.files import check_no_links, make_folder, write_atomic
 from robocore.plan import cmake_packages, colcon, dockerfiles, install_patch, naming
 from robocore.plan.inputs import FileDigest, digest_bytes, tree_hash
 from robocore.project import Project
@@ -200,10 +200,10 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callabl
     from robocore.adapters.image_builder import run_streaming
 
     for sub in ("build", "install", "log"):
-        (plan.out / sub).mkdir(parents=True, exist_ok=True)
+        make_folder(plan.out / sub)  # mounted into the container: a link here would let colcon write elsewhere
     uid, gid = os.getuid(), os.getgid()
     if plan.ccache is not None:
-        plan.ccache.mkdir(parents=True, exist_ok=True)
+        make_folder(plan.ccache)
     volumes = colcon.workspace_mounts(plan.workspace, plan.out, plan.ccache)
     events: list[colcon.PackageEvent] = []
     other: list[str] = []
@@ -367,7 +367,11 @@ def apply_patches(plan: BuildPlan) -> Outcome | None:
     for patch in plan.patches:
         for target in patch.targets:
             path = plan.out / target
-            if path.is_symlink() or not path.is_file() or digest_bytes(path.read_bytes()) != patch.old_digest:
+            try:
+                check_no_links(path)  # a target behind a link (colcon's --symlink-install): colcon does it
+            except UnsafePath:
+                return None
+            if not path.is_file() or digest_bytes(path.read_bytes()) != patch.old_digest:
                 return None
     contents = [_source_path(plan, patch).read_bytes() for patch in plan.patches]
     if any(digest_bytes(data) != patch.digest for patch, data in zip(plan.patches, contents, strict=True)):

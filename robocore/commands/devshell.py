@@ -28,7 +28,7 @@ from robocore.adapters.docker_hosts import local_client
 from robocore.commands.context import Options
 from robocore.commands.reporting import Reporter
 from robocore.errors import DockerError, ToolMissing, UsageError
-from robocore.files import write_atomic
+from robocore.files import make_folder, remove_tree, write_atomic
 from robocore.plan import devshell as plan
 from robocore.plan import discovery, naming
 from robocore.plan.gui import X11_SOCKETS
@@ -208,8 +208,8 @@ def _warn_if_stale(client: docker.DockerClient, container: Container, spec: plan
 
 
 def _ensure_dir(path: Path, owner: tuple[int, int]) -> None:
-    created = not path.exists()
-    path.mkdir(parents=True, exist_ok=True)
+    created = not os.path.lexists(path)
+    make_folder(path)
     if created and os.geteuid() == 0 and owner != (0, 0):
         os.chown(path, *owner)
 
@@ -227,7 +227,7 @@ def _write_files(project: Project, spec: plan.ShellSpec) -> None:
         if mount.target == spec.home or mount.target in plan.BUILD_TARGETS:
             _ensure_dir(src, owner)
         elif mount.target == plan.CONTAINER_X11:
-            src.mkdir(parents=True, exist_ok=True)
+            make_folder(src, private=True)
 
 
 def _refresh_cookie(project: Project, spec: plan.ShellSpec, report: Reporter) -> bool:
@@ -318,8 +318,9 @@ def _wait_ready(container: Container, spec: plan.ShellSpec) -> None:
 def _container_lock(project: Project, name: str) -> Iterator[None]:
     """Serialise "find or create, then start a session" against "last session left, remove"."""
     folder = project.shell_dir
-    folder.mkdir(parents=True, exist_ok=True)
-    with open(folder / f".{name}.lock", "a+b") as handle:
+    make_folder(folder)
+    fd = os.open(folder / f".{name}.lock", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, 0o666)
+    with os.fdopen(fd, "a+b") as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
         try:
             yield
@@ -370,4 +371,4 @@ def _remove_if_idle(client: docker.DockerClient, container: Container, project: 
         pass
     except APIError as exc:
         raise DockerError(f"cannot remove dev container {name}: {_explain(exc)}") from None
-    shutil.rmtree(project.x11_dir(name), ignore_errors=True)
+    remove_tree(project.x11_dir(name), ignore_errors=True)

@@ -17,9 +17,9 @@ the last run only. Any failed or errored test, unreadable result file or failed 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
-import shutil
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,8 +32,8 @@ from robocore.commands.machine import MAX_PARALLEL, check_emulation, local_docke
 from robocore.commands.reporting import Reporter
 from robocore.commands.workspace import selected_components
 from robocore.config.model import Component
-from robocore.errors import BuildError, TestFailure, UsageError
-from robocore.files import write_atomic
+from robocore.errors import BuildError, TestFailure, UnsafePath, UsageError
+from robocore.files import make_folder, remove_file, remove_tree, write_atomic
 from robocore.plan import colcon, dockerfiles, junit, naming
 from robocore.project import Project
 
@@ -159,11 +159,13 @@ def clear_results(plan: ComponentTests) -> None:
     """Remove the result files of the packages about to be tested, so stale ones are never counted."""
     for package in plan.packages:
         build = plan.out / "build" / package
+        # colcon (in a container) wrote this tree: a link in it is left alone, never followed
         for name in RESULT_FILES:
-            (build / name).unlink(missing_ok=True)
+            with contextlib.suppress(UnsafePath):
+                remove_file(build / name)
         for folder in RESULT_FOLDERS:
-            if (build / folder).is_dir() and not (build / folder).is_symlink():
-                shutil.rmtree(build / folder)
+            with contextlib.suppress(UnsafePath):
+                remove_tree(build / folder)
 
 
 def read_results(project: Project, plan: ComponentTests, outcome: ComponentOutcome,
@@ -202,7 +204,7 @@ def _run(project: Project, plan: ComponentTests, report: Reporter,
 
     name = plan.component.name
     for sub in ("build", "install", "log"):
-        (plan.out / sub).mkdir(parents=True, exist_ok=True)
+        make_folder(plan.out / sub)
     clear_results(plan)
     events: list[colcon.PackageEvent] = []
     other: list[str] = []
@@ -262,7 +264,7 @@ def test(options: Options, *, component: str | None, packages: Sequence[str] = (
             check_current(project, plan, state.id)
     finally:
         client.close()
-    shutil.rmtree(project.test_results_dir, ignore_errors=True)
+    remove_tree(project.test_results_dir, ignore_errors=True)
     outcomes = _run_all(project, plans, report)
     report.add(*results(outcomes))
     if report.human:

@@ -30,7 +30,7 @@ from robocore.commands.reporting import Reporter
 from robocore.commands.state import read_synced, write_synced
 from robocore.config.model import Component, Host, read_only_project_path
 from robocore.errors import GroupError, HostError, RobocoreError, UnsafePath, UsageError
-from robocore.files import refuse_links_leaving
+from robocore.files import make_folder, refuse_links_leaving, remove_tree
 from robocore.plan import layout
 from robocore.plan import sync as plan
 from robocore.project import Project
@@ -106,7 +106,6 @@ def _project_files(project: Project, host: Host, comp: Component, *, dry_run: bo
     """The read-only project volumes of ``comp`` as one source: a folder of symlinks to them, kept in
     ``.robocore/sync/files/<host>/<component>/files`` and made anew whenever the set of links changes
     (not in a dry run, which writes nothing)."""
-    import shutil
 
     wanted = [(i, rel) for i, v in enumerate(comp.volumes) if (rel := read_only_project_path(v)) is not None]
     allowed = bool(getattr(comp, "allow_outside_project", False))  # robot.yaml's opt-in, for symlinks only
@@ -132,9 +131,9 @@ def _project_files(project: Project, host: Host, comp: Component, *, dry_run: bo
     if dry_run:
         return plan.Source(farm, layout.FILES, follow=True) if links else None
     if _farm_links(farm) != links:  # made anew only when it changes: its folders' times are in the digest
-        shutil.rmtree(farm, ignore_errors=True)
+        remove_tree(farm, ignore_errors=True)
         for rel, real in links.items():
-            (farm / rel).parent.mkdir(parents=True, exist_ok=True)
+            make_folder((farm / rel).parent)
             (farm / rel).symlink_to(real)
     return plan.Source(farm, layout.FILES, follow=True) if links else None
 

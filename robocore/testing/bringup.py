@@ -16,7 +16,6 @@ import fcntl
 import os
 import random
 import secrets
-import shutil
 import socket
 import time
 from collections.abc import Iterator, Sequence
@@ -25,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from robocore.errors import RobocoreError
+from robocore.files import make_folder, remove_tree, write_atomic
 from robocore.plan import discovery, naming, testrun
 from robocore.plan.containers import ContainerSpec
 from robocore.plan.testrun import TestRun
@@ -289,7 +289,8 @@ class RobotUnderTest:
         for volume in self.client.volumes.list(filters={"label": f"{testrun.LABEL_RUN}={self.run.run_id}"}):
             with contextlib.suppress(Exception):
                 volume.remove(force=True)
-        shutil.rmtree(self.run_dir, ignore_errors=True)
+        with contextlib.suppress(RobocoreError):
+            remove_tree(self.run_dir, ignore_errors=True)
         if self._domain_holder is not None:
             self._domain_holder.close()
         with contextlib.suppress(Exception):
@@ -372,11 +373,11 @@ def _start(robot: RobotUnderTest, source: Project, *, servers: bool) -> None:
         addresses[host] = _address(wrapper, run.network)
     robot.project = Project(root=source.root, robot=testrun.isolated_robot(source.robot, addresses, run.domain_id))
     dds_dir = robot.run_dir / "dds"
-    dds_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(dds_dir)
     kind = discovery.for_robot(robot.project.robot)
     for name, text in kind.files().items():
-        (dds_dir / name).write_text(text)
-    (robot.run_dir / "probe.xml").write_text(testrun.probe_profile(robot.project.robot))
+        write_atomic(dds_dir / name, text)
+    write_atomic(robot.run_dir / "probe.xml", testrun.probe_profile(robot.project.robot))
     if servers:
         for spec in testrun.server_specs(run, robot.project, str(dds_dir)):
             for volume in (m.source for m in spec.mounts if m.is_named_volume):
