@@ -98,6 +98,24 @@ def _usage_error(message: str) -> Any:
     return Exit(message=f"robocore: {text} ({USAGE_HINT})", code=2)
 
 
+#: The flag that makes a whole command line a dry run (as invoke names it in a task's parser context).
+DRY_RUN = "dry-run"
+
+
+def dry_run_for_the_line(contexts: Sequence[Any]) -> None:
+    """``--dry-run`` given to any task of a line with several (``robocore build sync run --dry-run``) applies to
+    every task of it: invoke gives a flag to the task it follows, and a line that says dry run must never
+    deploy. A task of such a line that has no dry run (``doctor``) makes the line a one-line usage error."""
+    if len(contexts) < 2 or not any(DRY_RUN in ctx.args and ctx.args[DRY_RUN].value for ctx in contexts):
+        return
+    lacking = [ctx.name for ctx in contexts if DRY_RUN not in ctx.args]
+    if lacking:
+        raise _usage_error(f"--dry-run applies to every task of the line, and {', '.join(lacking)} has no dry run; "
+                           "run it on a line of its own")
+    for ctx in contexts:
+        ctx.args[DRY_RUN].value = True
+
+
 def _one_line(step: Any) -> Any:
     """A parse step of invoke's Program whose parse errors (and a flag value invoke cannot convert, such as
     ``-D abc``) become one line and exit code 2 instead of invoke's exit code 1 or a traceback."""
@@ -139,6 +157,7 @@ def _program(namespace: Any, settings: dict[str, Any] | None = None) -> Any:
         @_one_line
         def parse_tasks(self) -> None:
             super().parse_tasks()
+            dry_run_for_the_line(self.tasks)
             remainder = self.core.remainder if self.core is not None else ""
             if remainder.strip():
                 raise _usage_error(f"robocore tasks take no arguments after '--' (got {remainder!r})")

@@ -108,6 +108,10 @@ def _count(value: str, flag: str) -> int:
 def _options(c: Context, task_name: str, **flags: Any) -> Options:
     from robocore.commands.context import Options
 
+    if "dry_run" in flags and _setting(c, "argv") is None and any(
+            arg == "--dry-run" or arg.startswith("--dry-run=") for arg in command_line(c)):
+        flags["dry_run"] = True  # a project's own `invoke build sync run --dry-run`: the whole line is a dry run
+
     return Options(project_dir=project_dir(c), argv=command_line(c), task=task_name, **flags)
 
 

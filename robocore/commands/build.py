@@ -28,7 +28,7 @@ from robocore.commands.state import read_build_state, write_build_state
 from robocore.commands.workspace import check_workspace, selected_components, wheels_cmake_packages, workspace_files
 from robocore.config.model import Component
 from robocore.errors import BuildError, UnsafePath, UsageError
-from robocore.files import check_no_links, make_folder, write_atomic
+from robocore.files import check_no_links, make_folder, read_project_file, write_atomic
 from robocore.plan import cmake_packages, colcon, dockerfiles, install_patch, naming
 from robocore.plan.inputs import FileDigest, digest_bytes, tree_hash
 from robocore.project import Project
@@ -45,8 +45,10 @@ def workspace_packages(ws: Path) -> tuple[dict[str, str], WorkspaceFiles]:
     files = list(workspace_files(ws))
     roots = sorted((rel.rsplit("/", 1)[0] if "/" in rel else "" for rel, _ in files
                     if rel.rsplit("/", 1)[-1] == "package.xml"), key=len, reverse=True)
-    names = {root: colcon.package_name((ws / root / "package.xml").read_text(errors="replace")) or root or ws.name
-             for root in roots}
+    def manifest(root: str) -> str:  # a FIFO or a link out of the workspace: one line, never a blocked read
+        return read_project_file(ws / root / "package.xml", ws, what="package.xml").decode("utf-8", errors="replace")
+
+    names = {root: colcon.package_name(manifest(root)) or root or ws.name for root in roots}
     found: WorkspaceFiles = {names[root]: {} for root in roots}
     for rel, path in files:
         owner = next((r for r in roots if r == "" or rel.startswith(r + "/")), None)

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 from robocore.config.model import Component
 from robocore.errors import ConfigError, Problem, UsageError
-from robocore.files import refuse_links_leaving
+from robocore.files import read_project_file, refuse_links_leaving
 from robocore.project import Project
 
 if TYPE_CHECKING:
@@ -79,7 +79,8 @@ def package_manifests(folder: Path, project_root: Path) -> list[Manifest]:
         path = folder / rel
         shown = path.relative_to(project_root).as_posix() if path.is_relative_to(project_root) else str(path)
         cmakelists = f"{root}/CMakeLists.txt" if root else "CMakeLists.txt"
-        found.append(read_manifest(path.read_text(errors="replace"), shown, has_cmakelists=cmakelists in files))
+        text = read_project_file(path, project_root, what="package.xml").decode("utf-8", errors="replace")
+        found.append(read_manifest(text, shown, has_cmakelists=cmakelists in files))
     return found
 
 

@@ -10,7 +10,9 @@ Each check yields ``(key path, message)``; the loader adds file and line.
 
 from __future__ import annotations
 
+import os
 import re
+import stat
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,7 +35,7 @@ from robocore.config.model import (
 )
 from robocore.config.sources import checkout_folder_problem, protocol_problem
 from robocore.config.values import IMAGE_PATH, IMAGE_PREFIX, is_ipv6, shown
-from robocore.files import path_kind
+from robocore.files import is_inside, path_kind
 
 KeyPath = tuple[str | int, ...]
 Found = tuple[KeyPath, str]
@@ -340,6 +342,12 @@ def _tls_files(parts: Parts, project: Path) -> Iterator[Found]:
                 yield ("hosts", index, "tls", key), f"file {value!r} cannot be read: {reason}"
             elif kind != "file":
                 yield ("hosts", index, "tls", key), f"file {value!r} not found"
+            elif not stat.S_ISREG(os.stat(path).st_mode):
+                yield ("hosts", index, "tls", key), f"file {value!r} is not a regular file (a FIFO or a device?)"
+            elif not Path(value).expanduser().is_absolute() and not is_inside(path, project):
+                yield (("hosts", index, "tls", key),
+                       f"file {value!r} is a symlink leading outside the project folder; name the file outside "
+                       "by its absolute path instead")
 
 
 def discovery_hosts(parts: Parts) -> set[str]:

@@ -26,8 +26,8 @@ from robocore.config.values import shown as shown
 from robocore.config.yamltext import MAX_FILE_BYTES as MAX_FILE_BYTES
 from robocore.config.yamltext import ROBOT_FILE as ROBOT_FILE
 from robocore.config.yamltext import KeyPath, LineMap, problem, read_yaml, too_big
-from robocore.errors import ConfigError, Problem
-from robocore.files import path_kind
+from robocore.errors import ConfigError, Problem, UnsafePath
+from robocore.files import path_kind, read_project_file
 
 #: Problems reported one per line; the rest are counted in a last line.
 MAX_PROBLEMS = 200
@@ -227,14 +227,14 @@ def load_robot(project: Path, *, file_name: str = ROBOT_FILE) -> Robot:
         what = {"dir": "is not a file", "unusable": f"cannot be read: {reason}"}.get(
             kind, "file not found (is this a robocore project? 'robocore init DIR' makes one)")
         raise ConfigError([problem(shown_path, None, "", what)])
-    try:
-        with path.open("rb") as stream:
-            raw = stream.read(MAX_FILE_BYTES + 1)
-            if len(raw) > MAX_FILE_BYTES:
-                stream.seek(0, os.SEEK_END)
-                raise too_big(stream.tell(), shown_path)
+    try:  # a link out of the project, a FIFO or a device: one line at once, never a blocked read
+        raw = read_project_file(path, project, limit=MAX_FILE_BYTES, what=file_name)
+    except UnsafePath as exc:
+        raise ConfigError([problem(shown_path, None, "", str(exc).split(": ", 1)[-1])]) from None
     except OSError as exc:
         raise ConfigError([problem(shown_path, None, "", f"cannot read file: {exc.strerror or exc}")]) from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise too_big(os.stat(path).st_size, shown_path)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -49,6 +49,10 @@ TASKS = [
     (["connect", "--component", "talker", "-d"], "on main (interactive)"),
     (["release", "--dry-run", "--tag", "v1"], "docker push registry.example:5000/"),
     (["rollback", "--dry-run"], "main: would run tag v0"),
+    # the flag after the last task makes the whole line a dry run (invoke alone would give it to run only)
+    (["build", "sync", "run", "--dry-run"], "rsync -a -R -s"),
+    (["stage", "build", "sync", "run", "-d"], "unknown (dry run: not contacted)"),
+    (["build", "--dry-run", "sync", "run"], "rsync -a -R -s"),
 ]
 
 
@@ -110,6 +114,16 @@ def test_dry_run_prints_the_plan_offline(argv: list[str], says: str, world: dict
     assert not list(tmp.glob("ran-*")), [p.name for p in tmp.glob("ran-*")]
     assert snapshot(tmp) == before, "files were written"
     assert root.exists()
+
+
+def test_a_dry_run_line_with_a_task_that_has_none_is_refused(world: dict[str, object]) -> None:
+    tmp = Path(str(world["tmp"]))
+    before = snapshot(tmp)
+    done = robocore(world, "stage", "--dry-run", "doctor")
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.count("\n") == 1 and "doctor has no dry run" in done.stderr, done.stderr
+    assert connections(world["listener"]) == 0  # type: ignore[arg-type]
+    assert snapshot(tmp) == before and not list(tmp.glob("ran-*"))
 
 
 def test_negative_control_without_dry_run_the_daemon_and_ssh_are_contacted(world: dict[str, object]) -> None:
