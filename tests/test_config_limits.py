@@ -61,6 +61,25 @@ def test_an_alias_bomb_is_one_line() -> None:
     assert refusal(text) == [f"robot.yaml: document expands to more than {yamltext.MAX_VALUES} values (aliases?)"]
 
 
+@pytest.mark.parametrize("text", [
+    # a few values, each a large scalar repeated by aliases: small on disk, megabytes once expanded
+    "big: &big " + "x" * 300_000 + "\nhosts: [*big, *big, *big, *big, *big, *big, *big]\n",
+    # the same through nested lists and merge keys
+    "s: &s " + "y" * 100_000 + "\nl1: &l1 [*s, *s, *s, *s, *s]\nl2: &l2 [*l1, *l1, *l1, *l1, *l1]\n",
+    "m: &m {a: &v " + "z" * 200_000 + "}\nhosts:\n" + "".join(f"  - {{<<: *m, b{i}: *v}}\n" for i in range(20)),
+])
+def test_an_alias_expanding_to_too_many_bytes_is_one_line(text: str) -> None:
+    assert len(text) < yamltext.MAX_FILE_BYTES
+    assert refusal(text) == [f"robot.yaml: document expands to more than {yamltext.MAX_EXPANDED_BYTES:,} bytes of "
+                             "text with its aliases expanded (an alias repeated too often?)"]
+
+
+def test_aliases_within_the_byte_limit_are_expanded_as_usual() -> None:
+    text = HEAD + "components:\n  - &c {image: busybox, runs_on: main, name: c0}\n" + "".join(
+        f"  - {{<<: *c, name: c{i}}}\n" for i in range(1, 50))
+    assert [c.name for c in parse_robot_text(text).components] == [f"c{i}" for i in range(50)]
+
+
 def test_problems_are_capped_and_counted() -> None:
     components = "".join(f"  - {{name: c{i}, runs_on: nowhere{i}, image: busybox}}\n" for i in range(250))
     lines = refusal(HEAD + "components:\n" + components)

@@ -109,14 +109,18 @@ def _yaml_error(exc: yaml.YAMLError, file: str) -> ConfigError:
 
 #: Most values a robot.yaml may expand to (aliases included); far above any real robot.
 MAX_VALUES = 200_000
+#: Most bytes of text (keys and scalars) a robot.yaml may expand to, aliases expanded: twice the largest file, so
+#: that what is built from it (Dockerfiles, compose files, JSON) stays as bounded as the file itself.
+MAX_EXPANDED_BYTES = 2 * MAX_FILE_BYTES
 
 
 def _check_size(root: yaml.Node, file: str) -> None:
-    """Refuse recursive aliases and alias bombs before anything walks the document."""
-    sizes: dict[int, int] = {}
+    """Refuse recursive aliases and alias bombs before anything walks the document: the document is measured by
+    what it expands to (values and bytes of text, every alias counted in full), in one pass over its nodes."""
+    sizes: dict[int, tuple[int, int]] = {}
     active: set[int] = set()
 
-    def size(node: yaml.Node) -> int:
+    def size(node: yaml.Node) -> tuple[int, int]:
         key = id(node)
         if key in sizes:
             return sizes[key]
@@ -124,17 +128,28 @@ def _check_size(root: yaml.Node, file: str) -> None:
             line = node.start_mark.line + 1
             raise ConfigError([problem(file, line, "", "an alias refers to itself (recursive anchor)")])
         active.add(key)
-        total = 1
+        values, text = 1, 0
+        if isinstance(node, yaml.ScalarNode):
+            text = len(node.value)
+        children: list[yaml.Node] = []
         if isinstance(node, yaml.MappingNode):
-            total += sum(size(k) + size(v) for k, v in node.value)
+            children = [item for pair in node.value for item in pair]
         elif isinstance(node, yaml.SequenceNode):
-            total += sum(size(item) for item in node.value)
+            children = list(node.value)
+        for child in children:
+            more, longer = size(child)
+            values += more
+            text += longer
         active.discard(key)
-        if total > MAX_VALUES:
+        if values > MAX_VALUES:
             what = f"document expands to more than {MAX_VALUES} values (aliases?)"
             raise ConfigError([problem(file, None, "", what)])
-        sizes[key] = total
-        return total
+        if text > MAX_EXPANDED_BYTES:
+            what = (f"document expands to more than {MAX_EXPANDED_BYTES:,} bytes of text with its aliases expanded "
+                    "(an alias repeated too often?)")
+            raise ConfigError([problem(file, None, "", what)])
+        sizes[key] = values, text
+        return values, text
 
     size(root)
 
