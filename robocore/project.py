@@ -13,11 +13,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from robocore.errors import UsageError
-from robocore.files import ROBOT_FILE, STATE_DIR
+from robocore.files import ROBOT_FILE, STATE_DIR, check_no_links
 
 if TYPE_CHECKING:
     from robocore.config.model import Component, Host, Robot
 
+#: The folders robocore writes directly under ``.robocore/`` (checked for links before a task writes).
+STATE_FOLDERS = ("build", "cache", "compose", "dds", "desktop", "history", "home", "shell", "sync", "test-results",
+                 "test-runs", "x11")
 #: Inside a component's build folder: the state of its last successful build (package hashes, files, copies).
 BUILD_STATE = ".robocore-build.json"
 
@@ -119,6 +122,20 @@ class ProjectFolder:
     def x11_dir(self, container: str) -> Path:
         """The folder of a dev container's xauth cookie (a folder, so the file can be replaced atomically)."""
         return self.state_dir / "x11" / container
+
+    @property
+    def desktop_dir(self) -> Path:
+        """The folder of the desktop's VNC password (0700, the file 0600)."""
+        return self.state_dir / "desktop"
+
+    def check_state_links(self) -> None:
+        """Refuse, in one line naming it, a symlink at ``.robocore`` or at any folder robocore writes below it
+        (a cloned repository can carry one): checked with lstat before a task writes anything, so that nothing
+        outside the project is written or removed through it. Folders below these are checked as they are
+        written (:func:`robocore.files.write_atomic` and its siblings)."""
+        folders = [self.state_dir / name for name in STATE_FOLDERS]
+        for path in (self.state_dir, *folders, self.ssh_hosts_record, self.schema_file, self.build_lock):
+            check_no_links(path, anchor=self.root)
 
 
 @dataclass(frozen=True)

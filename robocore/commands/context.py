@@ -34,6 +34,8 @@ class Options:
     def load(self) -> Project:
         """Load the project (raises ConfigError with every problem)."""
         project = Project.load(self.project_dir)
+        if not self.dry_run and self.task != "validate":  # validate writes nothing; a dry run neither
+            project.check_state_links()
         if not self.dry_run:
             warm_remote_hosts(project, list(self.argv))
         return project
