@@ -307,10 +307,10 @@ CASES = [
     ),
     Case(
         "remote-read-only-volume-outside-the-project",
-        edit(after={15: "    volumes: ['../shared:/shared:ro', './ok:/ok:ro', '../data:/data']"}),
+        edit(after={15: "    volumes: ['../shared:/shared:ro', './ok:/ok:ro']"}),
         16,
-        "components[0].volumes[0]: '../shared' is not a folder inside the project; sync copies read-only project "
-        "paths to rpi5, so use one inside the project folder (or an absolute path on rpi5)",
+        "components[0].volumes[0]: '../shared:/shared:ro': a project path that leaves the project folder means "
+        "nothing on a robot; name a host folder by its absolute path ('../shared' is not in the project)",
     ),
     Case(
         "bad-env-name",

@@ -202,7 +202,7 @@ def _remote_project_volumes(parts: Parts) -> Iterator[Found]:
             continue
         for i, volume in enumerate(comp.volumes):
             relative = read_only_project_path(volume)
-            if relative is not None and (relative == "." or relative.split("/")[0] == ".."):
+            if relative == ".":  # a path leaving the project (..) is refused with the volume itself
                 yield (("components", index, "volumes", i),
                        f"{volume.split(':')[0]!r} is not a folder inside the project; sync copies read-only project "
                        f"paths to {host.name}, so use one inside the project folder (or an absolute path on "

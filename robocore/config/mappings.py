@@ -65,6 +65,9 @@ def volume_problem(value: str) -> str | None:
     if source.startswith("/"):
         if not _normalised_absolute(source):
             return f"{shown(value)}: the host path must be normalised (no '..', '.' or '//')"
+    elif is_project_path(source) and posixpath.normpath(source).split("/")[0] == "..":
+        return (f"{shown(value)}: a project path that leaves the project folder means nothing on a robot; "
+                f"name a host folder by its absolute path ({shown(posixpath.normpath(source))} is not in the project)")
     elif not is_project_path(source) and not _VOLUME_NAME.fullmatch(source):
         return (f"{shown(value)}: the source must be an absolute path, a project path (./path) or a volume name "
                 "(letters, digits, '_', '.', '-')")
@@ -111,6 +114,24 @@ DOCKER_SOCKETS = ("/var/run/docker.sock", "/run/docker.sock")
 _BLOCK_DEVICE = re.compile(
     r"/dev/(?:sd[a-z]|hd[a-z]|vd[a-z]|xvd[a-z]|nvme[0-9]|mmcblk[0-9]|loop[0-9]|dm-[0-9]|md[0-9]|mapper/|disk/)"
 )
+
+
+#: System folders of a host: a container that writes them changes the host (its configuration, kernel, boot).
+SYSTEM_FOLDERS = ("/etc", "/proc", "/sys", "/boot", "/usr", "/lib", "/bin", "/sbin", "/var/lib/docker", "/dev")
+#: Host folders whose mount hands a container the host itself: the system folders and root's home (its keys).
+HOST_FOLDERS = (*SYSTEM_FOLDERS, "/root")
+#: Devices that give the host's memory, I/O ports or flash (besides disks).
+_HOST_DEVICE = re.compile(r"/dev/(?:mem|kmem|port|mtd[0-9]|mtdblock[0-9]|ubi[0-9]|nvram|sg[0-9]|bsg/|watchdog)")
+
+
+def owns_host_folder(source: str, folders: tuple[str, ...] = HOST_FOLDERS) -> str | None:
+    """The folder of ``folders`` that ``source`` (absolute, normalised) is or lies in, else None."""
+    return next((folder for folder in folders if source == folder or source.startswith(folder + "/")), None)
+
+
+def is_host_device(path: str) -> bool:
+    """True for a device that gives the host's memory, ports or flash (``/dev/mem``, ``/dev/mtd0``)."""
+    return _HOST_DEVICE.match(path) is not None
 
 
 def exposes_docker_socket(source: str) -> bool:

@@ -13,7 +13,14 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from robocore.config.checks import outside_target
-from robocore.config.mappings import exposes_docker_socket, is_block_device
+from robocore.config.mappings import (
+    HOST_FOLDERS,
+    SYSTEM_FOLDERS,
+    exposes_docker_socket,
+    is_block_device,
+    is_host_device,
+    owns_host_folder,
+)
 from robocore.config.model import Component, Robot
 from robocore.config.values import shown
 
@@ -34,6 +41,15 @@ def risky_settings(robot: Robot, project: Path | None = None) -> list[Found]:
             message = _git_warning(repo.protocol, repo.url)
             if message:
                 found.append(((*base, "repositories", i, "url"), message))
+    for index, host in enumerate(robot.hosts):
+        if host.insecure:
+            found.append((("hosts", index, "insecure"),
+                          f"host {host.name}: its Docker daemon is reached by plain TCP without authentication: "
+                          "whoever reaches its port owns the host (use docker: ssh or tls)"))
+        root = host.mount_root.rstrip("/") or "/" if host.mount_root else None
+        if root is not None and (root == "/" or owns_host_folder(root, SYSTEM_FOLDERS) is not None):
+            found.append((("hosts", index, "mount_root"),
+                          f"host {host.name}: mount_root {shown(root)} is a system folder: sync writes releases there"))
     for index, pkg in enumerate(robot.common_packages):
         protocol = pkg.repo_protocol
         message = _git_warning(protocol, pkg.repo) if protocol and pkg.repo else None
@@ -62,12 +78,22 @@ def _component(comp: Component) -> Iterator[Found]:
             yield (("volumes", i),
                    f"mounts the Docker socket of {host} ({shown(volume)}): the container controls {host}'s Docker, "
                    f"and so {host}")
+        elif owns_host_folder(source) is not None and not volume.endswith(":ro"):
+            yield (("volumes", i),
+                   f"mounts {owns_host_folder(source)} of {host} writable ({shown(volume)}): the container can "
+                   f"change {host} itself")
+        elif source in HOST_FOLDERS:  # read-only: a single file (/etc/localtime) is common, a whole folder is not
+            yield (("volumes", i), f"mounts all of {source} of {host} ({shown(volume)}): the container reads its "
+                   "secrets")
     for i, device in enumerate(comp.devices):
         path = device.split(":")[0]
         if path == "/dev":
             yield ("devices", i), f"passes every device of {host}, its disks included ({shown(device)})"
         elif is_block_device(path):
             yield ("devices", i), f"passes a disk of {host} ({shown(device)}): the container can read and rewrite it"
+        elif is_host_device(path):
+            yield (("devices", i),
+                   f"passes {shown(path)} of {host} (memory, ports or flash): the container can rewrite {host}")
 
 
 def _outside_project(comp: Component, project: Path) -> Iterator[Found]:
