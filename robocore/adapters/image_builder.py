@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from robocore.errors import BuildError, DockerError
+from robocore.errors import BuildError, DockerError, UnsafePath
 from robocore.plan.dockerfiles import ContextEntry, ImagePlan
 from robocore.plan.inputs import FileDigest, digest_bytes
 
@@ -62,6 +62,9 @@ def _file(dest: str, path: Path) -> ContextFile:
     info = path.lstat()
     if stat.S_ISLNK(info.st_mode):
         return ContextFile(dest, b"", link=os.readlink(path))
+    if not stat.S_ISREG(info.st_mode):  # a FIFO would block the read for ever, a device never end
+        raise UnsafePath(f"{path}: is not a regular file (a FIFO, socket or device); robocore copies only files "
+                         "and links into images", hint=f"remove {path}")
     return ContextFile(dest, path.read_bytes(), executable=bool(info.st_mode & 0o111))
 
 

@@ -4,12 +4,13 @@ a command works on and the source files of a workspace."""
 from __future__ import annotations
 
 import os
+import stat
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from robocore.config.model import Component
-from robocore.errors import ConfigError, Problem, UsageError
+from robocore.errors import ConfigError, Problem, UnsafePath, UsageError
 from robocore.files import read_project_file, refuse_links_leaving
 from robocore.project import Project
 
@@ -53,6 +54,10 @@ def workspace_files(ws: Path) -> Iterator[tuple[str, Path]]:
         dirnames[:] = sorted(d for d in dirnames if not skipped(here, d))
         for name in sorted(filenames):
             if not name.endswith((".pyc", ".pyo")):
+                mode = os.lstat(here / name).st_mode
+                if not (stat.S_ISREG(mode) or stat.S_ISLNK(mode)):  # a FIFO would block a read for ever
+                    raise UnsafePath(f"{here / name}: is not a regular file (a FIFO, socket or device); a workspace "
+                                     "holds files and links only", hint=f"remove {here / name}")
                 yield (here / name).relative_to(ws).as_posix(), here / name
 
 

@@ -1,0 +1,122 @@
+"""How long each refusal of issue 19's hostile projects takes (goal: under 5 s each, on 2 cores).
+
+Each case sets up a hostile project in a temporary folder and runs ``robocore -p DIR TASK`` as a user would
+(a new process, start-up included; ``DOCKER_HOST`` points at a socket nobody serves, so no case reaches a
+daemon). It prints the outcome (exit code and the first line of stderr), the wall-clock time and its ratio to
+the 5 s goal, side by side, and the same for a plain ``validate`` of a small good project as the reference:
+
+- aliases that expand a 300 kB scalar past the byte limit; a billion-laughs bomb past the value limit;
+- robot.yaml as a FIFO (a plain reader would wait for ever), as ``/dev/zero``, as a link out of the project;
+- ``.robocore``, ``.robocore/compose`` and ``.robocore/dds`` as links to a folder outside (stage --refresh,
+  build), a package.xml FIFO (stage --dry-run);
+- a relative volume that leaves the project; ``--dry-run`` on a line with a task that has none.
+
+    python bench/hostile_limits.py
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+GOAL_S = 5.0
+GOOD = """\
+ros_distro: jazzy
+hosts:
+  - {name: dev, ip: 127.0.0.1}
+components:
+  - {name: talker, folder: components/talker, runs_on: dev}
+"""
+
+
+def project(root: Path, text: str = GOOD) -> Path:
+    pkg = root / "components" / "talker" / "src" / "talker_pkg"
+    pkg.mkdir(parents=True)
+    (pkg / "package.xml").write_text("<package><name>talker_pkg</name></package>")
+    (root / "robot.yaml").write_text(text)
+    return root
+
+
+def link_state(root: Path, rel: str) -> Path:
+    outside = root.parent / "outside"
+    outside.mkdir(exist_ok=True)
+    (outside / "canary").write_text("canary\n")
+    (root / rel).parent.mkdir(parents=True, exist_ok=True)
+    (root / rel).symlink_to(outside)
+    return root
+
+
+def robot_as(root: Path, kind: str) -> Path:
+    project(root)
+    robot = root / "robot.yaml"
+    robot.unlink()
+    if kind == "fifo":
+        os.mkfifo(robot)
+    elif kind == "device":
+        robot.symlink_to("/dev/zero")
+    else:
+        outside = root.parent / "outside.yaml"
+        outside.write_text(GOOD)
+        robot.symlink_to(outside)
+    return root
+
+
+def package_fifo(root: Path) -> Path:
+    project(root)
+    manifest = root / "components" / "talker" / "src" / "talker_pkg" / "package.xml"
+    manifest.unlink()
+    os.mkfifo(manifest)
+    return root
+
+
+BYTES_BOMB = "big: &big " + "x" * 300_000 + "\nhosts: [*big, *big, *big, *big, *big, *big, *big]\n"
+VALUES_BOMB = "a0: &a0 [x, x, x, x, x, x, x, x, x]\n" + "".join(
+    f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 9)}]\n" for i in range(1, 10))
+OUT_VOLUME = GOOD.replace("runs_on: dev}", "runs_on: dev, volumes: ['./../../var/run/docker.sock:/s']}")
+
+CASES: list[tuple[str, Callable[[Path], Path], list[str]]] = [
+    ("reference: validate, small good project", project, ["validate"]),
+    ("alias expands past the byte limit", lambda r: project(r, BYTES_BOMB), ["validate"]),
+    ("alias bomb past the value limit", lambda r: project(r, VALUES_BOMB), ["validate"]),
+    ("robot.yaml is a FIFO", lambda r: robot_as(r, "fifo"), ["validate"]),
+    ("robot.yaml is /dev/zero", lambda r: robot_as(r, "device"), ["validate"]),
+    ("robot.yaml links out of the project", lambda r: robot_as(r, "link"), ["validate"]),
+    (".robocore links outside: stage --refresh", lambda r: link_state(project(r), ".robocore"), ["stage", "--refresh"]),
+    (".robocore/compose links outside: stage --refresh", lambda r: link_state(project(r), ".robocore/compose"),
+     ["stage", "--refresh"]),
+    (".robocore/dds links outside: build", lambda r: link_state(project(r), ".robocore/dds"), ["build"]),
+    ("package.xml is a FIFO: stage --dry-run", package_fifo, ["stage", "--dry-run"]),
+    ("relative volume leaves the project", lambda r: project(r, OUT_VOLUME), ["validate"]),
+    ("--dry-run line with doctor", project, ["stage", "--dry-run", "doctor"]),
+]
+
+
+def main() -> int:
+    print(f"{'case':52} {'exit':>4} {'seconds':>8} {'/ goal':>7}  first line")
+    worst = 0.0
+    with tempfile.TemporaryDirectory(prefix="robocore-hostile-bench-") as tmp:
+        env = dict(os.environ, DOCKER_HOST=f"unix://{tmp}/nobody.sock")
+        for index, (name, setup, task) in enumerate(CASES):
+            root = setup(Path(tmp) / f"case{index}" / "robot")
+            start = time.monotonic()
+            try:
+                done = subprocess.run([sys.executable, "-m", "robocore", "-p", str(root), *task], capture_output=True,
+                                      text=True, env=env, timeout=60, stdin=subprocess.DEVNULL)
+                code, first = done.returncode, (done.stderr or done.stdout).strip().splitlines()[:1]
+            except subprocess.TimeoutExpired:
+                code, first = -1, ["TIMEOUT after 60 s"]
+            seconds = time.monotonic() - start
+            worst = max(worst, seconds)
+            print(f"{name:52} {code:>4} {seconds:8.2f} {seconds / GOAL_S:7.2f}  {(first or [''])[0][:110]}",
+                  flush=True)
+    print(f"worst: {worst:.2f} s ({worst / GOAL_S:.2f} of the {GOAL_S:.0f} s goal)")
+    return 0 if worst < GOAL_S else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
