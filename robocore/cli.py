@@ -75,6 +75,24 @@ def split_project(argv: Sequence[str], task_names: set[str]) -> tuple[str | None
     return project, rest
 
 
+def config_file_problem(rest: Sequence[str]) -> str | None:
+    """Why the invoke configuration file named by ``-f FILE``/``--config FILE`` cannot be read (a FIFO would
+    block invoke's read for ever, a folder or device fail with a traceback), else None."""
+    import stat
+
+    for flag, value in zip(rest, [*rest[1:], None], strict=True):
+        name = value if flag in ("-f", "--config") else flag.split("=", 1)[1] if flag.startswith("--config=") else None
+        if name is None:
+            continue
+        try:
+            mode = os.stat(name).st_mode
+        except (OSError, ValueError) as exc:
+            return f"{flag} {name!r}: cannot be read ({getattr(exc, 'strerror', None) or exc})"
+        if not stat.S_ISREG(mode):
+            return f"{flag} {name!r}: is not a regular file (a folder, FIFO or device)"
+    return None
+
+
 def init_in_project(rest: list[str], project: str) -> list[str]:
     """``robocore DIR init`` (and ``robocore -p DIR init``): create the project in DIR."""
     if rest[:1] != ["init"] or any(arg == "--path" or arg.startswith("--path=") for arg in rest):
@@ -197,6 +215,12 @@ def main(argv: Sequence[str] | None = None) -> None:
         from robocore.ui import clean
 
         print(f"robocore: {clean(str(error))} (robocore -p DIR TASK, robocore DIR TASK)", file=sys.stderr)
+        sys.exit(2)
+    problem = config_file_problem(rest)
+    if problem is not None:
+        from robocore.ui import clean
+
+        print(f"robocore: {clean(problem)} ({USAGE_HINT})", file=sys.stderr)
         sys.exit(2)
     # the steps that follow decide the ssh warm-up: only a real command line warms anything
     settings: dict[str, Any] = {"argv": args if argv is None else []}

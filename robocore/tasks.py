@@ -95,13 +95,19 @@ def _tag(tag: str) -> str | None:
     return tag
 
 
+#: Largest value of a counting flag (``logs --tail``): more lines than any container keeps.
+MAX_COUNT = 10_000_000
+
+
 def _count(value: str, flag: str) -> int:
-    """A flag that takes a whole number of at least 0 (taken as text, so that invoke never fails on it)."""
+    """A flag that takes a whole number from 0 to :data:`MAX_COUNT` (taken as text, so that invoke never fails
+    on it, and a number of thousands of digits is refused before it is converted)."""
     text = value.strip()
-    if not text.isdigit() or not text.isascii():
+    if not text.isdigit() or not text.isascii() or len(text) > len(str(MAX_COUNT)) or int(text) > MAX_COUNT:
         from robocore.errors import UsageError
 
-        raise UsageError(f"{flag} takes a whole number, 0 or more (got {value!r})")
+        shown = value if len(value) <= 40 else value[:37] + "..."
+        raise UsageError(f"{flag} takes a whole number from 0 to {MAX_COUNT:,} (got {shown!r})")
     return int(text)
 
 

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 from pydantic import BaseModel, ConfigDict, Field
 
 from robocore.config.hints import Unknown, known_list
-from robocore.config.values import shown
+from robocore.config.values import Number, shown
 
 if TYPE_CHECKING:
     from robocore.config.model import Component
@@ -36,10 +36,10 @@ class Desktop(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    display: int = Field(default=1, ge=1, le=63, description="X display number (:1); unique per host.")
+    display: Number = Field(default=1, ge=1, le=63, description="X display number (:1); unique per host.")
     size: str = Field(default="1280x800", pattern=f"^{SIZE}$", description="Screen size, WIDTHxHEIGHT.")
-    web_port: int = Field(default=6080, ge=1, le=65535, description="Port of noVNC (http://<host>:PORT/vnc.html).")
-    vnc_port: int | None = Field(
+    web_port: Number = Field(default=6080, ge=1, le=65535, description="Port of noVNC (http://<host>:PORT/vnc.html).")
+    vnc_port: Number | None = Field(
         default=None, ge=1, le=65535, description="VNC port, on 127.0.0.1 only (default: 5900 + display)."
     )
     local_only: bool = Field(

@@ -39,17 +39,18 @@ from robocore.config.values import (
     MountRoot,
     MultiLine,
     Name,
+    Number,
     OneLine,
     PipRequirement,
     Registry,
+    ShellWords,
     UserName,
     schema_pattern,
     shown,
 )
 
-#: ROS 2 distributions robocore knows, with the Fast DDS line each ships.
+#: ROS 2 distributions robocore knows, with the Fast DDS line each ship; ROS 1 ones (every other distro is ROS 2).
 FASTDDS_LINE: dict[str, int] = {"humble": 2, "jazzy": 2, "kilted": 3, "rolling": 3}
-#: ROS 1 distributions robocore knows (every other distro is ROS 2).
 ROS1_DISTROS = frozenset({"melodic", "noetic"})
 
 
@@ -121,10 +122,10 @@ class Host(Strict):
         description="How the Docker daemon is reached: local (this machine's socket), ssh "
         "(default for remote hosts), tls (TCP with client certificates), tcp (plain, needs insecure: true).",
     )
-    docker_port: int | None = Field(
+    docker_port: Number | None = Field(
         default=None, ge=1, le=65535, description="TCP port of the daemon (tls: 2376, tcp: 2375)."
     )
-    ssh_port: int = Field(default=22, ge=1, le=65535)
+    ssh_port: Number = Field(default=22, ge=1, le=65535)
     tls: TlsFiles | None = None
     insecure: bool = Field(default=False, description="Allow plain unauthenticated TCP to this host's daemon.")
     mount_root: MountRoot | None = None
@@ -243,7 +244,7 @@ class DiscoveryServer(Strict):
     """One discovery server (fastdds: a Fast DDS discovery server; rosmaster: the ROS master)."""
 
     host: Name
-    port: int | None = Field(
+    port: Number | None = Field(
         default=None, ge=1024, le=65535, description="Default: 11811 (fastdds), 11311 (rosmaster)."
     )
 
@@ -284,8 +285,8 @@ class Component(Strict):
     postinstall: list[MultiLine] = Field(
         default_factory=list, description="Shell commands run in the image after dependencies are installed."
     )
-    entrypoint: OneLine | None = Field(default=None, description="Command run at container start, ROS sourced.")
-    launch_args: OneLine | None = Field(default=None, description="Arguments appended to entrypoint.")
+    entrypoint: ShellWords | None = Field(default=None, description="Command run at container start, ROS sourced.")
+    launch_args: ShellWords | None = Field(default=None, description="Arguments appended to entrypoint.")
     devices: list[OneLine] = Field(
         default_factory=list, description="/dev/host_path[:container_path[:permissions]]; block devices (disks) "
         "and all of /dev are allowed, and validate warns."
@@ -371,7 +372,7 @@ class Robot(Strict):
     """A whole robot: one robot.yaml."""
 
     ros_distro: RosDistro
-    ros_domain_id: int = Field(default=0, ge=0, le=232, description="DDS domain id (0-232).")
+    ros_domain_id: Number = Field(default=0, ge=0, le=232, description="DDS domain id (0-232).")
     registry: Registry | None = None
     image_prefix: ImagePrefix = ""
     base: BaseImage = Field(default_factory=BaseImage)

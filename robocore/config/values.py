@@ -18,7 +18,7 @@ import ipaddress
 import re
 from typing import Annotated, Any
 
-from pydantic import AfterValidator, Field
+from pydantic import AfterValidator, Field, Strict
 
 #: Longest rendering of a user's value inside a message.
 MAX_SHOWN = 60
@@ -366,4 +366,22 @@ def multi_line(value: str) -> str:
 
 
 OneLine = Annotated[str, AfterValidator(one_line), pattern_field(ONE_LINE)]
+
+
+def shell_words(value: str) -> str:
+    """``value`` if it is one line that splits into words as a shell would (no unbalanced quote)."""
+    import shlex
+
+    one_line(value)
+    try:
+        shlex.split(value)
+    except ValueError as exc:  # "No closing quotation", "No escaped character"
+        raise ValueError(f"is split into words as a shell would, and {shown(value)} cannot be: {exc}") from None
+    return value
+
+
+#: A command line written as text (entrypoint, launch arguments): split into words with shell quoting rules.
+ShellWords = Annotated[str, AfterValidator(shell_words), pattern_field(ONE_LINE)]
+#: A whole number that YAML wrote as a number: ``true``/``false`` (YAML booleans) are not 1 and 0.
+Number = Annotated[int, Strict()]
 MultiLine = Annotated[str, AfterValidator(multi_line), pattern_field(MULTI_LINE)]

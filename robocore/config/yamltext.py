@@ -8,6 +8,7 @@ PyYAML's safe loader builds the values; libyaml scans and parses when it is inst
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from typing import Any
 
@@ -154,12 +155,29 @@ def _check_size(root: yaml.Node, file: str) -> None:
     size(root)
 
 
+#: Integers YAML 1.1 reads in a way nobody means in robot.yaml: octal (``022`` is 18), hexadecimal, binary,
+#: base 60 (``1:30`` is 90) and digits grouped with ``_``.
+_SURPRISING_INT = re.compile(r"[-+]?(?:0[0-7_]+|0[xob].*|.*:.*|.*_.*)")
+
+
+def _construct_int(loader: Any, node: yaml.ScalarNode) -> Any:
+    """PyYAML's integer, but a plain scalar YAML 1.1 reads as octal, hex, binary or base 60 is refused."""
+    if not node.style and _SURPRISING_INT.fullmatch(node.value):  # plain: None (PyYAML) or "" (libyaml)
+        value = yaml.constructor.SafeConstructor.construct_yaml_int(loader, node)
+        what = (f"{shown(node.value)} is read by YAML 1.1 as the number {value} (octal, hexadecimal, binary, base 60 "
+                f"or grouped digits); write {value} if that is meant, or quote it if text is")
+        raise ConfigError([problem(loader.file, node.start_mark.line + 1, "", what)])
+    return yaml.constructor.SafeConstructor.construct_yaml_int(loader, node)
+
+
 class _DepthLimit(yaml.composer.Composer):
     """PyYAML's composer with a nesting limit: composing nodes is recursive, and a deep document
-    would otherwise end in RecursionError (or worse) instead of a message."""
+    would otherwise end in RecursionError (or worse) instead of a message. Its integers refuse
+    YAML 1.1's surprises (:data:`_SURPRISING_INT`)."""
 
     file = ROBOT_FILE
     depth = 0
+    yaml_constructors = {**yaml.SafeLoader.yaml_constructors, "tag:yaml.org,2002:int": _construct_int}
 
     def compose_node(self, parent: yaml.Node | None, index: int) -> yaml.Node | None:
         """Compose one node, refusing documents nested more than :data:`MAX_DEPTH` levels."""
