@@ -181,3 +181,58 @@ def test_no_link_layout_lets_a_write_or_a_clean_reach_outside(links: set[str]) -
         else:
             pytest.fail(f"no refusal with links at {sorted(links)}")
         assert {p.name: p.read_bytes() for p in outside.iterdir()} == before
+
+
+# ------------------------------------------------------------------------------ no traceback, no hang
+
+
+@pytest.mark.parametrize("port, says", [
+    ("022", "'022' is read by YAML 1.1 as the number 18"),
+    ("0x16", "as the number 22"),
+    ("1:30", "as the number 90"),
+    ("2_2", "as the number 22"),
+    ("true", "expected a whole number, got True"),
+    ("9" * 5000, "could not be read as int"),
+])
+def test_yaml_numbers_that_surprise_are_one_line(port: str, says: str) -> None:
+    with pytest.raises(ConfigError) as caught:
+        parse_robot_text(f"ros_distro: jazzy\nhosts:\n  - {{name: main, ip: 192.168.1.10, ssh_port: {port}}}\n")
+    (line,) = caught.value.lines()
+    assert line.startswith("robot.yaml:3: ") and says in line and len(line) < 400
+
+
+@pytest.mark.parametrize("key", ["entrypoint", "launch_args"])
+@pytest.mark.parametrize("value", ["echo 'a", 'x:="a', "a \\"])
+def test_a_shell_field_with_an_unbalanced_quote_is_refused_by_validate(key: str, value: str) -> None:
+    with pytest.raises(ConfigError) as caught:
+        parse_robot_text(component(**{key: value}))
+    (line,) = caught.value.lines()
+    assert f"components[0].{key}: is split into words as a shell would" in line
+
+
+def test_a_shell_field_with_balanced_quotes_is_read() -> None:
+    robot = parse_robot_text(component(entrypoint="ros2 launch pkg 'a b.py'", launch_args='x:="1 2"'))
+    assert robot.components[0].entrypoint == "ros2 launch pkg 'a b.py'"
+
+
+def _cli(*args: str, cwd: Path) -> tuple[int, str]:
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "robocore", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=60, stdin=subprocess.DEVNULL)
+    return done.returncode, done.stderr
+
+
+def test_absurd_counts_and_config_files_that_are_not_files_are_one_line(tmp_path: Path) -> None:
+    (tmp_path / "robot.yaml").write_text(ROBOT)
+    os.mkfifo(tmp_path / "fifo")
+    for args, says in [(["logs", "--tail", "9" * 5000], "--tail takes a whole number from 0 to"),
+                       (["logs", "--tail", "-1"], "--tail takes a whole number"),
+                       (["-f", str(tmp_path / "fifo"), "status"], "is not a regular file"),
+                       (["-f", str(tmp_path), "status"], "is not a regular file"),
+                       (["-f", "/dev/null", "status"], "is not a regular file"),
+                       (["-p", str(tmp_path / "fifo"), "status"], "is a file, not a project folder")]:
+        code, err = _cli(*args, cwd=tmp_path)
+        assert code == 2 and "Traceback" not in err, (args, err)
+        assert says in err and err.count("\n") <= 2, (args, err)
