@@ -197,7 +197,7 @@ def test_invoke_in_a_project_checks_numeric_flags_too(project: Path) -> None:
     done = subprocess.run([str(invoke), "logs", "--tail", "abc"], capture_output=True, text=True, cwd=project,
                           env=env, timeout=60)
     assert done.returncode == 2 and "Traceback" not in done.stderr
-    assert done.stderr.strip() == "error: --tail takes a whole number, 0 or more (got 'abc')"
+    assert done.stderr.strip() == "error: --tail takes a whole number from 0 to 10,000,000 (got 'abc')"
 
 
 @pytest.mark.parametrize("value", [TITLE, "10.0.0.1\x1b[2J", "\u202etxt.exe"])
