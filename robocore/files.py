@@ -123,8 +123,9 @@ def make_folder(path: Path, *, private: bool = False) -> Path:
     return path
 
 
-def _read_own(path: Path) -> bytes | None:
-    """The content of ``path`` when it is a regular file (never following a link, never opening a FIFO)."""
+def read_own_file(path: Path) -> bytes | None:
+    """The content of ``path``, a file robocore wrote, when it is a regular file; None otherwise (missing, a link,
+    a FIFO, a device: never followed, never blocking). For robocore's records under ``.robocore/``."""
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_NOCTTY)
     except OSError:
@@ -150,7 +151,7 @@ def write_atomic(path: Path, content: str | bytes, *, mode: int | None = None, p
     make_folder(path.parent, private=private_dir or mode == PRIVATE)
     if os.path.lexists(path) and not stat.S_ISREG(os.lstat(path).st_mode):
         raise UnsafePath(f"{path}: is not a regular file; robocore writes its own file there", hint=f"remove {path}")
-    if _read_own(path) == data:
+    if read_own_file(path) == data:
         if mode is not None and (os.lstat(path).st_mode & 0o7777) != wanted:
             os.chmod(path, wanted)
         return False
@@ -202,7 +203,7 @@ def write_generated(folder: Path, files: Mapping[str, str | bytes], *, mode: int
     not write. The folder is private (0700) when ``mode`` is :data:`PRIVATE`."""
     make_folder(folder, private=mode == PRIVATE)
     record = folder / WRITTEN_RECORD
-    before = (_read_own(record) or b"").decode("utf-8", errors="replace").splitlines()
+    before = (read_own_file(record) or b"").decode("utf-8", errors="replace").splitlines()
     paths = []
     for name, content in files.items():
         write_atomic(folder / name, content, mode=mode)

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from robocore.config.model import Host
-from robocore.files import write_atomic
+from robocore.files import read_own_file, write_atomic
 from robocore.plan.containers import ROLE_COMPONENT, ContainerSpec
 from robocore.project import Project
 
@@ -36,7 +36,7 @@ HISTORY_KEEP = 20
 
 def _read_json(path: Path) -> dict[str, Any]:
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(read_own_file(path) or b"{}")  # a link or a FIFO here is no record
     except (OSError, ValueError):
         return {}
     return data if isinstance(data, dict) else {}

@@ -87,9 +87,11 @@ def warm_recorded(argv: Sequence[str], cwd: Path | None = None) -> None:
     project folder that is wrong) warms nothing; nothing here raises."""
     if not wants_remote(argv):
         return
+    from robocore.files import read_own_file
+
     try:
         root = _guess_project(argv, cwd or Path.cwd())
-        data = json.loads(ProjectFolder(root).ssh_hosts_record.read_text())
+        data = json.loads(read_own_file(ProjectFolder(root).ssh_hosts_record) or b"{}")  # never a link or FIFO
         if data.get("robot_yaml") != _fingerprint(root):
             return
         endpoints = [Endpoint(str(e["name"]), str(e["user"]), str(e["ip"]), int(e["ssh_port"]))
