@@ -210,17 +210,19 @@ def build(c: Context, component: str = "", full: bool = False, dry_run: bool = F
 
 @task(help={"component": "Test only this component.",
             "packages_select": "Test only this package (repeat for more).", "dry_run": "Print the plan only.",
+            "no_build": "Do not build what is stale first: refuse to test an out-of-date build instead.",
             "quiet": "Only errors.", "json": "Machine-readable result on stdout."},
       iterable=["packages_select"])
 @reported
 def test(c: Context, component: str = "", packages_select: list[str] | None = None, dry_run: bool = False,
-         quiet: bool = False, json: bool = False) -> None:
-    """colcon-test each component's packages inside its staged image; one result per package (exit 9 on failure)."""
+         no_build: bool = False, quiet: bool = False, json: bool = False) -> None:
+    """Build what is stale, then colcon-test each component's packages inside its staged image; one result per
+    package (exit 9 on failure)."""
     from robocore.commands import package_tests
 
     options = _options(c, "test", dry_run=dry_run, quiet=quiet, json=json)
     _execute(options, lambda: package_tests.test(options, component=component or None,
-                                                 packages=packages_select or []))
+                                                 packages=packages_select or [], build_first=not no_build))
 
 
 @task(help={"host": "Sync only this host.", "dry_run": "Print the rsync commands only.", "quiet": "Only errors.",
