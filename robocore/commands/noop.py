@@ -149,7 +149,10 @@ def command(args: Sequence[str], cwd: Path) -> tuple[Path, str, list[str]] | Non
     if i != len(flags):
         return None
     project = (cwd / project).absolute()
-    if not (project / "robot.yaml").is_file() or (project / ".robocore").is_symlink():
+    try:
+        if not (project / "robot.yaml").is_file() or (project / ".robocore").is_symlink():
+            return None
+    except (OSError, ValueError):  # a name too long, a NUL: the ordinary path says what is wrong
         return None
     return project, task, flags
 
@@ -172,15 +175,19 @@ class Memo:
         return self.project / ".robocore" / "noop" / f"{self.task}-{key}.json"
 
     def take(self) -> Snapshot | None:
-        """A snapshot of what this task depends on."""
-        return snapshot(self.project, images=TASKS[self.task])
+        """A snapshot of what this task depends on; None when one cannot be taken (a file vanished or is
+        unreadable while listed: the ordinary path then runs, and reports what it finds)."""
+        try:
+            return snapshot(self.project, images=TASKS[self.task])
+        except (OSError, ValueError):
+            return None
 
     def replay(self, out: TextIO, err: TextIO) -> bool:
         """Print the recorded output and return True when nothing changed since it was recorded; otherwise
         keep the snapshot taken (the ordinary run's "before") and return False."""
         self.before = self.take()
         try:
-            recorded = json.loads(self.path.read_text())
+            recorded = json.loads(self.path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             return False
         if self.before is None or not isinstance(recorded, dict) or recorded.get("snapshot") != self.before.digest:
