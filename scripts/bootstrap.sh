@@ -28,10 +28,34 @@ install_debs() {
     echo "warning: please install ${need_debs[*]} (Debian/Ubuntu: apt-get install ${need_debs[*]})" >&2
   fi
 }
-# the Debian tools install while the venv is made (they overlap; the venv step waits for them at the end)
+# With ROBOCORE_PREFETCH_ROOT=1 (scripts/demo), a machine that has no Debian 12 image gets the root image of
+# the wheels base as prepare-base would make it (robocore/adapters/rootfs.py: mmdebstrap, then docker import),
+# here, while the venv is made, so that the two downloads overlap; prepare-base then finds it. On failure
+# prepare-base tries again and says why.
+prefetch_root() {
+  command -v mmdebstrap >/dev/null && command -v docker >/dev/null || return 0
+  docker image inspect robocore/debian:bookworm >/dev/null 2>&1 && return 0
+  docker image inspect debian:bookworm >/dev/null 2>&1 && return 0
+  local tmp
+  tmp="$(mktemp -d)"
+  echo "bootstrapping the Debian 12 root image (robocore/debian:bookworm) while the venv is made" >&2
+  if mmdebstrap --variant=apt --include=python3,python3-venv,ca-certificates,procps bookworm "$tmp/root.tar" \
+       "${ROBOCORE_DEBIAN_MIRROR:-http://deb.debian.org/debian}" >"$tmp/log" 2>&1; then
+    docker import "$tmp/root.tar" robocore/debian:bookworm >/dev/null || true
+  else
+    echo "warning: bootstrapping the Debian root image ahead failed; prepare-base will try again" >&2
+  fi
+  rm -rf "$tmp"
+}
+# the Debian tools install (and the root image bootstraps) while the venv is made; the venv step waits for them
+# at the end
+background() {
+  if [ ${#need_debs[@]} -gt 0 ]; then install_debs; fi
+  if [ "${ROBOCORE_PREFETCH_ROOT:-0}" = 1 ]; then prefetch_root; fi
+}
 debs_pid=""
-if [ ${#need_debs[@]} -gt 0 ]; then
-  install_debs &
+if [ ${#need_debs[@]} -gt 0 ] || [ "${ROBOCORE_PREFETCH_ROOT:-0}" = 1 ]; then
+  background &
   debs_pid=$!
 fi
 
