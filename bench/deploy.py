@@ -16,7 +16,7 @@ edited text (the end is the Docker log timestamp of that line, so the polling in
 For each link speed (default: the unshaped bridge and 100 Mbit/s), prints both times, the ratio
 (goal >= 10x) and the bytes sync moved for the edit (goal < 50 KB).
 
-    python bench/deploy.py [--rounds N] [--links 0,100] [--separate]
+    python bench/deploy.py [--rounds N] [--links 0,100] [--separate] [--profile DIR]
 """
 
 from __future__ import annotations
@@ -44,8 +44,17 @@ from robocore.adapters.ssh import MULTIPLEX_SECONDS  # noqa: E402
 PROJECT = "robocore-it-demo"  # shares the cached images of the integration suites
 
 
-def robocore(project: Path, *args: str) -> subprocess.CompletedProcess[str]:
-    proc = subprocess.run([sys.executable, "-m", "robocore", "-p", str(project), *args],
+#: ``--profile DIR``: each timed robocore command runs under cProfile, its profile written there.
+PROFILE: dict[str, Any] = {"dir": None, "count": 0}
+
+
+def robocore(project: Path, *args: str, timed: bool = False) -> subprocess.CompletedProcess[str]:
+    python = [sys.executable]
+    if timed and PROFILE["dir"] is not None:
+        PROFILE["count"] += 1
+        name = f"{PROFILE['count']:02d}-{'-'.join(a for a in args if not a.startswith('-'))}.prof"
+        python += ["-m", "cProfile", "-o", str(Path(PROFILE["dir"]) / name)]
+    proc = subprocess.run([*python, "-m", "robocore", "-p", str(project), *args],
                           capture_output=True, text=True, timeout=3600)
     if proc.returncode != 0:
         raise SystemExit(f"robocore {' '.join(args)} failed ({proc.returncode}):\n{proc.stdout}\n{proc.stderr}")
@@ -118,16 +127,17 @@ def robocore_path(project: Path, client: Any, text: str, *, separate: bool) -> t
     set_greeting(project, text)
     t = time.time()
     if separate:  # three processes, each step timed
-        robocore(project, "build", "--component", "talker", "--quiet")
+        robocore(project, "build", "--component", "talker", "--quiet", timed=True)
         steps["build"] = time.time() - t
         t = time.time()
-        out = robocore(project, "sync", "--json").stdout
+        out = robocore(project, "sync", "--json", timed=True).stdout
         steps["sync"] = time.time() - t
         t = time.time()
-        robocore(project, "run", "--quiet")
+        robocore(project, "run", "--quiet", timed=True)
         steps["run"] = time.time() - t
     else:  # the documented loop: one command, one process
-        out = robocore(project, "build", "--component", "talker", "--quiet", "sync", "--json", "run", "--quiet").stdout
+        out = robocore(project, "build", "--component", "talker", "--quiet", "sync", "--json", "run", "--quiet",
+                       timed=True).stdout
         steps["build sync run"] = time.time() - t
     rows = json.loads(out)["results"]  # sync's --json is the only output on stdout
     sent = sum(int(r["sent"]) for r in rows if r["component"] == "talker")
@@ -220,7 +230,13 @@ def main() -> int:
     parser.add_argument("--separate", action="store_true",
                         help="robocore path as three commands (build; sync; run), each timed, instead of the one "
                              "command `build sync run`")
+    parser.add_argument("--profile", type=Path, metavar="DIR",
+                        help="run each timed robocore command under cProfile and write its profile into DIR "
+                             "(slower: for finding where the time goes, not for the figures)")
     args = parser.parse_args()
+    if args.profile is not None:
+        args.profile.mkdir(parents=True, exist_ok=True)
+        PROFILE["dir"] = args.profile.resolve()
     links = [float(x) for x in args.links.split(",") if x.strip()]
     if any(links) and shutil.which("tc") is None:
         raise SystemExit("--links: shaping needs tc (iproute2) and root; use --links 0 for the unshaped bridge only")

@@ -27,6 +27,11 @@ VALUE_FLAGS = frozenset({
 })
 
 
+#: The tasks whose no-op may answer from :mod:`robocore.commands.noop`'s memo (the module decides; this only
+#: spares other command lines its import).
+MEMO_TASKS = frozenset({"validate", "stage", "build"})
+
+
 class CommandLineError(Exception):
     """The ``robocore`` command line itself is malformed (before any task runs)."""
 
@@ -181,7 +186,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     """Entry point of the ``robocore`` console script."""
     args = list(sys.argv[1:] if argv is None else argv)
     memo = None
-    if argv is None:  # a real command line: an unchanged project's no-op answers from its memo
+    if argv is None and MEMO_TASKS & set(args[:3]):  # an unchanged project's no-op answers from its memo
         from robocore.commands import noop
 
         memo = noop.for_command(args)

@@ -225,6 +225,18 @@ def test(c: Context, component: str = "", packages_select: list[str] | None = No
                                                  packages=packages_select or [], build_first=not no_build))
 
 
+@task(help={"component": "Build and watch only this component (default: every component with a folder).",
+            "quiet": "Only errors and one line per deploy."})
+@reported
+def dev(c: Context, component: str = "", quiet: bool = False) -> None:
+    """build, sync and run, then again on every save (quick saves coalesce); a failed build leaves the robot on
+    the last good release and says why in one line. Ctrl-C stops."""
+    from robocore.commands import watch
+
+    options = _options(c, "dev", quiet=quiet)
+    watch.dev(options, component=component or None)
+
+
 @task(help={"host": "Sync only this host.", "dry_run": "Print the rsync commands only.", "quiet": "Only errors.",
             "json": "Machine-readable result on stdout."})
 @reported
@@ -346,7 +358,7 @@ def doctor(c: Context, host: str = "", json: bool = False) -> None:
     _execute(options, lambda: command.doctor(options, host=host or None))
 
 
-PROJECT_TASKS = (validate, prepare_base, stage, build, test, sync, run, down, status, logs, shell, connect,
+PROJECT_TASKS = (validate, prepare_base, stage, build, test, dev, sync, run, down, status, logs, shell, connect,
                  release, rollback, doctor)
 
 #: The collection a project's tasks.py re-exports (``from robocore.tasks import namespace``).

@@ -158,3 +158,9 @@ def test_the_command_replays_validate_and_sees_an_edit(tmp_path: Path) -> None:
     (root / "robot.yaml").write_text(text.replace("runs_on: dev", "runs_on: nowhere"))
     broken = validate()
     assert broken.returncode != 0 and "unknown host 'nowhere'" in broken.stderr
+
+
+def test_the_cli_asks_the_memo_about_every_memoised_task() -> None:
+    from robocore import cli
+
+    assert set(noop.TASKS) == set(cli.MEMO_TASKS)

@@ -105,6 +105,19 @@ def _tree_digest(root: Path, skipped: Sequence[str], into: hashlib._Hash) -> flo
     return newest
 
 
+def folders_digest(folders: Sequence[Path]) -> str:
+    """A digest of every entry of ``folders`` (as the memo's snapshot lists them; a missing folder counts as
+    missing): any save, even of identical content, changes it. The dev loop watches with it."""
+    digest = hashlib.sha256()
+    for folder in folders:
+        digest.update(f"{folder}\0".encode())
+        try:
+            _tree_digest(folder, SKIPPED, digest)
+        except OSError:
+            digest.update(b"\0missing")
+    return digest.hexdigest()
+
+
 def snapshot(project: Path, *, images: bool, environ: dict[str, str] | None = None) -> Snapshot | None:
     """The snapshot of ``project``, robocore's code and (with ``images``) the local robocore-built images;
     None when the images cannot be asked for (the ordinary path then runs)."""
