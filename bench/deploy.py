@@ -16,7 +16,10 @@ edited text (the end is the Docker log timestamp of that line, so the polling in
 For each link speed (default: the unshaped bridge and 100 Mbit/s), prints both times, the ratio
 (goal >= 10x) and the bytes sync moved for the edit (goal < 50 KB).
 
-    python bench/deploy.py [--rounds N] [--links 0,100] [--separate] [--profile DIR]
+    python bench/deploy.py [--rounds N] [--links 0,100] [--separate] [--watch] [--profile DIR]
+
+With --watch, `robocore dev --component talker` (the watch mode) also runs, and its rounds (a save until
+heard, with the save-to-deployed part) print beside the one-command loop and the naive path.
 """
 
 from __future__ import annotations
@@ -147,6 +150,51 @@ def robocore_path(project: Path, client: Any, text: str, *, separate: bool) -> t
     return end - start, sent, steps
 
 
+class DevLoop:
+    """``robocore dev --component talker`` running in the background; the times at which it said it deployed."""
+
+    def __init__(self, project: Path) -> None:
+        import threading
+
+        self.deployed: list[float] = []
+        self.lines: list[str] = []
+        self.proc = subprocess.Popen([sys.executable, "-m", "robocore", "-p", str(project), "dev", "--component",
+                                      "talker", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                     text=True)
+        self.reader = threading.Thread(target=self._read, daemon=True)
+        self.reader.start()
+        deadline = time.monotonic() + 300
+        while not any(line.startswith("dev: watching") for line in self.lines):
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                raise SystemExit("robocore dev did not start watching:\n" + "".join(self.lines[-20:]))
+            time.sleep(0.05)
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.append(line)
+            if line.startswith("dev: deployed"):
+                self.deployed.append(time.time())
+
+    def stop(self) -> None:
+        self.proc.terminate()
+        self.proc.wait(timeout=60)
+
+
+def dev_path(project: Path, client: Any, loop: DevLoop, text: str) -> tuple[float, int, dict[str, float]]:
+    """The watch mode: the edit is saved and `robocore dev` (already running) deploys it."""
+    steps: dict[str, float] = {}
+    count = len(loop.deployed)
+    start = time.time()
+    set_greeting(project, text)
+    end = wait_heard(client, f"{PROJECT}-listener", text)
+    if len(loop.deployed) > count:
+        steps["save to deployed"] = loop.deployed[count] - start
+        steps["deployed to heard"] = end - loop.deployed[count]
+    steps["until heard"] = end - start
+    return end - start, 0, steps
+
+
 NAIVE_DOCKERFILE = """\
 FROM {image}
 COPY src /robocore/ws/src
@@ -230,6 +278,10 @@ def main() -> int:
     parser.add_argument("--separate", action="store_true",
                         help="robocore path as three commands (build; sync; run), each timed, instead of the one "
                              "command `build sync run`")
+    parser.add_argument("--watch-rounds", type=int, default=5, help="rounds of the watch mode (with --watch)")
+    parser.add_argument("--watch", action="store_true",
+                        help="also time the watch mode: `robocore dev --component talker` running, a save until "
+                             "heard (its rounds run before the others)")
     parser.add_argument("--profile", type=Path, metavar="DIR",
                         help="run each timed robocore command under cProfile and write its profile into DIR "
                              "(slower: for finding where the time goes, not for the figures)")
@@ -242,6 +294,7 @@ def main() -> int:
         raise SystemExit("--links: shaping needs tc (iproute2) and root; use --links 0 for the unshaped bridge only")
     parent = Path(tempfile.mkdtemp(prefix="robocore-bench-deploy-"))
     results: dict[float, tuple[list[Result], list[Result]]] = {}
+    watched: dict[float, list[Result]] = {}
     try:
         with RobotFleet(1) as fleet:
             project = make_project(parent, fleet.hosts[0].ip)
@@ -256,6 +309,19 @@ def main() -> int:
                 shape_link(fleet, mbit)
                 fast: list[Result] = []
                 naive: list[Result] = []
+                if args.watch:
+                    loop = DevLoop(project)
+                    try:
+                        for n in range(args.watch_rounds):
+                            token = uuid.uuid4().hex[:8]
+                            watched.setdefault(mbit, []).append(
+                                dev_path(project, client, loop, f"dev edit {n} {token}"))
+                            steps = ", ".join(f"{k} {v:.2f}" for k, v in watched[mbit][-1][2].items())
+                            print(f"{describe_link(mbit)}, round {n + 1}: robocore dev {watched[mbit][-1][0]:.2f} s "
+                                  f"({steps})", flush=True)
+                            time.sleep(1)
+                    finally:
+                        loop.stop()
                 for n in range(args.rounds):
                     # robocore first: it starts from the container run created (install tree mounted), with no
                     # ssh connection open, as after a developer's pause (the last run's master has gone)
@@ -284,6 +350,15 @@ def main() -> int:
         for label, (secs, moved, steps) in (("robocore", best_fast), ("naive", best_naive)):
             detail = ", ".join(f"{k} {v:.1f}s" for k, v in steps.items())
             print(f"{describe_link(mbit):<22} {label:<9} {secs:>6.1f} {medians[label]:>7.1f} {moved:>14,}   {detail}")
+        if mbit in watched:
+            dev = watched[mbit]
+            best_dev = min(dev, key=lambda r: r[0])
+            detail = ", ".join(f"{k} {v:.2f}s" for k, v in best_dev[2].items())
+            dev_median = statistics.median(r[0] for r in dev)
+            print(f"{describe_link(mbit):<22} {'dev':<9} {best_dev[0]:>6.1f} {dev_median:>7.2f} {'-':>14}   {detail}")
+            verdicts.append(f"{describe_link(mbit)}: robocore dev, save to heard {dev_median:.2f} s median of "
+                            f"{len(dev)} (goal < 1.0 s) -> {'met' if dev_median < 1.0 else 'NOT met'}; "
+                            f"naive/dev {statistics.median(r[0] for r in naive) / dev_median:.1f}x median to median")
         ratio = best_naive[0] / best_fast[0]
         median_ratio = medians["naive"] / medians["robocore"]
         verdicts.append(f"{describe_link(mbit)}: ratio naive/robocore {ratio:.1f}x best to best, {median_ratio:.1f}x "

@@ -26,9 +26,9 @@ from robocore.errors import RobocoreError
 from robocore.ui import clean
 
 #: Seconds between two looks at the watched files.
-POLL = 0.1
+POLL = 0.05
 #: Seconds the watched files must stay unchanged before a deploy starts (quick saves coalesce).
-SETTLE = 0.25
+SETTLE = 0.15
 
 
 def watched(options: Options, component: str | None) -> list[Path]:
