@@ -30,7 +30,8 @@ class Robot:
             self.built.append(self.source.read_text())
             self.steps.append("build")
             if len(self.built) in self.fail_builds:
-                raise BuildError("colcon build failed for demo_talker (log: .robocore/build/talker/log)")
+                raise BuildError("colcon build failed for demo_talker (log: .robocore/build/talker/log)\n"
+                                 "  File setup.py, line 3\n  SyntaxError")  # a log tail, as colcon's errors have
 
         monkeypatch.setattr(build, "build", fake_build)
         monkeypatch.setattr(sync, "sync", lambda options, *, host: self.steps.append("sync"))

@@ -57,7 +57,7 @@ def deploy(project_dir: Path, components: Sequence[str], *, quiet: bool,
         step = "run"
         run.run(options("run"), host=None, tag=None)
     except RobocoreError as error:
-        first = next(iter(error.lines()), str(error))
+        first = (next(iter(error.lines()), str(error)).splitlines() or [""])[0]  # one line, log tails left out
         kept = "the robot keeps running the last good release" if step != "run" else "run did not finish"
         say(clean(f"dev: {step} failed: {first} ({kept}; watching for the next save)"))
         return False
