@@ -15,6 +15,7 @@ release atomically and ``run`` replaces only what changed.
 
 from __future__ import annotations
 
+import itertools
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -39,12 +40,14 @@ def watched(options: Options, component: str | None) -> list[Path]:
 
 
 def deploy(project_dir: Path, components: Sequence[str], *, quiet: bool,
-           say: Callable[[str], None]) -> bool:
-    """``build`` (each of ``components``, or all when empty), then ``sync`` and ``run``; False (and one line
-    said) when a step failed: nothing after it ran."""
+           say: Callable[[str], None]) -> dict[str, float] | None:
+    """``build`` (each of ``components``, or all when empty), then ``sync`` and ``run``: the seconds each took,
+    or None (and one line said) when a step failed: nothing after it ran."""
     argv = ("build", "sync", "run")
+    seconds: dict[str, float] = {}
 
     def options(task: str) -> Options:
+        seconds[task] = time.monotonic()
         return Options(project_dir=project_dir, quiet=quiet, argv=argv, task=task)
 
     step = "build"
@@ -56,12 +59,14 @@ def deploy(project_dir: Path, components: Sequence[str], *, quiet: bool,
         sync.sync(options("sync"), host=None)
         step = "run"
         run.run(options("run"), host=None, tag=None)
+        seconds["end"] = time.monotonic()
     except RobocoreError as error:
         first = (next(iter(error.lines()), str(error)).splitlines() or [""])[0]  # one line, log tails left out
         kept = "the robot keeps running the last good release" if step != "run" else "run did not finish"
         say(clean(f"dev: {step} failed: {first} ({kept}; watching for the next save)"))
-        return False
-    return True
+        return None
+    marks = sorted(seconds.items(), key=lambda item: item[1])
+    return {name: later - at for (name, at), (_, later) in itertools.pairwise(marks)}
 
 
 def dev(options: Options, *, component: str | None, say: Callable[[str], None] = print,
@@ -87,7 +92,8 @@ def dev(options: Options, *, component: str | None, say: Callable[[str], None] =
             seen = later
         current = seen
         started = time.monotonic()
-        ok = deploy(options.project_dir, selected, quiet=options.quiet, say=say)
+        steps = deploy(options.project_dir, selected, quiet=options.quiet, say=say)
         done += 1
-        if ok:
-            say(f"dev: deployed in {time.monotonic() - started:.2f} s")
+        if steps is not None:
+            detail = ", ".join(f"{name} {secs:.2f}" for name, secs in steps.items())
+            say(f"dev: deployed in {time.monotonic() - started:.2f} s ({detail})")
