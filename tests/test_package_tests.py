@@ -457,3 +457,25 @@ def test_dry_run_shows_the_build_that_would_come_first(project: Project, monkeyp
     package_tests.test(Options(project_dir=project.root, dry_run=True), component="listener")
     out = capsys.readouterr().out
     assert out.index("# listener (first build) in") < out.index("# listener: demo_listener in")
+
+
+def test_with_json_the_build_first_leaves_one_document_of_test_results(
+        project: Project, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    calls: list[dict[str, Any]] = []
+    _fake_docker(monkeypatch, project, {"demo_listener": PASS}, calls)
+
+    def fake_build(options: Options, *, component: str | None, full: bool = False) -> None:
+        from robocore.commands.reporting import Outcome
+
+        options.report.add(Outcome(what="listener", role="build", action="up-to-date"))
+        options.report.warn("a build warning")
+        _record_build(project)
+
+    monkeypatch.setattr(build, "build", fake_build)
+    options = Options(project_dir=project.root, json=True, task="test")
+    package_tests.test(options, component="listener")
+    options.report.finish()
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["task"] == "test" and [r["kind"] for r in doc["results"]] == ["tests"]
+    assert [p["message"] for p in doc["problems"]] == ["a build warning"]
+

@@ -252,7 +252,11 @@ def test(options: Options, *, component: str | None, packages: Sequence[str] = (
     if build_first and plans:
         from robocore.commands.build import build
 
-        build(options, component=component)
+        # the build reports as itself: its own table for people; with --json its results stay out of the test's
+        # one document (which keeps the build's warnings)
+        building = dataclasses.replace(options, task="build")
+        build(building, component=component)
+        report.problems.extend(building.report.problems)
     if options.dry_run:
         show_plan(project, plans, report)
         return
