@@ -1,6 +1,7 @@
 """Benchmark of no-op tasks on an unchanged project, side by side with bare Python's start-up.
 
-Prints, in one run, the median of N runs of each (goal < 0.3 s for validate, stage, build and status):
+Prints, in one run, the median of N runs of each (goal < 0.3 s for validate, stage, build and status; on a
+loaded machine, where bare start-up itself is slow, the same goal as a ratio: <= 1.8x bare start-up):
 - bare ``python -c pass`` (the floor) and ``python -c "import robocore.cli"``;
 - each task by its ordinary path (``ROBOCORE_NO_MEMO=1``: configuration loaded, images asked for,
   sources hashed) and by the no-op memo (``.robocore/noop``: one stat pass, one raw Docker API call);
@@ -23,6 +24,9 @@ import time
 from pathlib import Path
 
 GOAL = 0.3
+#: The goal as a ratio to bare start-up, for a loaded machine: on the clean machine of issue 21 the ordinary
+#: no-op stage took 0.50 s, three times bare Python's start-up, so 0.3 s is 1.8 times it.
+GOAL_RATIO = 1.8
 TASKS = ("validate", "stage", "build")
 
 
@@ -72,10 +76,11 @@ def main() -> None:
         rows.append(("status", median([py, "-m", "robocore", "status"], project, args.runs), None))
         print(f"no-op tasks on {project} (median of {args.runs}; machine shared, figures are noisy: "
               "compare within this run)")
-        print(f"{'what':<22}{'ordinary':>10}{'memo':>10}{'x bare':>9}  goal < {GOAL} s")
+        print(f"{'what':<22}{'ordinary':>10}{'memo':>10}{'x bare':>9}  goal < {GOAL} s; goal <= {GOAL_RATIO}x bare")
         for what, ordinary, memo in rows:
             best = memo if memo is not None else ordinary
-            verdict = "" if what.startswith(("python", "import")) else ("ok" if best < GOAL else "MISSED")
+            verdict = "" if what.startswith(("python", "import")) else (
+                f"{'ok' if best < GOAL else 'MISSED'}; {'ok' if best / bare <= GOAL_RATIO else 'MISSED'}")
             memo_text = f"{memo:>9.3f}s" if memo is not None else f"{'-':>10}"
             print(f"{what:<22}{ordinary:>9.3f}s{memo_text}{best / bare:>8.1f}x  {verdict}")
 
