@@ -226,14 +226,15 @@ def test(c: Context, component: str = "", packages_select: list[str] | None = No
 
 
 @task(help={"component": "Build and watch only this component (default: every component with a folder).",
+            "dry_run": "Print the plans of build, sync and run once; watch nothing.",
             "quiet": "Only errors and one line per deploy."})
 @reported
-def dev(c: Context, component: str = "", quiet: bool = False) -> None:
+def dev(c: Context, component: str = "", dry_run: bool = False, quiet: bool = False) -> None:
     """build, sync and run, then again on every save (quick saves coalesce); a failed build leaves the robot on
     the last good release and says why in one line. Ctrl-C stops."""
     from robocore.commands import watch
 
-    options = _options(c, "dev", quiet=quiet)
+    options = _options(c, "dev", dry_run=dry_run, quiet=quiet)
     watch.dev(options, component=component or None)
 
 

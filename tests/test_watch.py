@@ -97,3 +97,15 @@ def test_a_failed_build_deploys_nothing_says_why_and_the_loop_goes_on(
     assert line == ("dev: build failed: colcon build failed for demo_talker (log: .robocore/build/talker/log) "
                     "(the robot keeps running the last good release; watching for the next save)")
     assert robot.built == ["good", "broken", "fixed"]
+
+
+def test_a_dry_run_plans_one_deploy_and_watches_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    seen: list[tuple[str, bool]] = []
+    monkeypatch.setattr(build, "build",
+                        lambda options, *, component, full=False: seen.append(("build", options.dry_run)))
+    monkeypatch.setattr(sync, "sync", lambda options, *, host: seen.append(("sync", options.dry_run)))
+    monkeypatch.setattr(run, "run", lambda options, *, host, tag: seen.append(("run", options.dry_run)))
+    monkeypatch.setattr(watch, "watched", lambda options, component: pytest.fail("a dry run watched"))
+    watch.dev(Options(project_dir=tmp_path, dry_run=True), component="talker", say=lambda line: None)
+    assert seen == [("build", True), ("sync", True), ("run", True)]
+

@@ -40,7 +40,7 @@ def watched(options: Options, component: str | None) -> list[Path]:
 
 
 def deploy(project_dir: Path, components: Sequence[str], *, quiet: bool,
-           say: Callable[[str], None]) -> dict[str, float] | None:
+           say: Callable[[str], None], dry_run: bool = False) -> dict[str, float] | None:
     """``build`` (each of ``components``, or all when empty), then ``sync`` and ``run``: the seconds each took,
     or None (and one line said) when a step failed: nothing after it ran."""
     argv = ("build", "sync", "run")
@@ -48,7 +48,7 @@ def deploy(project_dir: Path, components: Sequence[str], *, quiet: bool,
 
     def options(task: str) -> Options:
         seconds[task] = time.monotonic()
-        return Options(project_dir=project_dir, quiet=quiet, argv=argv, task=task)
+        return Options(project_dir=project_dir, quiet=quiet, argv=argv, task=task, dry_run=dry_run)
 
     step = "build"
     try:
@@ -72,9 +72,12 @@ def deploy(project_dir: Path, components: Sequence[str], *, quiet: bool,
 def dev(options: Options, *, component: str | None, say: Callable[[str], None] = print,
         rounds: int | None = None, poll: float = POLL, settle: float = SETTLE) -> None:
     """Deploy, then deploy again after each (coalesced) save, until interrupted (or after ``rounds`` deploys
-    following the first, for tests)."""
-    paths = watched(options, component)
+    following the first, for tests). A dry run prints the plans of the first deploy's steps and returns."""
     selected = [component] if component else []
+    if options.dry_run:
+        deploy(options.project_dir, selected, quiet=options.quiet, say=say, dry_run=True)
+        return
+    paths = watched(options, component)
     current = noop.folders_digest(paths)
     deploy(options.project_dir, selected, quiet=options.quiet, say=say)
     say("dev: watching " + ", ".join(str(p) for p in paths) + " (Ctrl-C stops)")
