@@ -8,6 +8,10 @@ from __future__ import annotations
 
 import nox
 
+#: Seconds a session's pytest may take, after Ctrl-C or .ci/run's time limit, to tear its fixtures down and
+#: print its summary (nox's default of 0.3 s would cut the summary off).
+INTERRUPT_GRACE = 150.0
+
 nox.options.sessions = ["lint", "typecheck", "tests", "integration"]
 nox.options.reuse_existing_virtualenvs = True
 
@@ -32,7 +36,7 @@ def typecheck(session: nox.Session) -> None:
 @nox.session
 def tests(session: nox.Session) -> None:
     _install(session)
-    session.run("pytest", "tests", *session.posargs)
+    session.run("pytest", "tests", *session.posargs, interrupt_timeout=INTERRUPT_GRACE)
 
 
 @nox.session
@@ -40,5 +44,7 @@ def integration(session: nox.Session) -> None:
     """Docker suites. Fails loudly when there is no Docker daemon: never skips."""
     _install(session)
     session.env["TESTCONTAINERS_RYUK_DISABLED"] = "true"
-    # a test that hangs fails after 25 minutes (its fixtures' image builds included) instead of stalling CI
-    session.run("pytest", "integration", "-p", "no:cacheprovider", "--timeout=1500", *session.posargs)
+    # a test that hangs fails after 25 minutes (its fixtures' image builds included) instead of stalling CI;
+    # the 25 slowest tests are printed on every run (and on an interrupted one), so time growth is seen early
+    session.run("pytest", "integration", "-p", "no:cacheprovider", "--timeout=1500", "--durations=25",
+                *session.posargs, interrupt_timeout=INTERRUPT_GRACE)

@@ -16,7 +16,10 @@ edited text (the end is the Docker log timestamp of that line, so the polling in
 For each link speed (default: the unshaped bridge and 100 Mbit/s), prints both times, the ratio
 (goal >= 10x) and the bytes sync moved for the edit (goal < 50 KB).
 
-    python bench/deploy.py [--rounds N] [--links 0,100] [--separate]
+    python bench/deploy.py [--rounds N] [--links 0,100] [--separate] [--watch] [--profile DIR]
+
+With --watch, `robocore dev --component talker` (the watch mode) also runs, and its rounds (a save until
+heard, with the save-to-deployed part) print beside the one-command loop and the naive path.
 """
 
 from __future__ import annotations
@@ -44,8 +47,17 @@ from robocore.adapters.ssh import MULTIPLEX_SECONDS  # noqa: E402
 PROJECT = "robocore-it-demo"  # shares the cached images of the integration suites
 
 
-def robocore(project: Path, *args: str) -> subprocess.CompletedProcess[str]:
-    proc = subprocess.run([sys.executable, "-m", "robocore", "-p", str(project), *args],
+#: ``--profile DIR``: each timed robocore command runs under cProfile, its profile written there.
+PROFILE: dict[str, Any] = {"dir": None, "count": 0}
+
+
+def robocore(project: Path, *args: str, timed: bool = False) -> subprocess.CompletedProcess[str]:
+    python = [sys.executable]
+    if timed and PROFILE["dir"] is not None:
+        PROFILE["count"] += 1
+        name = f"{PROFILE['count']:02d}-{'-'.join(a for a in args if not a.startswith('-'))}.prof"
+        python += ["-m", "cProfile", "-o", str(Path(PROFILE["dir"]) / name)]
+    proc = subprocess.run([*python, "-m", "robocore", "-p", str(project), *args],
                           capture_output=True, text=True, timeout=3600)
     if proc.returncode != 0:
         raise SystemExit(f"robocore {' '.join(args)} failed ({proc.returncode}):\n{proc.stdout}\n{proc.stderr}")
@@ -118,16 +130,17 @@ def robocore_path(project: Path, client: Any, text: str, *, separate: bool) -> t
     set_greeting(project, text)
     t = time.time()
     if separate:  # three processes, each step timed
-        robocore(project, "build", "--component", "talker", "--quiet")
+        robocore(project, "build", "--component", "talker", "--quiet", timed=True)
         steps["build"] = time.time() - t
         t = time.time()
-        out = robocore(project, "sync", "--json").stdout
+        out = robocore(project, "sync", "--json", timed=True).stdout
         steps["sync"] = time.time() - t
         t = time.time()
-        robocore(project, "run", "--quiet")
+        robocore(project, "run", "--quiet", timed=True)
         steps["run"] = time.time() - t
     else:  # the documented loop: one command, one process
-        out = robocore(project, "build", "--component", "talker", "--quiet", "sync", "--json", "run", "--quiet").stdout
+        out = robocore(project, "build", "--component", "talker", "--quiet", "sync", "--json", "run", "--quiet",
+                       timed=True).stdout
         steps["build sync run"] = time.time() - t
     rows = json.loads(out)["results"]  # sync's --json is the only output on stdout
     sent = sum(int(r["sent"]) for r in rows if r["component"] == "talker")
@@ -135,6 +148,57 @@ def robocore_path(project: Path, client: Any, text: str, *, separate: bool) -> t
     end = wait_heard(client, f"{PROJECT}-listener", text)
     steps["until heard"] = end - t
     return end - start, sent, steps
+
+
+class DevLoop:
+    """``robocore dev --component talker`` running in the background; the times at which it said it deployed."""
+
+    def __init__(self, project: Path) -> None:
+        import threading
+
+        self.deployed: list[float] = []
+        self.steps: list[dict[str, float]] = []  # each deploy's steps, as `dev` printed them
+        self.lines: list[str] = []
+        self.proc = subprocess.Popen([sys.executable, "-m", "robocore", "-p", str(project), "dev", "--component",
+                                      "talker", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                     text=True)
+        self.reader = threading.Thread(target=self._read, daemon=True)
+        self.reader.start()
+        deadline = time.monotonic() + 300
+        while not any(line.startswith("dev: watching") for line in self.lines):
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                raise SystemExit("robocore dev did not start watching:\n" + "".join(self.lines[-20:]))
+            time.sleep(0.05)
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.append(line)
+            if line.startswith("dev: deployed"):
+                self.deployed.append(time.time())
+                inside = line.rstrip().rpartition("(")[2].rstrip(")")  # "build 0.12, sync 0.30, run 0.45"
+                self.steps.append({f"dev {k}": float(v) for k, _, v in (p.strip().partition(" ")
+                                                                      for p in inside.split(","))
+                                   if v.replace(".", "", 1).isdigit()})
+
+    def stop(self) -> None:
+        self.proc.terminate()
+        self.proc.wait(timeout=60)
+
+
+def dev_path(project: Path, client: Any, loop: DevLoop, text: str) -> tuple[float, int, dict[str, float]]:
+    """The watch mode: the edit is saved and `robocore dev` (already running) deploys it."""
+    steps: dict[str, float] = {}
+    count = len(loop.deployed)
+    start = time.time()
+    set_greeting(project, text)
+    end = wait_heard(client, f"{PROJECT}-listener", text)
+    if len(loop.deployed) > count:
+        steps["save to deployed"] = loop.deployed[count] - start
+        steps.update(loop.steps[count])
+        steps["deployed to heard"] = end - loop.deployed[count]
+    steps["until heard"] = end - start
+    return end - start, 0, steps
 
 
 NAIVE_DOCKERFILE = """\
@@ -220,12 +284,23 @@ def main() -> int:
     parser.add_argument("--separate", action="store_true",
                         help="robocore path as three commands (build; sync; run), each timed, instead of the one "
                              "command `build sync run`")
+    parser.add_argument("--watch-rounds", type=int, default=5, help="rounds of the watch mode (with --watch)")
+    parser.add_argument("--watch", action="store_true",
+                        help="also time the watch mode: `robocore dev --component talker` running, a save until "
+                             "heard (its rounds run before the others)")
+    parser.add_argument("--profile", type=Path, metavar="DIR",
+                        help="run each timed robocore command under cProfile and write its profile into DIR "
+                             "(slower: for finding where the time goes, not for the figures)")
     args = parser.parse_args()
+    if args.profile is not None:
+        args.profile.mkdir(parents=True, exist_ok=True)
+        PROFILE["dir"] = args.profile.resolve()
     links = [float(x) for x in args.links.split(",") if x.strip()]
     if any(links) and shutil.which("tc") is None:
         raise SystemExit("--links: shaping needs tc (iproute2) and root; use --links 0 for the unshaped bridge only")
     parent = Path(tempfile.mkdtemp(prefix="robocore-bench-deploy-"))
     results: dict[float, tuple[list[Result], list[Result]]] = {}
+    watched: dict[float, list[Result]] = {}
     try:
         with RobotFleet(1) as fleet:
             project = make_project(parent, fleet.hosts[0].ip)
@@ -240,6 +315,19 @@ def main() -> int:
                 shape_link(fleet, mbit)
                 fast: list[Result] = []
                 naive: list[Result] = []
+                if args.watch:
+                    loop = DevLoop(project)
+                    try:
+                        for n in range(args.watch_rounds):
+                            token = uuid.uuid4().hex[:8]
+                            watched.setdefault(mbit, []).append(
+                                dev_path(project, client, loop, f"dev edit {n} {token}"))
+                            steps = ", ".join(f"{k} {v:.2f}" for k, v in watched[mbit][-1][2].items())
+                            print(f"{describe_link(mbit)}, round {n + 1}: robocore dev {watched[mbit][-1][0]:.2f} s "
+                                  f"({steps})", flush=True)
+                            time.sleep(1)
+                    finally:
+                        loop.stop()
                 for n in range(args.rounds):
                     # robocore first: it starts from the container run created (install tree mounted), with no
                     # ssh connection open, as after a developer's pause (the last run's master has gone)
@@ -262,12 +350,27 @@ def main() -> int:
           f"(of {args.rounds} rounds)")
     verdicts = []
     for mbit, (fast, naive) in results.items():
+        if not fast or not naive:  # --rounds 0: only the watch mode was timed
+            if mbit in watched:
+                dev_median = statistics.median(r[0] for r in watched[mbit])
+                verdicts.append(f"{describe_link(mbit)}: robocore dev, save to heard {dev_median:.2f} s median of "
+                                f"{len(watched[mbit])} (goal < 1.0 s) -> {'met' if dev_median < 1.0 else 'NOT met'}")
+            continue
         best_fast = min(fast, key=lambda r: r[0])
         best_naive = min(naive, key=lambda r: r[0])
         medians = {"robocore": statistics.median(r[0] for r in fast), "naive": statistics.median(r[0] for r in naive)}
         for label, (secs, moved, steps) in (("robocore", best_fast), ("naive", best_naive)):
             detail = ", ".join(f"{k} {v:.1f}s" for k, v in steps.items())
             print(f"{describe_link(mbit):<22} {label:<9} {secs:>6.1f} {medians[label]:>7.1f} {moved:>14,}   {detail}")
+        if mbit in watched:
+            dev = watched[mbit]
+            best_dev = min(dev, key=lambda r: r[0])
+            detail = ", ".join(f"{k} {v:.2f}s" for k, v in best_dev[2].items())
+            dev_median = statistics.median(r[0] for r in dev)
+            print(f"{describe_link(mbit):<22} {'dev':<9} {best_dev[0]:>6.1f} {dev_median:>7.2f} {'-':>14}   {detail}")
+            verdicts.append(f"{describe_link(mbit)}: robocore dev, save to heard {dev_median:.2f} s median of "
+                            f"{len(dev)} (goal < 1.0 s) -> {'met' if dev_median < 1.0 else 'NOT met'}; "
+                            f"naive/dev {statistics.median(r[0] for r in naive) / dev_median:.1f}x median to median")
         ratio = best_naive[0] / best_fast[0]
         median_ratio = medians["naive"] / medians["robocore"]
         verdicts.append(f"{describe_link(mbit)}: ratio naive/robocore {ratio:.1f}x best to best, {median_ratio:.1f}x "

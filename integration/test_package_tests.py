@@ -2,8 +2,9 @@
 
 Controls: the passing run must find tests in every package (a run that found none would also
 "pass"); a copy of the project with one wrong assertion added must fail, name that test and show
-its message, and it is refused until it is built again (the tests would run the old code);
-``--packages-select`` must leave the other package's tests unrun.
+its message: ``test`` builds the edited package first, while ``test --no-build`` refuses the stale
+build (the tests would run the old code); ``--packages-select`` must leave the other package's tests
+unrun.
 """
 
 from __future__ import annotations
@@ -76,11 +77,10 @@ def test_a_failing_test_fails_the_run_by_name_with_its_message(project_copies: C
                                                                 run_robocore: RobocoreCli) -> None:
     root = project_copies("pkgtest")
     (root / "components/talker/src/demo_talker/test/test_wrong.py").write_text(WRONG_TEST)
-    stale = run_robocore(root, "test", check=False)
+    stale = run_robocore(root, "test", "--no-build", check=False)
     assert stale.returncode == 6, stale.stderr
     assert "component talker: the build is out of date (changed: demo_talker)" in stale.stderr
-    run_robocore(root, "build", "--component", "talker", "--quiet")
-    proc = run_robocore(root, "test", check=False)
+    proc = run_robocore(root, "test", check=False)  # builds the edited package first, then tests it
     print(proc.stdout, proc.stderr)
     assert proc.returncode == 9
     assert _row(proc.stdout, "demo_talker") == ["talker", "demo_talker", "3", "1", "0", "0", "FAILED"]
@@ -96,6 +96,5 @@ def test_a_failing_test_fails_the_run_by_name_with_its_message(project_copies: C
     # negative control: the same copy passes once the assertion is right
     (root / "components/talker/src/demo_talker/test/test_wrong.py").write_text(
         WRONG_TEST.replace('"hello #1"', '"hello from talker #1"'))
-    run_robocore(root, "build", "--component", "talker", "--quiet")
     fixed = run_robocore(root, "test", "--component", "talker")
     assert _row(fixed.stdout, "demo_talker") == ["talker", "demo_talker", "3", "0", "0", "0", "passed"]

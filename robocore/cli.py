@@ -11,6 +11,7 @@ starts its ssh connections first (:mod:`robocore.commands.warmup`).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 from collections.abc import Sequence
@@ -24,6 +25,11 @@ VALUE_FLAGS = frozenset({
     "-f", "--config", "-T", "--command-timeout", "-D", "--list-depth", "-F", "--list-format", "--hide",
     "--print-completion-script",
 })
+
+
+#: The tasks whose no-op may answer from :mod:`robocore.commands.noop`'s memo (the module decides; this only
+#: spares other command lines its import).
+MEMO_TASKS = frozenset({"validate", "stage", "build"})
 
 
 class CommandLineError(Exception):
@@ -199,13 +205,37 @@ def _program(namespace: Any, settings: dict[str, Any] | None = None) -> Any:
                            config_class=RobocoreConfig)
 
 
+def _run_recording(memo: Any, args: list[str]) -> None:
+    """Run a memoisable command line, printing as usual; a success that changed nothing is memoised."""
+    from robocore.commands import noop
+
+    with noop.captured() as (out, err):
+        try:
+            main(args)
+        except SystemExit as done:
+            if done.code not in (0, None):
+                raise
+    with contextlib.suppress(OSError):  # no memo then: the next run takes the ordinary path again
+        memo.record(out.kept.getvalue(), err.kept.getvalue())
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     """Entry point of the ``robocore`` console script."""
     args = list(sys.argv[1:] if argv is None else argv)
+    memo = None
+    if argv is None and MEMO_TASKS & set(args[:3]):  # an unchanged project's no-op answers from its memo
+        from robocore.commands import noop
+
+        memo = noop.for_command(args)
+        if memo is not None and memo.replay(sys.stdout, sys.stderr):
+            return
     if argv is None:  # a real command line: start the robot hosts' ssh handshakes while the rest loads
         from robocore.commands.warmup import warm_recorded
 
         warm_recorded(args)
+    if memo is not None:
+        _run_recording(memo, args)
+        return
     from robocore.tasks import cli_namespace
 
     names = set(cli_namespace.task_names) | {n.replace("_", "-") for n in cli_namespace.task_names}

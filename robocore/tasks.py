@@ -220,17 +220,32 @@ def build(c: Context, component: str = "", full: bool = False, dry_run: bool = F
 
 @task(help={"component": "Test only this component.",
             "packages_select": "Test only this package (repeat for more).", "dry_run": "Print the plan only.",
+            "no_build": "Do not build what is stale first: refuse to test an out-of-date build instead.",
             "quiet": "Only errors.", "json": "Machine-readable result on stdout."},
       iterable=["packages_select"])
 @reported
 def test(c: Context, component: str = "", packages_select: list[str] | None = None, dry_run: bool = False,
-         quiet: bool = False, json: bool = False) -> None:
-    """colcon-test each component's packages inside its staged image; one result per package (exit 9 on failure)."""
+         no_build: bool = False, quiet: bool = False, json: bool = False) -> None:
+    """Build what is stale, then colcon-test each component's packages inside its staged image; one result per
+    package (exit 9 on failure)."""
     from robocore.commands import package_tests
 
     options = _options(c, "test", dry_run=dry_run, quiet=quiet, json=json)
     _execute(options, lambda: package_tests.test(options, component=component or None,
-                                                 packages=packages_select or []))
+                                                 packages=packages_select or [], build_first=not no_build))
+
+
+@task(help={"component": "Build and watch only this component (default: every component with a folder).",
+            "dry_run": "Print the plans of build, sync and run once; watch nothing.",
+            "quiet": "Only errors and one line per deploy."})
+@reported
+def dev(c: Context, component: str = "", dry_run: bool = False, quiet: bool = False) -> None:
+    """build, sync and run, then again on every save (quick saves coalesce); a failed build leaves the robot on
+    the last good release and says why in one line. Ctrl-C stops."""
+    from robocore.commands import watch
+
+    options = _options(c, "dev", dry_run=dry_run, quiet=quiet)
+    watch.dev(options, component=component or None)
 
 
 @task(help={"host": "Sync only this host.", "dry_run": "Print the rsync commands only.", "quiet": "Only errors.",
@@ -354,7 +369,7 @@ def doctor(c: Context, host: str = "", json: bool = False) -> None:
     _execute(options, lambda: command.doctor(options, host=host or None))
 
 
-PROJECT_TASKS = (validate, prepare_base, stage, build, test, sync, run, down, status, logs, shell, connect,
+PROJECT_TASKS = (validate, prepare_base, stage, build, test, dev, sync, run, down, status, logs, shell, connect,
                  release, rollback, doctor)
 
 #: The collection a project's tasks.py re-exports (``from robocore.tasks import namespace``).

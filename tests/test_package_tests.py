@@ -314,7 +314,7 @@ def test_the_command_runs_colcon_test_as_the_user_and_fails_on_a_failing_test(
     calls: list[dict[str, Any]] = []
     _fake_docker(monkeypatch, project, {"demo_talker": FAIL, "talker_msgs": PASS, "demo_listener": PASS}, calls)
     with pytest.raises(TestFailure, match=r"^tests did not pass: 1 failed, 0 errored in demo_talker \(JUnit"):
-        package_tests.test(Options(project_dir=project.root), component=None)
+        package_tests.test(Options(project_dir=project.root), component=None, build_first=False)
     assert sorted(c["image"] for c in calls) == ["robot-listener:latest", "robot-talker:latest"]
     assert {c["user"] for c in calls} == {f"{os.getuid()}:{os.getgid()}"}
     assert all(c["environment"] == colcon.CONTAINER_ENV and c["labels"]["dev.robocore.role"] == "test"
@@ -334,7 +334,7 @@ def test_the_command_passes_and_prints_json(project: Project, monkeypatch: pytes
     calls: list[dict[str, Any]] = []
     _fake_docker(monkeypatch, project, {"demo_talker": PASS, "talker_msgs": PASS, "demo_listener": PASS}, calls)
     options = Options(project_dir=project.root, json=True, task="test")
-    package_tests.test(options, component="talker", packages=["talker_msgs"])
+    package_tests.test(options, component="talker", packages=["talker_msgs"], build_first=False)
     options.report.finish()
     [call] = calls
     assert call["argv"][10:12] == ["--packages-select", "talker_msgs"]
@@ -347,7 +347,7 @@ def test_colcon_failing_to_run_is_a_test_failure(project: Project, monkeypatch: 
     _record_build(project)
     _fake_docker(monkeypatch, project, {}, [], code=2)
     with pytest.raises(TestFailure, match="colcon test exited 2 in component listener"):
-        package_tests.test(Options(project_dir=project.root, quiet=True), component="listener")
+        package_tests.test(Options(project_dir=project.root, quiet=True), component="listener", build_first=False)
 
 
 def test_a_stale_build_is_refused_before_any_container(project: Project, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -355,7 +355,7 @@ def test_a_stale_build_is_refused_before_any_container(project: Project, monkeyp
     calls: list[dict[str, Any]] = []
     _fake_docker(monkeypatch, project, {"demo_listener": PASS}, calls)
     with pytest.raises(BuildError, match="component listener: the build is out of date"):
-        package_tests.test(Options(project_dir=project.root), component="listener")
+        package_tests.test(Options(project_dir=project.root), component="listener", build_first=False)
     assert calls == []
 
 
@@ -365,7 +365,8 @@ def test_dry_run_prints_the_plan_without_docker(project: Project, monkeypatch: p
         raise AssertionError("the dry run contacted Docker")
 
     monkeypatch.setattr(package_tests, "local_docker", no_docker)
-    package_tests.test(Options(project_dir=project.root, dry_run=True), component=None, packages=["demo_talker"])
+    package_tests.test(Options(project_dir=project.root, dry_run=True), component=None, packages=["demo_talker"],
+                       build_first=False)
     out = capsys.readouterr().out
     assert "# talker: demo_talker in robot-talker:latest as" in out and "(not built yet: run build first)" in out
     assert f"  mount {project.root / 'ws/talker'} -> /robocore/ws" in out
@@ -403,7 +404,7 @@ def test_dry_run_json_is_one_document(project: Project, monkeypatch: pytest.Monk
                                       capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setattr(package_tests, "local_docker", lambda: pytest.fail("the dry run contacted Docker"))
     options = Options(project_dir=project.root, dry_run=True, json=True, task="test")
-    package_tests.test(options, component="listener")
+    package_tests.test(options, component="listener", build_first=False)
     options.report.finish()
     doc = json.loads(capsys.readouterr().out)
     [listener] = doc["results"]
@@ -411,3 +412,70 @@ def test_dry_run_json_is_one_document(project: Project, monkeypatch: pytest.Monk
     assert listener["argv"] == colcon.workspace_test_argv()
     assert listener["mounts"][str(project.root / "ws/listener")] == "/robocore/ws"
     assert (listener["packages"], listener["built"]) == (["demo_listener"], False)
+
+
+# ---------------------------------------------------------------------------------------------- build first
+
+
+def test_test_builds_the_selected_component_first_then_tests(project: Project, monkeypatch: pytest.MonkeyPatch) -> None:
+    order: list[str] = []
+    calls: list[dict[str, Any]] = []
+    _fake_docker(monkeypatch, project, {"demo_listener": PASS}, calls)
+
+    def fake_build(options: Options, *, component: str | None, full: bool = False) -> None:
+        order.append(f"build {component}")
+        _record_build(project)  # what a real build leaves: a current build record
+
+    monkeypatch.setattr(build, "build", fake_build)
+    package_tests.test(Options(project_dir=project.root, quiet=True), component="listener")
+    assert order == ["build listener"]
+    assert [c["image"] for c in calls] == ["robot-listener:latest"]
+
+
+def test_a_failed_build_first_runs_no_test(project: Project, monkeypatch: pytest.MonkeyPatch) -> None:
+    calls: list[dict[str, Any]] = []
+    _fake_docker(monkeypatch, project, {"demo_listener": PASS}, calls)
+
+    def failing_build(options: Options, *, component: str | None, full: bool = False) -> None:
+        raise BuildError("component listener: colcon build failed")
+
+    monkeypatch.setattr(build, "build", failing_build)
+    with pytest.raises(BuildError, match="colcon build failed"):
+        package_tests.test(Options(project_dir=project.root, quiet=True), component="listener")
+    assert calls == []
+
+
+def test_an_unknown_package_is_refused_before_building(project: Project, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(build, "build", lambda *a, **k: pytest.fail("built before the packages were checked"))
+    with pytest.raises(UsageError, match="unknown package 'nope'"):
+        package_tests.test(Options(project_dir=project.root, quiet=True), component=None, packages=["nope"])
+
+
+def test_dry_run_shows_the_build_that_would_come_first(project: Project, monkeypatch: pytest.MonkeyPatch,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setattr(package_tests, "local_docker", lambda: pytest.fail("the dry run contacted Docker"))
+    package_tests.test(Options(project_dir=project.root, dry_run=True), component="listener")
+    out = capsys.readouterr().out
+    assert out.index("# listener (first build) in") < out.index("# listener: demo_listener in")
+
+
+def test_with_json_the_build_first_leaves_one_document_of_test_results(
+        project: Project, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    calls: list[dict[str, Any]] = []
+    _fake_docker(monkeypatch, project, {"demo_listener": PASS}, calls)
+
+    def fake_build(options: Options, *, component: str | None, full: bool = False) -> None:
+        from robocore.commands.reporting import Outcome
+
+        options.report.add(Outcome(what="listener", role="build", action="up-to-date"))
+        options.report.warn("a build warning")
+        _record_build(project)
+
+    monkeypatch.setattr(build, "build", fake_build)
+    options = Options(project_dir=project.root, json=True, task="test")
+    package_tests.test(options, component="listener")
+    options.report.finish()
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["task"] == "test" and [r["kind"] for r in doc["results"]] == ["tests"]
+    assert [p["message"] for p in doc["problems"]] == ["a build warning"]
+

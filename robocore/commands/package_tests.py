@@ -3,9 +3,11 @@
 The container is the one ``build`` uses: the component's staged image, run as the invoking
 UID:GID, with the workspace and ``.robocore/build/<c>/{build,install,log}`` bind-mounted at the
 same paths and the same environment. The tests run against the install tree of the last build,
-so that build must be current: a component that was never built, or whose sources or image
-changed since its last build, is refused with the hint to run ``build`` first (``invoke build
-test`` does both). Building here instead would hide a build's output inside a test run.
+so ``test`` first builds what is stale (as ``cargo test`` does), through ``build`` itself with its
+own progress and results, so an edited test file is the one that runs; a failed build stops the
+run before any test. With ``--no-build`` the build must already be current: a component that was
+never built, or whose sources or image changed since its last build, is refused with the hint to
+run ``build`` first.
 
 colcon leaves JUnit XML in each package's build folder (``pytest.xml`` of ``ament_python``
 packages, ``test_results/**.xml`` of ``ament_cmake`` ones). Those files are removed before the
@@ -238,14 +240,25 @@ def _run_all(project: Project, plans: Sequence[ComponentTests], report: Reporter
     return [result for _, result in done if not isinstance(result, BaseException)]
 
 
-def test(options: Options, *, component: str | None, packages: Sequence[str] = ()) -> None:
-    """Run each component's package tests; print a result per package; fail when any test did not pass."""
+def test(options: Options, *, component: str | None, packages: Sequence[str] = (), build_first: bool = True) -> None:
+    """Run each component's package tests; print a result per package; fail when any test did not pass.
+
+    With ``build_first`` the components are built first where stale (``robocore build``), so the tests run
+    the current sources; without it a stale build is refused."""
     project = options.load()
     report = options.report
     comps = [c for c in selected_components(project, component) if c.folder is not None]
     if component and not comps:
         raise UsageError(f"component {component!r} has no folder: nothing to test")
     plans = plan_tests(project, comps, packages)
+    if build_first and plans:
+        from robocore.commands.build import build
+
+        # the build reports as itself: its own table for people; with --json its results stay out of the test's
+        # one document (which keeps the build's warnings)
+        building = dataclasses.replace(options, task="build")
+        build(building, component=component)
+        report.problems.extend(building.report.problems)
     if options.dry_run:
         show_plan(project, plans, report)
         return

@@ -26,10 +26,10 @@ from pathlib import Path
 from robocore.project import ProjectFolder
 
 #: Steps that talk to the robot hosts over ssh.
-REMOTE_STEPS = frozenset({"sync", "run", "status", "logs", "connect", "doctor", "down", "rollback"})
+REMOTE_STEPS = frozenset({"dev", "sync", "run", "status", "logs", "connect", "doctor", "down", "rollback"})
 #: Steps that connect to the robot hosts' Docker daemons with :func:`robocore.commands.hosts.connect`'s
 #: settings (status and logs use others).
-DOCKER_STEPS = frozenset({"run", "down", "rollback"})
+DOCKER_STEPS = frozenset({"dev", "run", "down", "rollback"})
 
 _warmed: set[tuple[str, str, int]] = set()  # (user, ip, port) already warmed by this process
 

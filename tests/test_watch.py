@@ -1,0 +1,111 @@
+"""robocore dev: deploy, then again on each save; quick saves coalesce; a failed build deploys nothing and says
+why in one line; the loop goes on watching."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from robocore.commands import build, run, sync, watch
+from robocore.commands.context import Options
+from robocore.errors import BuildError
+
+
+class Robot:
+    """The deploy steps, faked: what each saw of the watched file, and which steps ran."""
+
+    def __init__(self, source: Path, fail_builds: set[int] | None = None) -> None:
+        self.source = source
+        self.steps: list[str] = []
+        self.built: list[str] = []
+        self.fail_builds = fail_builds or set()
+        self.said: list[str] = []
+
+    def install(self, monkeypatch: pytest.MonkeyPatch, paths: list[Path]) -> None:
+        def fake_build(options: Options, *, component: str | None, full: bool = False) -> None:
+            self.built.append(self.source.read_text())
+            self.steps.append("build")
+            if len(self.built) in self.fail_builds:
+                raise BuildError("colcon build failed for demo_talker (log: .robocore/build/talker/log)\n"
+                                 "  File setup.py, line 3\n  SyntaxError")  # a log tail, as colcon's errors have
+
+        monkeypatch.setattr(build, "build", fake_build)
+        monkeypatch.setattr(sync, "sync", lambda options, *, host: self.steps.append("sync"))
+        monkeypatch.setattr(run, "run", lambda options, *, host, tag: self.steps.append("run"))
+        monkeypatch.setattr(watch, "watched", lambda options, component: paths)
+
+
+def start(tmp_path: Path, rounds: int, settle: float) -> threading.Thread:
+    def loop() -> None:
+        watch.dev(Options(project_dir=tmp_path, quiet=True), component=None, rounds=rounds, poll=0.02,
+                  settle=settle, say=said.append)
+
+    said: list[str] = []
+    thread = threading.Thread(target=loop, daemon=True)
+    thread.said = said  # type: ignore[attr-defined]
+    thread.start()
+    return thread
+
+
+def wait_for(condition: Any, what: str, timeout: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out waiting for {what}")
+        time.sleep(0.01)
+
+
+def test_quick_saves_coalesce_into_one_deploy_of_the_last_one(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    source = tmp_path / "ws" / "talker.py"
+    source.parent.mkdir()
+    source.write_text("v0")
+    robot = Robot(source)
+    robot.install(monkeypatch, [tmp_path / "ws"])
+    thread = start(tmp_path, rounds=1, settle=1.0)
+    wait_for(lambda: robot.steps == ["build", "sync", "run"], "the first deploy")
+    time.sleep(0.1)
+    for n in range(1, 6):  # five saves, far quicker than the settle time
+        source.write_text(f"v{n}")
+        time.sleep(0.01)
+    thread.join(timeout=60)
+    assert not thread.is_alive()
+    assert robot.built == ["v0", "v5"]  # no deploy of a half-saved state
+    assert robot.steps == ["build", "sync", "run"] * 2
+
+
+def test_a_failed_build_deploys_nothing_says_why_and_the_loop_goes_on(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    source = tmp_path / "ws" / "talker.py"
+    source.parent.mkdir()
+    source.write_text("good")
+    robot = Robot(source, fail_builds={2})
+    robot.install(monkeypatch, [tmp_path / "ws"])
+    thread = start(tmp_path, rounds=2, settle=0.05)
+    wait_for(lambda: len(robot.steps) == 3, "the first deploy")
+    source.write_text("broken")
+    wait_for(lambda: len(robot.built) == 2, "the failing build")
+    wait_for(lambda: any(line.startswith("dev: build failed") for line in thread.said), "the failure line")  # type: ignore[attr-defined]
+    source.write_text("fixed")
+    thread.join(timeout=60)
+    assert not thread.is_alive()
+    assert robot.steps == ["build", "sync", "run", "build", "build", "sync", "run"]  # nothing after the failed build
+    [line] = [s for s in thread.said if s.startswith("dev: build failed")]  # type: ignore[attr-defined]
+    assert line == ("dev: build failed: colcon build failed for demo_talker (log: .robocore/build/talker/log) "
+                    "(the robot keeps running the last good release; watching for the next save)")
+    assert robot.built == ["good", "broken", "fixed"]
+
+
+def test_a_dry_run_plans_one_deploy_and_watches_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    seen: list[tuple[str, bool]] = []
+    monkeypatch.setattr(build, "build",
+                        lambda options, *, component, full=False: seen.append(("build", options.dry_run)))
+    monkeypatch.setattr(sync, "sync", lambda options, *, host: seen.append(("sync", options.dry_run)))
+    monkeypatch.setattr(run, "run", lambda options, *, host, tag: seen.append(("run", options.dry_run)))
+    monkeypatch.setattr(watch, "watched", lambda options, component: pytest.fail("a dry run watched"))
+    watch.dev(Options(project_dir=tmp_path, dry_run=True), component="talker", say=lambda line: None)
+    assert seen == [("build", True), ("sync", True), ("run", True)]
+
