@@ -96,13 +96,14 @@ def free_display() -> tuple[int, int, int]:
     raise RuntimeError("no free X display and ports")
 
 
-def magenta_pixels(vnc_port: int, shot: Path, password: str | None) -> tuple[int, tuple[int, int]]:
+def magenta_pixels(vnc_port: int, shot: Path, password: str | None,
+                   timeout: float = 30) -> tuple[int, tuple[int, int]]:
     """Screenshot the desktop through VNC (vncdotool, a real RFB client, with the VNC password if one is given);
     the count of MAGENTA pixels and the size."""
     from PIL import Image
     from vncdotool import api
 
-    client = api.connect(f"127.0.0.1::{vnc_port}", password=password, timeout=30)
+    client = api.connect(f"127.0.0.1::{vnc_port}", password=password, timeout=timeout)
     try:
         client.captureScreen(str(shot))
     finally:
@@ -234,7 +235,7 @@ def test_the_desktop_asks_for_the_projects_password_and_refuses_a_client_without
     assert result != 0, result  # no "OK" security result: failed, or hung up
     # a real RFB client with a wrong password is refused; with the project's password it gets the screen
     with pytest.raises(Exception):  # noqa: B017 - vncdotool raises its own or a timeout, both mean refused
-        magenta_pixels(port, tmp_path / "wrong.png", "wrong123")
+        magenta_pixels(port, tmp_path / "wrong.png", "wrong123", timeout=10)
     assert not (tmp_path / "wrong.png").exists()
     assert magenta_pixels(port, tmp_path / "right.png", password)[1] == (1024, 768)
 

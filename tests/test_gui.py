@@ -404,3 +404,28 @@ def test_compose_file_of_a_gui_robot_is_plain_yaml() -> None:
     p = project([desktop(), {"name": "viz", "runs_on": "dev", "gui": "vnc"}])
     text = yaml.safe_dump(compose_document([spec_of(p, "vnc"), spec_of(p, "viz")]))
     assert yaml.safe_load(text)["services"]["vnc"]["command"][0] == "bash"
+
+
+def test_sync_ships_the_password_folder_to_a_robots_desktop_with_its_modes(tmp_path: Path) -> None:
+    from robocore.commands import sync as sync_command
+    from robocore.commands.composefiles import write_compose_files
+    from robocore.errors import UsageError as Usage
+
+    p = project([desktop(name="pidesk", runs_on="pi")], root=tmp_path)
+    with pytest.raises(Usage, match="no VNC password at"):  # before stage: said, not shipped as nothing
+        (p.dds_dir).mkdir(parents=True)
+        p.compose_dir.mkdir(parents=True)
+        p.compose_file("pi").write_text("services: {}\n")
+        sync_command.plan_host(p, p.robot.host("pi"))
+    write_compose_files(p)
+    (item,) = sync_command.plan_host(p, p.robot.host("pi"))
+    sources = {source.name: source.path for source in item.sources}
+    assert sources[gui.PASSWORD_FOLDER] == tmp_path / ".robocore" / "desktop"
+    # rsync -a keeps modes: what arrives is what is here
+    assert oct(sources["desktop"].stat().st_mode & 0o777) == "0o700"
+    assert oct((sources["desktop"] / "vnc-password").stat().st_mode & 0o777) == "0o600"
+    # an open desktop has no password to ship
+    opened = project([desktop(name="pidesk", runs_on="pi", desktop={"open": True})], root=tmp_path / "o")
+    write_compose_files(opened)
+    (item,) = sync_command.plan_host(opened, opened.robot.host("pi"))
+    assert gui.PASSWORD_FOLDER not in {source.name for source in item.sources}
