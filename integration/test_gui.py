@@ -237,6 +237,8 @@ def test_the_desktop_asks_for_the_projects_password_and_refuses_a_client_without
     with pytest.raises(Exception):  # noqa: B017 - vncdotool raises its own or a timeout, both mean refused
         magenta_pixels(port, tmp_path / "wrong.png", "wrong123", timeout=10)
     assert not (tmp_path / "wrong.png").exists()
+    assert wait_for(lambda: log_lines(desktop, "Authentication failure"), 10), \
+        desktop.logs().decode(errors="replace")[-2000:]  # Xvnc's own word: refused for the password
     assert magenta_pixels(port, tmp_path / "right.png", password)[1] == (1024, 768)
 
 
