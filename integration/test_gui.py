@@ -5,7 +5,9 @@ The desktop and clock components are the commented-out block of the generated ro
 as a user would; the test only moves the desktop to a free display and free ports (a real X server or
 another suite may use :1 and 6080 on this machine) and gives the clock a known background colour
 (``launch_args``), so that its window can be counted in the screenshot. Controls: with the clock
-stopped the colour is gone from the same desktop; an X client without the desktop's cookie is refused.
+stopped the colour is gone from the same desktop; an X client without the desktop's cookie is refused; an
+RFB client without the project's VNC password, or with a wrong one, is refused, and the same desktop opened in
+robot.yaml (``open: true``) serves one without.
 The images (``robocore-it-demo-desktop``, ``-clock``) are kept as a cache, like the demo's.
 """
 
@@ -57,6 +59,22 @@ def _display_taken(number: int) -> bool:
                if line.split())
 
 
+def rfb_security(port: int, choose: int) -> tuple[list[int], int | None]:
+    """An RFB 3.8 handshake by hand: the security types the server offers, and its security result when the
+    client picks ``choose`` (1: None) anyway: 0 is OK, anything else a failure, None when it hung up."""
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as sock:
+        reader = sock.makefile("rb")
+        assert reader.read(12).startswith(b"RFB 003.008")
+        sock.sendall(b"RFB 003.008\n")
+        count = reader.read(1)[0]
+        types = list(reader.read(count))
+        if not count:
+            return [], None
+        sock.sendall(bytes([choose]))
+        result = reader.read(4)
+        return types, int.from_bytes(result, "big") if len(result) == 4 else None
+
+
 def _tcp_free(port: int) -> bool:
     with socket.socket() as sock:
         try:
@@ -78,12 +96,14 @@ def free_display() -> tuple[int, int, int]:
     raise RuntimeError("no free X display and ports")
 
 
-def magenta_pixels(vnc_port: int, shot: Path) -> tuple[int, tuple[int, int]]:
-    """Screenshot the desktop through VNC (vncdotool, a real RFB client); the count of MAGENTA pixels and the size."""
+def magenta_pixels(vnc_port: int, shot: Path, password: str | None,
+                   timeout: float = 30) -> tuple[int, tuple[int, int]]:
+    """Screenshot the desktop through VNC (vncdotool, a real RFB client, with the VNC password if one is given);
+    the count of MAGENTA pixels and the size."""
     from PIL import Image
     from vncdotool import api
 
-    client = api.connect(f"127.0.0.1::{vnc_port}", timeout=30)
+    client = api.connect(f"127.0.0.1::{vnc_port}", password=password, timeout=timeout)
     try:
         client.captureScreen(str(shot))
     finally:
@@ -126,7 +146,9 @@ def desktop_robot(demo_project: Path, tmp_path_factory: pytest.TempPathFactory, 
         if not wait_for(lambda: log_lines(desktop, gui.DESKTOP_READY), READY_WITHIN):
             pytest.fail(f"the desktop did not get ready:\n{desktop.logs().decode(errors='replace')[-3000:]}",
                         pytrace=False)
-        yield {"root": root, "name": name, "display": display, "vnc_port": vnc_port, "web_port": web_port}
+        password = run_robocore(root, "desktop-password").stdout.strip()
+        yield {"root": root, "name": name, "display": display, "vnc_port": vnc_port, "web_port": web_port,
+               "password": password}
     finally:
         remove_project_containers(docker_client, name)
         for volume in docker_client.volumes.list(filters={"name": f"{name}-"}):
@@ -136,13 +158,13 @@ def desktop_robot(demo_project: Path, tmp_path_factory: pytest.TempPathFactory, 
 
 def test_the_desktop_shows_the_window_of_another_containers_x_client(desktop_robot: dict[str, Any], vnc_client: None,
                                                                        docker_client: Any, tmp_path: Path) -> None:
-    port = desktop_robot["vnc_port"]
+    port, password = desktop_robot["vnc_port"], desktop_robot["password"]
     clock = docker_client.containers.get(f"{desktop_robot['name']}-clock")
 
     counts: list[int] = []
 
     def window_shown() -> bool:
-        count, size = magenta_pixels(port, tmp_path / "with-clock.png")
+        count, size = magenta_pixels(port, tmp_path / "with-clock.png", password)
         assert size == (1024, 768)
         counts.append(count)
         return count > SHOWN
@@ -160,7 +182,7 @@ def test_the_desktop_shows_the_window_of_another_containers_x_client(desktop_rob
         gone: list[int] = []
 
         def window_gone() -> bool:
-            gone.append(magenta_pixels(port, tmp_path / "without-clock.png")[0])
+            gone.append(magenta_pixels(port, tmp_path / "without-clock.png", password)[0])
             return gone[-1] == 0
 
         assert wait_for(window_gone, 30, interval=1), f"magenta still shown without the clock: {gone[-5:]}"
@@ -193,6 +215,59 @@ def test_novnc_serves_its_page_and_reaches_the_vnc_server(desktop_robot: dict[st
     finally:
         conn.close()
     assert bytes(banner if isinstance(banner, bytes) else banner.encode()).startswith(b"RFB 003.008")
+
+
+def test_the_desktop_asks_for_the_projects_password_and_refuses_a_client_without_it(
+        desktop_robot: dict[str, Any], vnc_client: None, docker_client: Any, tmp_path: Path) -> None:
+    import stat
+
+    port, password = desktop_robot["vnc_port"], desktop_robot["password"]
+    secret = desktop_robot["root"] / ".robocore" / "desktop" / "vnc-password"
+    assert secret.read_text() == password and len(password) == 8
+    assert stat.S_IMODE(secret.stat().st_mode) == 0o600 and stat.S_IMODE(secret.parent.stat().st_mode) == 0o700
+    # the container holds the path of the secret, never the secret (docker inspect shows env and command)
+    desktop = docker_client.containers.get(f"{desktop_robot['name']}-desktop")
+    assert password not in str(desktop.attrs["Config"]) and password not in str(desktop.attrs["Args"])
+    assert log_lines(desktop, "VNC security: VncAuth")
+    # a client that skips authentication: offered VNC authentication only, and refused when it asks for none
+    types, result = rfb_security(port, choose=1)
+    assert types == [2], types
+    assert result != 0, result  # no "OK" security result: failed, or hung up
+    # a real RFB client with a wrong password is refused; with the project's password it gets the screen
+    with pytest.raises(Exception):  # noqa: B017 - vncdotool raises its own or a timeout, both mean refused
+        magenta_pixels(port, tmp_path / "wrong.png", "wrong123", timeout=10)
+    assert not (tmp_path / "wrong.png").exists()
+    assert wait_for(lambda: log_lines(desktop, "Authentication failure"), 10), \
+        desktop.logs().decode(errors="replace")[-2000:]  # Xvnc's own word: refused for the password
+    assert magenta_pixels(port, tmp_path / "right.png", password)[1] == (1024, 768)
+
+
+def test_a_desktop_opened_in_robot_yaml_serves_a_client_without_a_password(
+        desktop_robot: dict[str, Any], vnc_client: None, docker_client: Any, run_robocore: Any,
+        tmp_path: Path) -> None:
+    root, port = desktop_robot["root"], desktop_robot["vnc_port"]
+    robot_yaml = root / "robot.yaml"
+    original = robot_yaml.read_text()
+    data = yaml.safe_load(original)
+    data["components"][0]["desktop"]["open"] = True
+    robot_yaml.write_text(yaml.safe_dump(data, sort_keys=False))
+    desktop_name = f"{desktop_robot['name']}-desktop"
+    try:
+        checked = run_robocore(root, "validate")
+        assert "desktop.open: warning:" in checked.stdout + checked.stderr and "without a password" in \
+            checked.stdout + checked.stderr
+        run_robocore(root, "run", "--quiet")
+        desktop = docker_client.containers.get(desktop_name)
+        assert "ROBOCORE_DESKTOP_PASSWORD_FILE" not in str(desktop.attrs["Config"]["Env"])
+        assert wait_for(lambda: log_lines(desktop, "VNC security: None"), READY_WITHIN), \
+            desktop.logs().decode(errors="replace")[-2000:]
+        assert rfb_security(port, choose=1) == ([1], 0)
+        assert magenta_pixels(port, tmp_path / "open.png", None)[1] == (1024, 768)
+    finally:  # back to the password, for the tests after this one
+        robot_yaml.write_text(original)
+        run_robocore(root, "run", "--quiet")
+        desktop = docker_client.containers.get(desktop_name)
+        wait_for(lambda: log_lines(desktop, "VNC security: VncAuth"), READY_WITHIN)
 
 
 # --------------------------------------------------------------------------- gui: true, the host's own display

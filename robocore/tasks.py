@@ -369,8 +369,18 @@ def doctor(c: Context, host: str = "", json: bool = False) -> None:
     _execute(options, lambda: command.doctor(options, host=host or None))
 
 
+@task(name="desktop-password")
+@reported
+def desktop_password(c: Context) -> None:
+    """Print the project's VNC password (made once, kept 0600 in .robocore/desktop/), which noVNC asks for."""
+    from robocore.commands import displays
+
+    options = _options(c, "desktop-password")
+    print(_execute(options, lambda: displays.desktop_password(options.load())))
+
+
 PROJECT_TASKS = (validate, prepare_base, stage, build, test, dev, sync, run, down, status, logs, shell, connect,
-                 release, rollback, doctor)
+                 release, rollback, doctor, desktop_password)
 
 #: The collection a project's tasks.py re-exports (``from robocore.tasks import namespace``).
 namespace = Collection(*PROJECT_TASKS)

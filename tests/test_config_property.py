@@ -41,7 +41,7 @@ KEYS = [
     "components", "name", "ip", "user", "arch", "docker", "docker_port", "tls", "insecure", "mount_root", "folder",
     "repo", "branch", "runs_on", "image", "apt_packages", "pip_packages", "repositories", "postinstall", "entrypoint",
     "launch_args", "devices", "ports", "environment", "volumes", "network", "nvidia", "gui", "privileged", "servers",
-    "desktop", "display", "web_port", "vnc_port", "local_only", "size",
+    "desktop", "display", "web_port", "vnc_port", "local_only", "open", "size",
     "port", "host", "transport", "kind", "url", "version", "bogus", "",
 ]
 

@@ -35,7 +35,7 @@ components:
     runs_on: dev
 """
 
-DESKTOP_APT = "[tigervnc-standalone-server, novnc, websockify]"
+DESKTOP_APT = "[tigervnc-standalone-server, tigervnc-tools, novnc, websockify]"
 
 
 def edit(replace: dict[int, str] | None = None, *, after: dict[int, str] | None = None) -> str:

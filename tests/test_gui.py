@@ -16,14 +16,14 @@ from robocore.commands.displays import prepare_host_displays
 from robocore.config.desktop import Desktop, display_host
 from robocore.config.loader import parse_robot_text, robot_warnings
 from robocore.config.model import Robot
-from robocore.errors import ConfigError
+from robocore.errors import ConfigError, UsageError
 from robocore.plan import addresses, gui
 from robocore.plan.compose import compose_document
 from robocore.plan.containers import component_spec
 from robocore.project import Project
 
 ROOT = Path("/srv/myrobot")
-DESKTOP_APT = ["tigervnc-standalone-server", "novnc", "websockify", "openbox"]
+DESKTOP_APT = ["tigervnc-standalone-server", "tigervnc-tools", "novnc", "websockify", "openbox"]
 
 
 def project(components: list[dict[str, Any]], *, root: Path = ROOT, dev_ip: str = "192.168.1.10") -> Project:
@@ -70,7 +70,7 @@ components:
   - name: vnc
     runs_on: dev
     desktop: {display: 1}
-    apt_packages: [tigervnc-standalone-server, novnc, websockify]
+    apt_packages: [tigervnc-standalone-server, tigervnc-tools, novnc, websockify]
 """
 
 
@@ -108,11 +108,11 @@ def test_a_gui_component_of_the_desktops_host_is_valid() -> None:
      "robot.yaml:13: components[1].environment.DISPLAY: gui: vnc sets DISPLAY to that desktop's display; remove "
      "DISPLAY from environment"),
     ("  - name: vnc2\n    runs_on: dev\n    desktop: {web_port: 6081, vnc_port: 5999}\n"
-     "    apt_packages: [tigervnc-standalone-server, novnc, websockify]\n",
+     "    apt_packages: [tigervnc-standalone-server, tigervnc-tools, novnc, websockify]\n",
      "robot.yaml:12: components[1].desktop.display: display 1 is already used by the desktop of components[0] on "
      "'dev'"),
     ("  - name: vnc2\n    runs_on: dev\n    desktop: {display: 2, web_port: 6082}\n    entrypoint: xterm\n"
-     "    apt_packages: [tigervnc-standalone-server, novnc/bookworm, websockify=0.10.0+dfsg1-4+b1]\n",
+     "    apt_packages: [tigervnc-standalone-server, tigervnc-tools, novnc/bookworm, websockify=0.10.0+dfsg1-4+b1]\n",
      "robot.yaml:13: components[1].entrypoint: robocore starts the desktop (Xvnc, window manager, noVNC); remove it"),
 ])
 def test_gui_problems_are_one_line_with_file_line_and_key(tail: str, expected: str) -> None:
@@ -121,11 +121,16 @@ def test_gui_problems_are_one_line_with_file_line_and_key(tail: str, expected: s
 
 
 def test_a_desktop_without_its_packages_or_with_gui_is_refused() -> None:
-    packages = "    apt_packages: [tigervnc-standalone-server, novnc, websockify]\n"
+    packages = "    apt_packages: [tigervnc-standalone-server, tigervnc-tools, novnc, websockify]\n"
     head = HEAD.replace(packages, "    apt_packages: [novnc]\n")
     assert problems("", head) == [
-        "robot.yaml:9: components[0].apt_packages: a desktop needs tigervnc-standalone-server, novnc, websockify "
-        "(missing: tigervnc-standalone-server, websockify); a window manager such as openbox is optional"]
+        "robot.yaml:9: components[0].apt_packages: a desktop needs tigervnc-standalone-server, novnc, websockify, "
+        "tigervnc-tools (missing: tigervnc-standalone-server, websockify, tigervnc-tools); a window manager such as "
+        "openbox is optional; tigervnc-tools gives vncpasswd, for the desktop's password"]
+    # an open desktop (no password) needs no vncpasswd
+    open_desk = HEAD.replace(packages, "    apt_packages: [tigervnc-standalone-server, novnc, websockify]\n").replace(
+        "desktop: {display: 1}", "desktop: {display: 1, open: true}")
+    assert problems("", open_desk) == []
     # a pre-built image brings its own packages
     image = HEAD.replace(packages, "    image: my/desk:1\n")
     assert problems("", image) == []
@@ -133,13 +138,18 @@ def test_a_desktop_without_its_packages_or_with_gui_is_refused() -> None:
         "robot.yaml:10: components[0].gui: a desktop component shows the windows of others; remove gui"]
 
 
-def test_a_desktop_on_every_interface_is_warned_about(tmp_path: Path) -> None:
-    robot = parse_robot_text(HEAD)
-    (warning,) = robot_warnings(tmp_path / "robot.yaml", robot)
+def test_only_a_desktop_opened_in_robot_yaml_is_warned_about(tmp_path: Path) -> None:
+    # the default asks for the project's password: nothing to warn about, on every interface or not
+    assert robot_warnings(tmp_path / "robot.yaml", parse_robot_text(HEAD)) == []
+    opened = parse_robot_text(HEAD.replace("desktop: {display: 1}", "desktop: {display: 1, open: true}"))
+    (warning,) = robot_warnings(tmp_path / "robot.yaml", opened)
     text = str(warning)
-    assert "components[0].desktop: warning:" in text and "port 6080 of every interface of dev" in text
-    local = parse_robot_text(HEAD.replace("desktop: {display: 1}", "desktop: {display: 1, local_only: true}"))
-    assert robot_warnings(tmp_path / "robot.yaml", local) == []
+    assert "components[0].desktop.open: warning:" in text and "port 6080 of every interface of dev" in text
+    assert "without a password" in text
+    local = parse_robot_text(HEAD.replace("desktop: {display: 1}",
+                                          "desktop: {display: 1, open: true, local_only: true}"))
+    (warning,) = robot_warnings(tmp_path / "robot.yaml", local)
+    assert "port 6080 of 127.0.0.1 of dev" in str(warning)
 
 
 # ------------------------------------------------------------------ container specs
@@ -159,6 +169,77 @@ def test_desktop_component_runs_robocores_desktop_script_with_its_own_socket_vol
     assert spec.network_mode == "host"
     assert project([desktop()]).robot.component("vnc").desktop is not None
     assert spec_of(project([desktop()]), "vnc").env["ROBOCORE_DESKTOP_LISTEN"] == "0.0.0.0"
+
+
+def test_a_desktop_mounts_the_projects_password_file_read_only_and_gets_only_its_path() -> None:
+    p = project([desktop(), desktop(name="pidesk", runs_on="pi")])
+    local = spec_of(p, "vnc")
+    assert local.env["ROBOCORE_DESKTOP_PASSWORD_FILE"] == gui.PASSWORD_MOUNT == "/run/robocore-desktop/vnc-password"
+    (secret,) = [m for m in local.mounts if m.target == gui.PASSWORD_MOUNT]
+    assert (secret.source, secret.read_only) == (str(ROOT / ".robocore" / "desktop" / "vnc-password"), True)
+    # on a robot: the copy sync ships in the live release
+    remote = spec_of(p, "pidesk")
+    (secret,) = [m for m in remote.mounts if m.target == gui.PASSWORD_MOUNT]
+    assert (secret.source, secret.read_only) == ("/home/pi/robocore/pidesk/current/desktop/vnc-password", True)
+    # desktop.open: true -> today's open desktop: no password, no mount
+    opened = spec_of(project([desktop(desktop={"open": True})]), "vnc")
+    assert "ROBOCORE_DESKTOP_PASSWORD_FILE" not in opened.env
+    assert not [m for m in opened.mounts if m.target == gui.PASSWORD_MOUNT]
+    # the script asks for VNC authentication with a password file, and serves no security only without one
+    script = gui.desktop_script()
+    assert "-SecurityTypes VncAuth -PasswordFile" in script and "vncpasswd -f" in script
+
+
+def test_the_password_is_made_once_private_and_never_in_argv_env_or_compose(tmp_path: Path) -> None:
+    import stat
+
+    from robocore.commands.displays import desktop_password, ensure_desktop_password
+
+    p = project([desktop(), {"name": "viz", "runs_on": "dev", "gui": "vnc"}], root=tmp_path)
+    old = os.umask(0o022)
+    try:
+        path = ensure_desktop_password(p)
+    finally:
+        os.umask(old)
+    assert path == tmp_path / ".robocore" / "desktop" / "vnc-password"
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600 and stat.S_IMODE(path.parent.stat().st_mode) == 0o700
+    password = desktop_password(p)
+    assert len(password) == 8 and password.isalnum() and path.read_text() == password
+    assert ensure_desktop_password(p) == path and desktop_password(p) == password  # made once, kept
+    path.chmod(0o644)
+    ensure_desktop_password(p)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600 and path.read_text() == password  # narrowed, same value
+    specs = [spec_of(p, "vnc"), spec_of(p, "viz")]
+    document = yaml.safe_dump(compose_document(specs))
+    assert password not in document
+    for spec in specs:
+        assert password not in " ".join(spec.command or ()) and password not in str(spec.env)
+    # a project whose desktops are all open has no password to show
+    with pytest.raises(UsageError, match="no desktop of this project asks for a password"):
+        desktop_password(project([desktop(desktop={"open": True})], root=tmp_path / "other"))
+    assert ensure_desktop_password(project([desktop(desktop={"open": True})], root=tmp_path / "other")) is None
+    assert not (tmp_path / "other").exists()
+
+
+def test_the_password_is_never_written_through_a_link(tmp_path: Path) -> None:
+    from robocore.commands.displays import ensure_desktop_password
+    from robocore.errors import UnsafePath
+
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "vnc-password").write_text("theirs")
+    root = tmp_path / "proj"
+    (root / ".robocore").mkdir(parents=True)
+    (root / ".robocore" / "desktop").symlink_to(outside)  # as a cloned repository can carry it
+    with pytest.raises(UnsafePath, match="desktop"):
+        ensure_desktop_password(project([desktop()], root=root))
+    assert (outside / "vnc-password").read_text() == "theirs" and os.listdir(outside) == ["vnc-password"]
+    (root / ".robocore" / "desktop").unlink()
+    (root / ".robocore" / "desktop").mkdir()
+    (root / ".robocore" / "desktop" / "vnc-password").symlink_to(outside / "vnc-password")
+    with pytest.raises(UnsafePath, match="vnc-password"):
+        ensure_desktop_password(project([desktop()], root=root))
+    assert (outside / "vnc-password").read_text() == "theirs"
 
 
 def test_a_gui_component_draws_into_the_desktop_through_its_volume_and_cookie() -> None:
@@ -323,3 +404,28 @@ def test_compose_file_of_a_gui_robot_is_plain_yaml() -> None:
     p = project([desktop(), {"name": "viz", "runs_on": "dev", "gui": "vnc"}])
     text = yaml.safe_dump(compose_document([spec_of(p, "vnc"), spec_of(p, "viz")]))
     assert yaml.safe_load(text)["services"]["vnc"]["command"][0] == "bash"
+
+
+def test_sync_ships_the_password_folder_to_a_robots_desktop_with_its_modes(tmp_path: Path) -> None:
+    from robocore.commands import sync as sync_command
+    from robocore.commands.composefiles import write_compose_files
+    from robocore.errors import UsageError as Usage
+
+    p = project([desktop(name="pidesk", runs_on="pi")], root=tmp_path)
+    with pytest.raises(Usage, match="no VNC password at"):  # before stage: said, not shipped as nothing
+        (p.dds_dir).mkdir(parents=True)
+        p.compose_dir.mkdir(parents=True)
+        p.compose_file("pi").write_text("services: {}\n")
+        sync_command.plan_host(p, p.robot.host("pi"))
+    write_compose_files(p)
+    (item,) = sync_command.plan_host(p, p.robot.host("pi"))
+    sources = {source.name: source.path for source in item.sources}
+    assert sources[gui.PASSWORD_FOLDER] == tmp_path / ".robocore" / "desktop"
+    # rsync -a keeps modes: what arrives is what is here
+    assert oct(sources["desktop"].stat().st_mode & 0o777) == "0o700"
+    assert oct((sources["desktop"] / "vnc-password").stat().st_mode & 0o777) == "0o600"
+    # an open desktop has no password to ship
+    opened = project([desktop(name="pidesk", runs_on="pi", desktop={"open": True})], root=tmp_path / "o")
+    write_compose_files(opened)
+    (item,) = sync_command.plan_host(opened, opened.robot.host("pi"))
+    assert gui.PASSWORD_FOLDER not in {source.name for source in item.sources}

@@ -235,7 +235,7 @@ def test_desktop_example_is_commented_out_and_valid_once_uncommented(project: Pa
         (project / "robot.yaml").write_text(text)
     desktop, clock = robot.component("desktop"), robot.component("clock")
     assert desktop.desktop is not None and desktop.desktop.web_port == 6080 and desktop.runs_on == "devmachine"
-    assert "tigervnc-standalone-server" in desktop.apt_packages and desktop.folder is None
+    assert {"tigervnc-standalone-server", "tigervnc-tools"} <= set(desktop.apt_packages) and desktop.folder is None
     assert clock.gui == "desktop" and clock.runs_on == "devmachine" and clock.entrypoint == "xclock -update 1"
 
 

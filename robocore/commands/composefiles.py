@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from robocore.commands.displays import ensure_desktop_password
 from robocore.commands.state import with_local_build
 from robocore.files import PRIVATE, write_generated
 from robocore.plan import compose, discovery
@@ -22,8 +23,10 @@ def write_dds_profiles(project: Project) -> list[Path]:
 def write_compose_files(project: Project, *, tag: str | None = None) -> list[Path]:
     """Write one compose file per host (and the DDS profiles they mount); return the compose paths.
 
-    Compose files hold the containers' environment, so they are mode 0600 whatever the umask."""
+    Compose files hold the containers' environment, so they are mode 0600 whatever the umask. The desktops'
+    VNC password is made here too (once): their compose services mount it (:func:`ensure_desktop_password`)."""
     write_dds_profiles(project)
+    ensure_desktop_password(project)
     texts: dict[str, str] = {}
     for host in project.robot.hosts:
         # The same labels `run` gives the containers (local components: the build they run).

@@ -1,4 +1,5 @@
-"""The host's own display for ``gui: true`` components: a cookie of their own, made before ``run`` starts them.
+"""The displays of deployed components: the host's own display for ``gui: true`` components (a cookie of
+their own, made before ``run`` starts them), and the VNC password of the project's desktops.
 
 A display manager gives the logged-in user a new cookie at every login, so the copy is made at
 every ``run``, on the component's host and as that host's user (over ssh, or here for a local
@@ -8,15 +9,57 @@ file, so a later copy reaches a running container too.
 
 from __future__ import annotations
 
+import secrets
+import string
 import subprocess
+from pathlib import Path
 
 from robocore.config.model import Host
-from robocore.errors import HostError
+from robocore.errors import HostError, UsageError
+from robocore.files import PRIVATE, read_own_file, write_atomic
 from robocore.plan import gui
 from robocore.project import Project
 
 #: Seconds the cookie script may take on a host.
 COOKIE_TIMEOUT = 60
+#: VNC authentication uses the first 8 characters of a password: 8 letters and digits (about 47 bits).
+PASSWORD_LENGTH = 8
+PASSWORD_ALPHABET = string.ascii_letters + string.digits
+
+
+def _valid_password(data: bytes | None) -> str | None:
+    text = (data or b"").decode("ascii", errors="replace")
+    ok = len(text) == PASSWORD_LENGTH and all(ch in PASSWORD_ALPHABET for ch in text)
+    return text if ok else None
+
+
+def ensure_desktop_password(project: Project) -> Path | None:
+    """The project's VNC password file, made once (``secrets``) when a desktop asks for it; None when none does.
+
+    Mode 0600 in a 0700 folder, written through :func:`~robocore.files.write_atomic` (never through a link, never
+    half-written); a file that is not robocore's own password (a link, a FIFO, something else) is replaced by a new
+    one only if it is a regular file, refused otherwise. An existing password keeps its value, and its mode is
+    narrowed to 0600."""
+    if not any(gui.needs_password(c) for c in project.robot.components):
+        return None
+    path = gui.password_file(project)
+    password = _valid_password(read_own_file(path))
+    if password is None:
+        password = "".join(secrets.choice(PASSWORD_ALPHABET) for _ in range(PASSWORD_LENGTH))
+    write_atomic(path, password, mode=PRIVATE)
+    return path
+
+
+def desktop_password(project: Project) -> str:
+    """The project's VNC password (made if it is not there yet), which noVNC and VNC viewers ask for."""
+    path = ensure_desktop_password(project)
+    if path is None:
+        desktops = [c.name for c in project.robot.components if c.desktop is not None]
+        raise UsageError("no desktop of this project asks for a password" +
+                         (f" ({', '.join(desktops)}: desktop.open: true)" if desktops else " (no desktop component)"))
+    password = _valid_password(read_own_file(path))
+    assert password is not None, "ensure_desktop_password just wrote it"
+    return password
 
 
 def prepare_host_displays(project: Project, host: Host, *, dry_run: bool) -> list[str]:

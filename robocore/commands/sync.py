@@ -30,8 +30,8 @@ from robocore.commands.reporting import Reporter
 from robocore.commands.state import read_synced, write_synced
 from robocore.config.model import Component, Host, read_only_project_path
 from robocore.errors import GroupError, HostError, RobocoreError, UnsafePath, UsageError
-from robocore.files import make_folder, refuse_links_leaving, remove_tree
-from robocore.plan import layout
+from robocore.files import make_folder, read_own_file, refuse_links_leaving, remove_tree
+from robocore.plan import gui, layout
 from robocore.plan import sync as plan
 from robocore.project import Project
 from robocore.ui import human_size
@@ -92,6 +92,11 @@ def plan_host(project: Project, host: Host, *, dry_run: bool = False) -> list[pl
                              hint="run `stage` (or `stage --refresh`) first: it writes compose files and DDS profiles")
         sources.append(plan.Source(dds_dir, "dds"))
         sources.append(plan.Source(compose, compose.name))
+        if gui.needs_password(comp):  # rsync -a keeps the modes: the folder 0700, the password 0600
+            if not read_own_file(gui.password_file(project)):  # a link there is no password, never followed
+                raise UsageError(f"component {comp.name}: no VNC password at {gui.password_file(project)}",
+                                 hint="run `stage` (or `stage --refresh`) first: it makes the desktop's password")
+            sources.append(plan.Source(project.desktop_dir, gui.PASSWORD_FOLDER))
         files = _project_files(project, host, comp, dry_run=dry_run)
         if files is not None:
             sources.append(files)

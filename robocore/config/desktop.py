@@ -25,6 +25,9 @@ Found = tuple[KeyPath, str]
 
 #: Debian (and Ubuntu) packages the desktop script needs: Xvnc, noVNC's web pages, websockify.
 DESKTOP_PACKAGES = ("tigervnc-standalone-server", "novnc", "websockify")
+#: The package of ``vncpasswd``, which turns the project's VNC password into Xvnc's password file
+#: (a desktop without ``open: true``).
+PASSWORD_PACKAGE = "tigervnc-tools"
 #: The first VNC port; a desktop on display N serves VNC on ``VNC_BASE_PORT + N`` unless told otherwise.
 VNC_BASE_PORT = 5900
 SIZE = r"[1-9][0-9]{2,4}x[1-9][0-9]{2,4}"
@@ -44,7 +47,11 @@ class Desktop(BaseModel):
     )
     local_only: bool = Field(
         default=False, description="Serve noVNC on 127.0.0.1 only (reach it through ssh -L); "
-        "otherwise on every interface, without a password (validate warns).",
+        "otherwise on every interface.",
+    )
+    open: bool = Field(
+        default=False, description="Serve the desktop without a password (validate warns); otherwise VNC asks "
+        "for the project's password (`robocore desktop-password`).",
     )
 
     @property
@@ -118,11 +125,13 @@ def _desktops(components: Sequence[tuple[int, Component]]) -> Iterator[Found]:
                 yield (*base, key), "robocore starts the desktop (Xvnc, window manager, noVNC); remove it"
         if comp.image is None:
             have = {package_name(p) for p in comp.apt_packages}
-            missing = [p for p in DESKTOP_PACKAGES if p not in have]
+            needed = DESKTOP_PACKAGES if desktop.open else (*DESKTOP_PACKAGES, PASSWORD_PACKAGE)
+            missing = [p for p in needed if p not in have]
             if missing:
                 yield ((*base, "apt_packages"),
-                       f"a desktop needs {', '.join(DESKTOP_PACKAGES)} (missing: {', '.join(missing)}); a window "
-                       "manager such as openbox is optional")
+                       f"a desktop needs {', '.join(needed)} (missing: {', '.join(missing)}); a window "
+                       "manager such as openbox is optional"
+                       + ("" if desktop.open else f"; {PASSWORD_PACKAGE} gives vncpasswd, for the desktop's password"))
         uses = (("display", "display", desktop.display), ("web_port", "port", desktop.web_port),
                 ("vnc_port", "port", desktop.rfb_port))
         for key, what, number in uses:

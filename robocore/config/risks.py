@@ -62,11 +62,12 @@ def _component(comp: Component) -> Iterator[Found]:
     host = comp.runs_on
     if comp.privileged:
         yield ("privileged",), f"{comp.name} runs privileged: every device and kernel feature of {host}"
-    if comp.desktop is not None and not comp.desktop.local_only:
-        yield (("desktop",),
-               f"{comp.name} serves its desktop through noVNC on port {comp.desktop.web_port} of every interface of "
-               f"{host}, without a password: whoever reaches it sees and controls the screen (desktop.local_only: "
-               "true keeps it on 127.0.0.1, for ssh -L)")
+    if comp.desktop is not None and comp.desktop.open:
+        where = "127.0.0.1" if comp.desktop.local_only else "every interface"
+        yield (("desktop", "open"),
+               f"{comp.name} serves its desktop through noVNC on port {comp.desktop.web_port} of {where} of {host}, "
+               "without a password (desktop.open: true): whoever reaches it sees and controls the screen (remove "
+               "open to ask for the project's VNC password)")
     for i, volume in enumerate(comp.volumes):
         source = volume.split(":")[0]
         if not source.startswith("/"):

@@ -6,6 +6,9 @@ Three cases, decided by robot.yaml:
   (``resources/desktop.sh``): TigerVNC's Xvnc on display ``:N``, a window manager, and noVNC
   through websockify. Its X socket folder ``/tmp/.X11-unix`` is a named volume of its own, and
   the script writes a fresh cookie (wildcard address family) beside the socket at every start.
+  VNC asks for the project's password (``.robocore/desktop/vnc-password``, 0600): the file is
+  bind-mounted read-only, never put in the environment or the compose file, and the script turns it
+  into Xvnc's password file (``-SecurityTypes VncAuth``). ``desktop.open: true`` serves it without.
 * ``gui: <desktop>`` -- the component draws into that desktop (same host; validate refuses
   another). It mounts the desktop's volume read-only at ``/tmp/.X11-unix``, so ``DISPLAY=:N``
   reaches the socket and ``XAUTHORITY`` the cookie, whatever its network. On host networking the
@@ -23,11 +26,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import cache
 from importlib import resources
-from pathlib import PurePosixPath
+from pathlib import Path, PurePosixPath
 
 from robocore.config.model import Component, Host
 from robocore.plan import naming
-from robocore.plan.layout import component_root
+from robocore.plan.layout import CURRENT, component_root
 from robocore.project import Project
 
 #: Where X servers put their sockets, in every container.
@@ -41,6 +44,11 @@ COOKIE_FILE = "xauth"
 DEFAULT_DISPLAY = ":0"
 #: Folder beside a remote component's releases that holds its cookie (``<mount_root>/<component>/...``).
 REMOTE_COOKIE_FOLDER = ".robocore-x11"
+#: The project's VNC password: the file in ``project.desktop_dir``, the folder of it in a remote release
+#: (``<mount_root>/<component>/current/desktop/``), and where a desktop container reads it.
+PASSWORD_FILE = "vnc-password"
+PASSWORD_FOLDER = "desktop"
+PASSWORD_MOUNT = "/run/robocore-desktop/vnc-password"
 #: argv[0] of the desktop script, as ``ps`` and the logs show it.
 DESKTOP_PROCESS = "robocore-desktop"
 #: What the desktop script prints once the display and noVNC serve.
@@ -106,6 +114,24 @@ def desktop_volume(project_name: str, component: str) -> str:
     return f"{project_name}-{component}-x11"
 
 
+def password_file(project: Project) -> Path:
+    """The project's VNC password on this machine (0600 in a 0700 folder; see ``desktop_password``)."""
+    return project.desktop_dir / PASSWORD_FILE
+
+
+def needs_password(component: Component) -> bool:
+    """Whether ``component`` is a desktop that asks for the project's VNC password (not ``open: true``)."""
+    return component.desktop is not None and not component.desktop.open
+
+
+def password_source(project: Project, host: Host, component: str) -> str:
+    """The password file on ``host`` that desktop ``component`` mounts: the project's own for a local host; for a
+    remote one, the copy ``sync`` ships in every release (``current/desktop/vnc-password``, mode kept: 0600)."""
+    if host.is_local:
+        return str(password_file(project))
+    return str(component_root(host, component) / CURRENT / PASSWORD_FOLDER / PASSWORD_FILE)
+
+
 def host_display(component: Component) -> str:
     """The display of a ``gui: true`` component on its host: its own ``DISPLAY``, else ``:0``."""
     return component.environment.get("DISPLAY", DEFAULT_DISPLAY)
@@ -151,9 +177,15 @@ def _desktop(project: Project, component: Component) -> GuiPlan:
         "ROBOCORE_DESKTOP_XAUTHORITY": DESKTOP_XAUTHORITY,
         "ROBOCORE_DESKTOP_NAME": f"{project.name} {component.name}",
     }
+    binds = [Bind(desktop_volume(project.name, component.name), X11_SOCKETS)]
+    if not desktop.open:
+        # the path of the secret, never the secret: env and compose files are shown by `docker inspect`
+        env["ROBOCORE_DESKTOP_PASSWORD_FILE"] = PASSWORD_MOUNT
+        host = project.robot.host(component.runs_on)
+        binds.append(Bind(password_source(project, host, component.name), PASSWORD_MOUNT, read_only=True))
     return GuiPlan(
         environment=env,
-        binds=(Bind(desktop_volume(project.name, component.name), X11_SOCKETS),),
+        binds=tuple(binds),
         command=("bash", "-c", desktop_script(), DESKTOP_PROCESS),
     )
 

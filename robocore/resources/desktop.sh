@@ -37,12 +37,27 @@ xauth -q -f "$server_auth.local" add ":$n" MIT-MAGIC-COOKIE-1 "$cookie"
 xauth -q -f "$server_auth.local" nlist ":$n" | sed -e 's/^..../ffff/' | xauth -q -f "$server_auth" nmerge -
 rm -f -- "$server_auth.local"
 
+# The project's VNC password, when robocore mounts one (every desktop but desktop.open: true): vncpasswd
+# turns it into Xvnc's password file, readable by this container's user only. Never an argument, never
+# in the environment.
+security=(-SecurityTypes None)
+rfbauth=/tmp/robocore-desktop.passwd
+rm -f -- "$rfbauth"
+if [ -n "${ROBOCORE_DESKTOP_PASSWORD_FILE:-}" ]; then
+  command -v vncpasswd >/dev/null || { log "vncpasswd is missing: add tigervnc-tools to apt_packages"; exit 127; }
+  [ -f "$ROBOCORE_DESKTOP_PASSWORD_FILE" ] && [ -s "$ROBOCORE_DESKTOP_PASSWORD_FILE" ] || {
+    log "no VNC password at $ROBOCORE_DESKTOP_PASSWORD_FILE: run robocore stage (and sync for a robot)"; exit 1; }
+  vncpasswd -f < "$ROBOCORE_DESKTOP_PASSWORD_FILE" > "$rfbauth"
+  [ -s "$rfbauth" ] || { log "vncpasswd made no password file"; exit 1; }
+  security=(-SecurityTypes VncAuth -PasswordFile "$rfbauth")
+fi
+
 pids=""
 stop() { trap - TERM INT; [ -z "$pids" ] || kill $pids 2>/dev/null || true; wait || true; exit "${1:-0}"; }
 trap 'stop 0' TERM INT
 
 Xvnc ":$n" -auth "$server_auth" -geometry "$ROBOCORE_DESKTOP_SIZE" -depth 24 -nolisten tcp \
-  -rfbport "$ROBOCORE_DESKTOP_VNC_PORT" -interface 127.0.0.1 -SecurityTypes None -AlwaysShared \
+  -rfbport "$ROBOCORE_DESKTOP_VNC_PORT" -interface 127.0.0.1 "${security[@]}" -AlwaysShared \
   -desktop "${ROBOCORE_DESKTOP_NAME:-robocore}" &
 xvnc=$!
 pids="$xvnc"
@@ -84,7 +99,7 @@ umask 022
 cp -- "$server_auth" "$auth.new"
 chmod 0644 -- "$auth.new"
 mv -f -- "$auth.new" "$auth"
-log "display :$n ready; noVNC on port $ROBOCORE_DESKTOP_WEB_PORT (/vnc.html), VNC on 127.0.0.1:$ROBOCORE_DESKTOP_VNC_PORT"
+log "display :$n ready (VNC security: ${security[1]}); noVNC on port $ROBOCORE_DESKTOP_WEB_PORT (/vnc.html), VNC on 127.0.0.1:$ROBOCORE_DESKTOP_VNC_PORT"
 
 # The desktop lives as long as every part of it: the first to stop ends the container (its restart
 # policy starts it again).
