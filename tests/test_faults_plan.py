@@ -54,7 +54,7 @@ def test_a_partition_blocks_the_other_groups_and_the_observer_stays_with_the_fir
 
 def test_a_lossy_link_drops_per_mille_on_its_host_only() -> None:
     lossy = LinkLimit("arm", None, 12.5)
-    assert _filter("arm", lossy).loss_permille == 125
+    assert _filter("arm", lossy) == HostFilter(loss_permille=125)
     assert _filter("main", lossy).empty
 
 
@@ -115,10 +115,18 @@ def test_the_ruleset_reaches_nft_as_an_argument_of_a_fixed_script() -> None:
 def test_shaping_argv_carries_values_as_positional_arguments() -> None:
     argv = faults.shape_argv(800)
     assert argv[:4] == ["sh", "-c", faults.SHAPE_SCRIPT, "robocore-shape"]
-    assert argv[4:] == ["eth0", "800kbit", str(16 * 1024), "400ms", "rcfault-ifb", ""]
-    assert faults.shape_argv(None, 30)[5:] == ["", "", "400ms", "rcfault-ifb", "30ms"]
+    assert argv[4:] == ["eth0", "800kbit", str(16 * 1024), "400ms", ""]
+    assert faults.shape_argv(None, 30)[5:] == ["", "", "400ms", "30ms"]
     assert faults.burst_bytes(100_000) == 250_000  # 20 ms at 100 Mbit/s
-    assert faults.unshape_argv()[3:] == ["robocore-unshape", "eth0", "rcfault-ifb"]
+    assert faults.unshape_argv()[3:] == ["robocore-unshape", "eth0"]
+
+
+def test_a_rate_limit_polices_what_the_host_receives() -> None:
+    limited = _filter("arm", LinkLimit("arm", 800))
+    assert limited.ingress_bytes_per_s == 100_000 and not limited.empty
+    text = faults.nft_ruleset(limited)
+    assert text.count("limit rate over 100000 bytes/second burst 16384 bytes counter drop") == 1
+    assert text.index("limit rate") < text.index("chain output")
 
 
 def test_a_boot_starts_servers_first_and_only_what_the_restart_policy_starts() -> None:

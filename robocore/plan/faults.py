@@ -11,8 +11,10 @@ namespace the run did not create.
   whenever one is added or undone (:func:`host_filter`, :func:`nft_ruleset`): a cut-off or
   powered-off host drops everything but loopback; a partition drops the addresses of the other
   groups (the test process sits with the first group); a lossy link drops a share of packets.
-* A limited link is shaped in both directions with ``tbf`` (egress on the host's interface, ingress
-  redirected through an ``ifb`` device): :func:`shape_argv`. The kernel of the machine that runs
+* A limited link: what the host sends is shaped with ``tbf`` (:func:`shape_argv`), what it receives
+  beyond the rate is dropped by its filter (an nftables ``limit``). Redirecting ingress through an
+  ``ifb`` device to shape it was tried and dropped: nodes started after it never reached the test
+  process's node (the listener on another host was unaffected). The kernel of the machine that runs
   the tests decides what else is there: delay needs ``netem`` (:data:`DELAY_UNAVAILABLE`).
 """
 
@@ -28,8 +30,6 @@ from robocore.errors import UsageError
 TABLE = "robocore_faults"
 #: The run's hosts each have one interface on the run network (the host container's only network).
 INTERFACE = "eth0"
-#: The intermediate device that ingress traffic is redirected through to be shaped (<= 15 characters).
-IFB = "rcfault-ifb"
 #: The fault agent's command: hold nothing, wait for ``exec``.
 AGENT_COMMAND = ("sleep", "infinity")
 #: What the fault agent image adds to the robot's base image (Debian and Ubuntu both name them so).
@@ -154,11 +154,12 @@ class HostFilter:
     drop_all: bool = False
     blocked: frozenset[str] = frozenset()
     loss_permille: int = 0
+    ingress_bytes_per_s: int = 0  # what the host receives beyond this rate is dropped (0: no limit)
 
     @property
     def empty(self) -> bool:
         """True when the filter drops nothing (the table is removed)."""
-        return not (self.drop_all or self.blocked or self.loss_permille)
+        return not (self.drop_all or self.blocked or self.loss_permille or self.ingress_bytes_per_s)
 
 
 def host_filter(host: str, faults: Iterable[Fault], addresses: Mapping[str, str], observer: str) -> HostFilter:
@@ -166,7 +167,7 @@ def host_filter(host: str, faults: Iterable[Fault], addresses: Mapping[str, str]
     the test process's address on the run network."""
     drop_all = False
     blocked: set[str] = set()
-    loss = 0
+    loss = rate = 0
     for fault in faults:
         if isinstance(fault, CutOff | PowerCut) and fault.host == host:
             drop_all = True
@@ -177,7 +178,8 @@ def host_filter(host: str, faults: Iterable[Fault], addresses: Mapping[str, str]
                 blocked.add(observer)
         elif isinstance(fault, LinkLimit) and fault.host == host:
             loss = max(loss, round(fault.loss_percent * 10))
-    return HostFilter(drop_all, frozenset(blocked), loss)
+            rate = fault.rate_kbit * 1000 // 8 if fault.rate_kbit else rate
+    return HostFilter(drop_all, frozenset(blocked), loss, rate)
 
 
 def _address_set(addresses: Iterable[str]) -> str:
@@ -200,6 +202,9 @@ def nft_ruleset(rules: HostFilter) -> str:
                 body.append(f"ip {peer} {_address_set(rules.blocked)} counter drop")
             if rules.loss_permille:
                 body.append(f"numgen random mod 1000 < {rules.loss_permille} counter drop")
+            if rules.ingress_bytes_per_s and chain == "input":
+                body.append(f"limit rate over {rules.ingress_bytes_per_s} bytes/second "
+                            f"burst {burst_bytes(rules.ingress_bytes_per_s * 8 // 1000)} bytes counter drop")
         chains.append(f"  chain {chain} {{\n" + "".join(f"    {line}\n" for line in body) + "  }")
     lines.append(f"table inet {TABLE} {{\n" + "\n".join(chains) + "\n}")
     return "\n".join(lines) + "\n"
@@ -219,42 +224,35 @@ def burst_bytes(rate_kbit: int) -> int:
     return max(rate_kbit * 1000 // 8 // 50, 16 * 1024)
 
 
-#: Fixed script: ``$1`` interface, ``$2`` rate (empty: none), ``$3`` burst, ``$4`` latency, ``$5`` the ifb
-#: device, ``$6`` delay (empty: none). Egress is shaped on the interface; ingress is redirected to the ifb
-#: device and shaped there; a delay (netem) delays what the host sends.
+#: Fixed script: ``$1`` interface, ``$2`` rate (empty: none), ``$3`` burst, ``$4`` latency, ``$5`` delay (empty:
+#: none). What the host sends is shaped (tbf) and, with a delay, delayed (netem under the tbf).
 SHAPE_SCRIPT = (
     "set -e; "
-    'tc qdisc del dev "$1" root 2>/dev/null || true; tc qdisc del dev "$1" ingress 2>/dev/null || true; '
-    'ip link del "$5" 2>/dev/null || true; '
+    'tc qdisc del dev "$1" root 2>/dev/null || true; '
     'if [ -n "$2" ]; then '
     'tc qdisc add dev "$1" root handle 1: tbf rate "$2" burst "$3" latency "$4"; '
-    'ip link add "$5" type ifb; ip link set "$5" up; '
-    'tc qdisc add dev "$1" handle ffff: ingress; '
-    'tc filter add dev "$1" parent ffff: protocol all u32 match u32 0 0 action mirred egress redirect dev "$5"; '
-    'tc qdisc add dev "$5" root tbf rate "$2" burst "$3" latency "$4"; '
-    'if [ -n "$6" ]; then tc qdisc add dev "$1" parent 1:1 handle 10: netem delay "$6"; fi; '
-    'elif [ -n "$6" ]; then tc qdisc add dev "$1" root handle 1: netem delay "$6"; fi'
+    'if [ -n "$5" ]; then tc qdisc add dev "$1" parent 1:1 handle 10: netem delay "$5"; fi; '
+    'elif [ -n "$5" ]; then tc qdisc add dev "$1" root handle 1: netem delay "$5"; fi'
 )
-#: Fixed script: remove what :data:`SHAPE_SCRIPT` added (``$1`` interface, ``$2`` the ifb device).
-UNSHAPE_SCRIPT = ('tc qdisc del dev "$1" root 2>/dev/null; tc qdisc del dev "$1" ingress 2>/dev/null; '
-                  'ip link del "$2" 2>/dev/null; true')
-#: Does the kernel know netem? (exit 0: yes). Tried on the ifb device, which carries nothing yet.
+#: Fixed script: remove what :data:`SHAPE_SCRIPT` added (``$1`` interface).
+UNSHAPE_SCRIPT = 'tc qdisc del dev "$1" root 2>/dev/null; true'
+#: Does the kernel know netem? (exit 0: yes). Tried on a new ifb device that carries nothing and is removed.
 NETEM_PROBE = ('ip link add rcfault-probe type ifb && '
                'tc qdisc add dev rcfault-probe root netem delay 1ms; code=$?; ip link del rcfault-probe; exit $code')
 
 
 def shape_argv(rate_kbit: int | None, delay_ms: int = 0) -> list[str]:
-    """argv (run in the fault agent) that shapes the host's link to ``rate_kbit`` kbit/s each way (None: no
-    rate limit) and delays what it sends by ``delay_ms`` (0: none; needs netem)."""
+    """argv (run in the fault agent) that shapes what the host sends to ``rate_kbit`` kbit/s (None: no rate
+    limit) and delays it by ``delay_ms`` (0: none; needs netem). What it receives is policed by its filter."""
     rate = f"{rate_kbit}kbit" if rate_kbit else ""
     burst = str(burst_bytes(rate_kbit)) if rate_kbit else ""
     delay = f"{delay_ms}ms" if delay_ms else ""
-    return ["sh", "-c", SHAPE_SCRIPT, "robocore-shape", INTERFACE, rate, burst, f"{SHAPER_LATENCY_MS}ms", IFB, delay]
+    return ["sh", "-c", SHAPE_SCRIPT, "robocore-shape", INTERFACE, rate, burst, f"{SHAPER_LATENCY_MS}ms", delay]
 
 
 def unshape_argv() -> list[str]:
     """argv (run in the fault agent) that removes the host's shaping."""
-    return ["sh", "-c", UNSHAPE_SCRIPT, "robocore-unshape", INTERFACE, IFB]
+    return ["sh", "-c", UNSHAPE_SCRIPT, "robocore-unshape", INTERFACE]
 
 
 def netem_probe_argv() -> list[str]:
