@@ -59,6 +59,13 @@ class Faults:
         """The run's robot hosts (those that run something), in robot.yaml order."""
         return testrun.hosts_to_start(self._project.robot)
 
+    def host_of(self, service: str) -> str:
+        """The robot host that runs ``service`` (a component, or ``discovery-N``)."""
+        try:
+            return str(self._services()[service].host)
+        except KeyError:
+            raise FaultError(f"no component {service!r} in this run (known: {', '.join(self._services())})") from None
+
     def cut_off(self, host: str) -> None:
         """Take ``host`` off the network: nothing in or out (other hosts, the test process), loopback excepted."""
         self._add(plan.CutOff(plan.check_host(host, self.hosts)))
