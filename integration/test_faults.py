@@ -10,6 +10,7 @@ fails on purpose with faults in force (its report lists them; the next test find
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -48,17 +49,12 @@ def run_suite(project_copies: Callable[..., Path], suite: str, edit: Callable[[d
 
 def figures(proc: subprocess.CompletedProcess[str]) -> dict[str, float]:
     """The ``FIGURE name value`` lines the suite printed."""
-    out = {}
-    for line in proc.stdout.splitlines():
-        if line.startswith("FIGURE "):
-            _, name, value = line.split()
-            out[name] = float(value)
-    return out
+    return {name: float(value) for name, value in re.findall(r"FIGURE (\w+) ([0-9.]+)", proc.stdout)}
 
 
 def test_every_fault_is_observed_and_undone_on_a_two_host_robot(project_copies: Callable[..., Path]) -> None:
     proc = run_suite(project_copies, "faults_two_hosts.py", two_hosts_two_servers)
-    print(figures(proc))
+    print(figures(proc), re.findall(r"NOTE [^\n]*", proc.stdout))
     assert "1 failed, 9 passed" in proc.stdout, output_tails(proc, 12000)
     failed = proc.stdout.split("test_zz_a_failing_test_with_a_fault_in_force", 1)[1]
     assert "robocore: faults in force" in failed, output_tails(proc)
