@@ -231,5 +231,5 @@ def test_the_fault_calls_the_template_may_use_exist() -> None:
     from robocore.testing.bringup import RobotUnderTest
     from robocore.testing.faults import Faults
 
-    assert FAULTS_API <= set(dir(Faults))
+    assert set(dir(Faults)) >= FAULTS_API
     assert ROBOT_API - {"components", "graph"} <= set(dir(RobotUnderTest))
