@@ -20,9 +20,11 @@ from template_repo import TEMPLATE
 
 GRAPH_TESTS = TEMPLATE / "tests" / "graph" / "{% if ros_version == 2 %}test_talker_listener.py{% endif %}"
 #: The documented API of the `robot` fixture (PLUGIN_API): attributes of robot and of robot.graph.
-ROBOT_API = {"graph", "logs", "wait_for_log", "restart", "stop", "start", "exec", "components"}
+ROBOT_API = {"graph", "logs", "wait_for_log", "restart", "stop", "start", "kill", "exec", "components", "faults"}
 GRAPH_API = {"node", "node_names", "topic_names", "wait_for_message", "publish", "call", "wait_for_node",
-             "wait_for_topic"}
+             "wait_for_topic", "spin"}
+FAULTS_API = {"host_of", "cut_off", "reconnect", "partition", "heal", "limit_link", "unlimit_link", "power_cut",
+              "boot", "describe", "clear", "hosts"}
 
 
 @dataclass
@@ -38,10 +40,13 @@ class SimRobot:
     listener_hears_after_restart: bool = True
     listener_hears_the_test: bool = True
     talker_counts: bool = True
+    listener_hears_after_reconnect: bool = True
     nodes: set[str] = field(default_factory=lambda: {"/talker", "/listener"})
     now: float = 0.0
     count: int = 0
     restarted: bool = False
+    cut: bool = False
+    reconnected: bool = False
     listener_log: list[str] = field(default_factory=list)
 
     def tick(self) -> str:
@@ -49,9 +54,32 @@ class SimRobot:
         self.now += 0.5
         self.count += 1 if self.talker_counts else 0
         text = f"hello from talker #{max(self.count, 1)}"
-        if not self.restarted or self.listener_hears_after_restart:
+        if (not self.restarted or self.listener_hears_after_restart) and (
+                not self.reconnected or self.listener_hears_after_reconnect):
             self.listener_log.append(f"[listener-1] I heard: {text}")
         return text
+
+    # robot.faults (one host: the listener shares it with the talker)
+    @property
+    def faults(self) -> SimRobot:
+        return self
+
+    def host_of(self, component: str) -> str:
+        assert component in self.components
+        return "devmachine"
+
+    def cut_off(self, host: str) -> None:
+        assert host == "devmachine"
+        self.cut = True
+
+    def reconnect(self, host: str) -> None:
+        assert host == "devmachine" and self.cut
+        self.cut, self.reconnected = False, True
+
+    def spin(self, seconds: float) -> None:
+        while seconds > 0:
+            self.tick()
+            seconds -= 0.5
 
     # the `robot` fixture
     @property
@@ -102,7 +130,7 @@ class SimRobot:
         deadline = self.now + timeout
         while self.now < deadline:
             msg = String(data=self.tick())
-            if predicate is None or predicate(msg):
+            if not self.cut and (predicate is None or predicate(msg)):  # a cut-off host is not heard here
                 return msg
         raise AssertionError(f"no matching message on {topic} in {timeout} s")
 
@@ -136,6 +164,7 @@ def graph_tests(namespace: dict[str, Any]) -> dict[str, Callable[[Any], None]]:
 
 def test_the_graph_tests_are_the_four_behaviours(monkeypatch: pytest.MonkeyPatch) -> None:
     assert sorted(graph_tests(load_graph_tests(SimRobot(), monkeypatch))) == [
+        "test_listener_hears_the_talker_again_after_its_host_is_cut_off",
         "test_listener_hears_what_the_test_publishes",
         "test_listener_keeps_hearing_after_the_talker_restarts",
         "test_talker_and_listener_are_in_the_graph",
@@ -154,14 +183,17 @@ def test_graph_tests_import_only_std_msgs_and_use_only_the_documented_api() -> N
                      and isinstance(n.value, ast.Name) and n.value.id == "robot"}
     used_on_graph = {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute)
                      and isinstance(n.value, ast.Attribute) and n.value.attr == "graph"}
-    assert used_on_robot <= ROBOT_API and used_on_graph <= GRAPH_API
+    used_on_faults = {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute)
+                      and isinstance(n.value, ast.Attribute) and n.value.attr == "faults"}
+    assert used_on_robot <= ROBOT_API and used_on_graph <= GRAPH_API and used_on_faults <= FAULTS_API
     assert {"graph", "logs", "wait_for_log", "restart"} <= used_on_robot
     assert not (GRAPH_TESTS.parent / "conftest.py").exists()  # the plugin's entry point brings the fixture
 
 
 @pytest.mark.parametrize("name", ["test_talker_and_listener_are_in_the_graph", "test_talker_publishes_a_growing_count",
                                   "test_listener_hears_what_the_test_publishes",
-                                  "test_listener_keeps_hearing_after_the_talker_restarts"])
+                                  "test_listener_keeps_hearing_after_the_talker_restarts",
+                                  "test_listener_hears_the_talker_again_after_its_host_is_cut_off"])
 def test_each_graph_test_passes_on_a_working_robot(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
     sim = SimRobot()
     graph_tests(load_graph_tests(sim, monkeypatch))[name](sim)
@@ -175,6 +207,8 @@ def test_each_graph_test_passes_on_a_working_robot(name: str, monkeypatch: pytes
      "did not hear"),
     ({"restart_resets_the_count": False}, "test_listener_keeps_hearing_after_the_talker_restarts",
      "no matching message"),
+    ({"listener_hears_after_reconnect": False}, "test_listener_hears_the_talker_again_after_its_host_is_cut_off",
+     "did not hear"),
 ])
 def test_each_graph_test_fails_on_a_robot_without_its_behaviour(broken: dict[str, Any], name: str, message: str,
                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
@@ -191,3 +225,11 @@ def test_the_restart_test_does_not_mistake_the_listeners_old_lines_for_new_ones(
     with pytest.raises(AssertionError):
         test(sim)
     assert any(line.endswith("I heard: hello from talker #1") for line in sim.listener_log)
+
+
+def test_the_fault_calls_the_template_may_use_exist() -> None:
+    from robocore.testing.bringup import RobotUnderTest
+    from robocore.testing.faults import Faults
+
+    assert set(dir(Faults)) >= FAULTS_API
+    assert ROBOT_API - {"components", "graph"} <= set(dir(RobotUnderTest))

@@ -73,6 +73,10 @@ class TestRun:
         """The container of discovery server ``index`` in this run."""
         return f"{self.prefix}-discovery-{index}"
 
+    def fault_agent(self, host: str) -> str:
+        """The fault agent of robot host ``host`` (:mod:`robocore.plan.faults`): nft and tc in its namespace."""
+        return f"{self.prefix}-faults-{host}"
+
     def server_volume(self, index: int) -> str:
         """The state volume of discovery server ``index`` in this run (a restart within the run holds, as deployed)."""
         return f"{self.prefix}-discovery-{index}-state"
@@ -169,4 +173,16 @@ def server_specs(run: TestRun, project: Project, dds_dir: str) -> list[Container
                        for m in spec.mounts)
         spec = dataclasses.replace(spec, mounts=mounts)
         out.append(_in_host(run, spec, name=run.server_container(server.index), dds_dir=dds_dir, share_ipc=share))
+    return out
+
+
+def boot_services(project: Project) -> dict[str, tuple[str, str, str]]:
+    """Service -> (its host, its role, its restart policy on the robot): what a host's boot starts
+    (:func:`robocore.plan.faults.boot_order`). The run's containers themselves never restart on their own."""
+    out = {}
+    for server in discovery.for_robot(project.robot).servers():
+        spec = containers.discovery_spec(project, server.index)
+        out[spec.service] = (spec.host, spec.role, spec.restart)
+    for component in project.robot.components:
+        out[component.name] = (component.runs_on, containers.ROLE_COMPONENT, component.restart)
     return out

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["BringUpError", "Graph", "RobotUnderTest", "bring_up"]
+__all__ = ["BringUpError", "FaultError", "Faults", "Graph", "RobotUnderTest", "bring_up"]
 
 
 def __getattr__(name: str) -> Any:
@@ -21,6 +21,10 @@ def __getattr__(name: str) -> Any:
         from robocore.testing import bringup
 
         return getattr(bringup, name)
+    if name in {"FaultError", "Faults"}:
+        from robocore.testing import faults
+
+        return getattr(faults, name)
     if name == "Graph":
         from robocore.testing.graph import Graph
 

@@ -30,6 +30,7 @@ from robocore.plan.containers import ContainerSpec
 from robocore.plan.testrun import TestRun
 from robocore.project import Project
 from robocore.testing import ros_env
+from robocore.testing.faults import Faults
 from robocore.testing.graph import Graph
 
 os.environ.setdefault("TESTCONTAINERS_RYUK_DISABLED", "true")
@@ -181,6 +182,7 @@ class RobotUnderTest:
     _network: Any = None
     _hosts: list[Any] = field(default_factory=list)
     _domain_holder: socket.socket | None = None
+    _faults: Faults | None = None
     _closed: bool = False
 
     # ------------------------------------------------------------------ public API
@@ -193,6 +195,13 @@ class RobotUnderTest:
         if self.graph_node is None:
             raise BringUpError("this run has no graph node (brought up without one)")
         return self.graph_node
+
+    @property
+    def faults(self) -> Faults:
+        """Cut hosts off, partition them, limit a link, power-cut a host (:mod:`robocore.testing.faults`)."""
+        if self._faults is None:
+            self._faults = Faults(self.client, self.run, self.project, lambda: self.specs, self._container)
+        return self._faults
 
     @property
     def components(self) -> list[str]:
@@ -235,6 +244,10 @@ class RobotUnderTest:
         """Stop ``component``; it is started again before the next test."""
         self._container(component).stop(timeout=STOP_TIMEOUT)
 
+    def kill(self, component: str) -> None:
+        """SIGKILL ``component`` (no clean shutdown); :meth:`start` (or the next test) starts it again."""
+        self.faults.kill(component)
+
     def start(self, component: str) -> None:
         """Start ``component`` again after :meth:`stop`."""
         container = self._container(component)
@@ -252,7 +265,9 @@ class RobotUnderTest:
     # ------------------------------------------------------------------ lifecycle
 
     def ensure_running(self) -> list[str]:
-        """Start every container a test stopped (servers first); return the services started."""
+        """Undo the faults in force, then start every container a test stopped (servers first); return the
+        services started."""
+        self.undo_faults()
         started = []
         for service in self.containers:
             container = self._container(service)
@@ -261,6 +276,14 @@ class RobotUnderTest:
                 container.start()
                 started.append(service)
         return started
+
+    def undo_faults(self) -> list[str]:
+        """Undo every fault in force; return what was in force (nothing to do when no fault was ever applied)."""
+        return self._faults.clear() if self._faults is not None else []
+
+    def faults_in_force(self) -> list[str]:
+        """One line per fault in force, for a failed test's report."""
+        return self._faults.describe() if self._faults is not None else []
 
     def report(self) -> str:
         """The last log lines of every container and the graph, for a failed test's report."""
@@ -280,6 +303,8 @@ class RobotUnderTest:
         if self.graph_node is not None:
             with contextlib.suppress(Exception):
                 self.graph_node.close()
+        if self._faults is not None:
+            self._faults.close()
         for wrapper in [*reversed(self.containers.values()), *self._hosts]:
             with contextlib.suppress(Exception):
                 wrapper.get_wrapped_container().remove(force=True, v=True)

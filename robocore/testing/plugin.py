@@ -97,15 +97,21 @@ def robot(request: pytest.FixtureRequest) -> Generator[Any, None, None]:
 
 
 @pytest.fixture(autouse=True)
-def _robot_components_running(request: pytest.FixtureRequest) -> None:
-    """Before each test that uses ``robot``: start again whatever an earlier test stopped."""
+def _robot_components_running(request: pytest.FixtureRequest) -> Generator[None, None, None]:
+    """Around each test that uses ``robot``: before, undo any fault and start again whatever an earlier test
+    stopped; after, undo the test's faults (pass or fail), so that none outlives its test."""
     if "robot" not in request.fixturenames:
+        yield
         return
     from robocore.testing.bringup import RobotUnderTest
 
     run = request.getfixturevalue("robot")
-    if isinstance(run, RobotUnderTest):  # not a project's own fixture of that name
-        run.ensure_running()
+    if not isinstance(run, RobotUnderTest):  # a project's own fixture of that name
+        yield
+        return
+    run.ensure_running()
+    yield
+    run.undo_faults()
 
 
 @pytest.hookimpl(hookwrapper=True)
@@ -118,6 +124,9 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) ->
     run = item.config.stash.get(_RUN, None)
     if run is None or "robot" not in getattr(item, "fixturenames", ()):
         return
+    with contextlib.suppress(Exception):
+        if in_force := run.faults_in_force():
+            report.sections.append(("robocore: faults in force", "\n".join(in_force)))
     with contextlib.suppress(Exception):
         report.sections.append(("robocore: components and graph", run.report()))
 

@@ -1,0 +1,234 @@
+"""Graph tests of a two-host robot under faults, run by integration/test_faults.py through the pytest plugin.
+
+The robot: host ``main`` runs the talker (2 Hz, "hello from talker #N") and discovery server 0,
+host ``arm`` runs the listener and discovery server 1. The test process (the probe) counts the
+talker's messages; the listener's log says what it heard. Every fault is undone by the plugin
+before the next test: the test after a deliberately failed one proves it. Figures go to stdout as
+``FIGURE name value`` lines (the outer test prints them).
+"""
+
+from __future__ import annotations
+
+import itertools
+import threading
+import time
+from typing import Any
+
+import pytest
+from rclpy.qos import qos_profile_sensor_data
+from std_msgs.msg import String
+
+from robocore.testing.faults import FaultError
+
+GREETING = "hello from talker #"
+
+#: Run in a component with ``robot.exec``: a new node publishing ``text i stamp payload`` on a topic
+#: (reliable when there is no payload, best effort like a sensor stream when there is one).
+PUBLISH = """
+import sys, time, rclpy
+from rclpy.qos import qos_profile_sensor_data
+from std_msgs.msg import String
+topic, text, count, period, size = sys.argv[1], sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), int(sys.argv[5])
+rclpy.init()
+node = rclpy.create_node("pub_" + text.replace(" ", "_"))
+pub = node.create_publisher(String, topic, qos_profile_sensor_data if size else 10)
+print("created", time.time(), flush=True)
+payload = "x" * size
+for i in range(count):
+    pub.publish(String(data=f"{text} {i} {time.time()} {payload}"))
+    time.sleep(period)
+"""
+
+
+def count(msg: String) -> int:
+    prefix, _, number = msg.data.rpartition("#")
+    return int(number) if prefix == GREETING[:-1] and number.isdigit() else -1
+
+
+def heard(robot: Any, text: str = "I heard: hello from talker #") -> int:
+    return sum(text in line for line in robot.logs("listener").splitlines())
+
+
+def figure(name: str, value: float) -> None:
+    print(f"FIGURE {name} {value:.2f}", flush=True)
+
+
+class Topic:
+    """Every message of one topic the probe receives: (arrival time, message)."""
+
+    def __init__(self, robot: Any, topic: str, qos: Any = 100) -> None:
+        self.seen: list[tuple[float, Any]] = []
+        self.sub = robot.graph.node.create_subscription(String, topic, lambda m: self.seen.append(
+            (time.monotonic(), m)), qos)
+
+    def during(self, robot: Any, seconds: float) -> list[tuple[float, Any]]:
+        mark = len(self.seen)
+        robot.graph.spin(seconds)
+        return self.seen[mark:]
+
+    def until(self, robot: Any, check: Any, timeout: float) -> tuple[float, Any] | None:
+        mark = len(self.seen)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            robot.graph.spin(0.05)
+            for entry in self.seen[mark:]:
+                if check(entry[1]):
+                    return entry
+        return None
+
+
+@pytest.fixture(scope="module")
+def chatter(robot: Any) -> Topic:
+    topic = Topic(robot, "/chatter")
+    assert topic.until(robot, lambda m: count(m) > 0, 20), "the probe never heard the talker"
+    return topic
+
+
+def in_background(robot: Any, component: str, argv: list[str]) -> threading.Thread:
+    thread = threading.Thread(target=robot.exec, args=(component, argv), daemon=True)
+    thread.start()
+    return thread
+
+
+def test_control_traffic_never_stops_without_a_fault(robot: Any, chatter: Topic) -> None:
+    before = heard(robot)
+    got = chatter.during(robot, 4.0)
+    times = [t for t, _ in got]
+    assert len(got) >= 6, got
+    assert max(b - a for a, b in itertools.pairwise(times)) < 1.2, times
+    assert heard(robot) - before >= 6
+
+
+def test_a_cut_off_host_is_silent_until_reconnected(robot: Any, chatter: Topic) -> None:
+    robot.faults.cut_off("main")
+    robot.graph.spin(0.3)
+    before = heard(robot)
+    assert chatter.during(robot, 3.0) == [], "messages of a cut-off host arrived"
+    assert heard(robot) == before, "the listener heard a cut-off host"
+    assert robot.faults.describe() == ["host main cut off from the network"]
+    robot.faults.reconnect("main")
+    reconnected = time.monotonic()
+    first = chatter.until(robot, lambda m: count(m) > 0, 10)
+    assert first is not None, "no message after the reconnection"
+    figure("reconnect_to_message_s", first[0] - reconnected)
+    deadline = time.monotonic() + 10
+    while heard(robot) == before:
+        assert time.monotonic() < deadline, "the listener did not hear the talker again"
+        robot.graph.spin(0.1)
+
+
+def test_a_partition_splits_the_graph_each_half_works_and_they_merge(robot: Any, chatter: Topic) -> None:
+    robot.graph.wait_for_node("/listener")
+    robot.faults.partition(["main"], ["arm"])
+    split = time.monotonic()
+    robot.graph.spin(0.3)
+    before = heard(robot)
+    assert len(chatter.during(robot, 2.0)) >= 3, "the main half (talker and probe) stopped working"
+    # the arm half: a node started there now is found through the arm's server and heard by the listener
+    in_background(robot, "listener", ["python3", "-c", PUBLISH, "/chatter", "arm half", "40", "0.1", "0"])
+    robot.wait_for_log("listener", "I heard: arm half", timeout=10)
+    assert heard(robot) == before, "the listener heard the talker across the partition"
+    deadline = time.monotonic() + 40
+    while "/listener" in robot.graph.node_names():
+        assert time.monotonic() < deadline, f"the probe still sees /listener: {robot.graph.node_names()}"
+        robot.graph.spin(0.2)
+    figure("partition_to_split_graph_s", time.monotonic() - split)
+    robot.faults.heal()
+    healed = time.monotonic()
+    while heard(robot) == before:
+        assert time.monotonic() < healed + 20, "the halves did not merge: the listener never heard the talker again"
+        robot.graph.spin(0.1)
+    figure("heal_to_merged_s", time.monotonic() - healed)
+    # The test process's view of the graph: seen to miss /listener for over 20 s after healing in 2 of 6 runs
+    # (Fast DDS 2.14: a super client that dropped server 1 during the partition), while data flowed. Reported only.
+    deadline = time.monotonic() + 10
+    while "/listener" not in robot.graph.node_names() and time.monotonic() < deadline:
+        robot.graph.spin(0.2)
+    if "/listener" in robot.graph.node_names():
+        figure("heal_to_listener_in_graph_s", time.monotonic() - healed)
+    else:
+        print("NOTE the probe did not see /listener again within 10 s of the merge", flush=True)
+
+
+def test_a_limited_link_slows_a_large_topic(robot: Any) -> None:
+    """A node on host main publishes 1 kB at 200 Hz (200 kB/s; one frame each: larger messages are
+    IP-fragmented, and a bottleneck that drops fragments lets almost no datagram through). Once the probe
+    receives it: 3 s free, 4 s with main's link at 200 kbit/s (25 kB/s), 3 s free again."""
+    bulk = Topic(robot, "/bulk", qos_profile_sensor_data)
+    thread = in_background(robot, "talker", ["python3", "-c", PUBLISH, "/bulk", "bulk", "4000", "0.005", "1000"])
+    assert bulk.until(robot, lambda m: True, 10) is not None, "nothing arrived on /bulk"
+
+    def rate(seconds: float) -> float:
+        return 1000 * len(bulk.during(robot, seconds)) / seconds
+
+    free = rate(3.0)
+    robot.faults.limit_link("main", rate_kbit=200)
+    robot.graph.spin(0.5)
+    limited = rate(4.0)
+    robot.faults.unlimit_link("main")
+    robot.graph.spin(0.5)
+    again = rate(3.0)
+    thread.join(timeout=30)
+    figure("bulk_free_kBps", free / 1000)
+    figure("bulk_limited_kBps", limited / 1000)
+    figure("bulk_again_kBps", again / 1000)
+    assert limited < free / 3 and limited < 1.5 * 200_000 / 8, (free, limited)
+    assert again > 2 * limited, (free, limited, again)
+
+
+def test_delay_is_refused_in_one_line_where_the_kernel_has_no_netem(robot: Any) -> None:
+    with pytest.raises(FaultError, match="netem"):
+        robot.faults.limit_link("arm", delay_ms=50)
+
+
+def test_a_power_cut_kills_every_process_of_the_host_and_its_boot_restarts_them(robot: Any, chatter: Topic) -> None:
+    killed = robot.faults.power_cut("arm")
+    assert sorted(killed) == ["discovery-1", "listener"]
+    for service in killed:
+        state = robot.client.containers.get(robot.specs[service].name).attrs["State"]
+        assert (state["Status"], state["ExitCode"]) == ("exited", 137), state
+    assert len(chatter.during(robot, 1.0)) >= 1, "the other host stopped with it"
+    before = heard(robot)
+    booted_at = time.monotonic()
+    assert robot.faults.boot("arm") == ["discovery-1", "listener"]
+    while heard(robot) <= before:
+        assert time.monotonic() < booted_at + 20, "the booted listener never heard the talker"
+        time.sleep(0.1)
+    figure("boot_to_heard_s", time.monotonic() - booted_at)
+
+
+def test_a_power_cut_of_the_talkers_host(robot: Any, chatter: Topic) -> None:
+    robot.faults.power_cut("main")
+    robot.graph.spin(0.3)
+    assert chatter.during(robot, 1.0) == []
+    booted_at = time.monotonic()
+    robot.faults.boot("main")
+    first = chatter.until(robot, lambda m: count(m) > 0, 20)
+    assert first is not None, "the booted talker was never heard"
+    figure("boot_to_probe_heard_s", first[0] - booted_at)
+
+
+def test_a_sigkilled_component_starts_again(robot: Any, chatter: Topic) -> None:
+    robot.kill("talker")
+    state = robot.client.containers.get(robot.specs["talker"].name).attrs["State"]
+    assert state["ExitCode"] == 137, state
+    assert robot.faults.describe() == ["component talker SIGKILLed"]
+    robot.graph.spin(0.3)
+    assert chatter.during(robot, 1.0) == []
+    robot.start("talker")
+    assert chatter.until(robot, lambda m: 0 < count(m) <= 3, 15) is not None
+    assert robot.faults.describe() == []
+
+
+def test_zz_a_failing_test_with_a_fault_in_force(robot: Any) -> None:
+    robot.faults.cut_off("arm")
+    robot.faults.limit_link("main", rate_kbit=1000, loss_percent=5)
+    raise AssertionError("failing on purpose with faults in force")
+
+
+def test_zzz_the_next_test_finds_every_fault_undone(robot: Any, chatter: Topic) -> None:
+    assert robot.faults.describe() == []
+    before = heard(robot)
+    got = chatter.during(robot, 2.0)
+    assert len(got) >= 3
+    assert heard(robot) > before
