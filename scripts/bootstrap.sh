@@ -72,7 +72,7 @@ if [ ! -f "$stamp" ] || [ "$ROOT/pyproject.toml" -nt "$stamp" ]; then
   # else by pip as before; ROBOCORE_INSTALLER=pip forces pip
   if [ "${ROBOCORE_INSTALLER:-uv}" = uv ] && "$VENV/bin/python" -m pip install -q --disable-pip-version-check uv \
        >/dev/null 2>&1 && "$VENV/bin/python" -m uv --version >/dev/null 2>&1; then
-    "$VENV/bin/python" -m uv pip install -q --python "$VENV/bin/python" -e "$ROOT[dev]"
+    "$VENV/bin/python" -m uv pip install -q --python "$VENV/bin/python" --upgrade pip -e "$ROOT[dev]"  # pip too: tests drive pip with git+file requirements
   else
     "$VENV/bin/python" -m pip install -q --upgrade pip >/dev/null
     "$VENV/bin/python" -m pip install -q -e "$ROOT[dev]"
