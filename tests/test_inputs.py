@@ -193,9 +193,12 @@ def test_missing_mmdebstrap_is_tool_missing_with_a_hint(tmp_path: Path, monkeypa
     import pytest
 
     from robocore.adapters import rootfs
+    from robocore.config.model import BaseKind
     from robocore.errors import ToolMissing
+    from robocore.plan import arches
 
     monkeypatch.setattr(rootfs.shutil, "which", lambda name: None)
     with pytest.raises(ToolMissing) as info:
-        rootfs.bootstrap(object(), work_dir=tmp_path)  # type: ignore[arg-type]
+        rootfs.bootstrap(object(), arches.root_strap(BaseKind.wheels, "arm64", ["python3"]),  # type: ignore[arg-type]
+                         target="robocore/arm64/debian:bookworm-wheels", work_dir=tmp_path)
     assert "mmdebstrap" in info.value.message and "apt-get install mmdebstrap" in (info.value.hint or "")
