@@ -185,7 +185,10 @@ def test_cross_arch_without_binfmt_says_how_to_set_up_qemu(tmp_path: Path, monke
     with pytest.raises(ToolMissing) as info:
         machine.check_emulation("arm64", "amd64", "component cam")
     assert "component cam" in info.value.message and "qemu-user-static" in (info.value.hint or "")
-    (tmp_path / "qemu-aarch64").write_text("enabled\n")
+    (tmp_path / "qemu-aarch64").write_text("enabled\nflags: PO\n")
+    with pytest.raises(ToolMissing, match="lacks the F flag"):  # containers could not find the interpreter
+        machine.check_emulation("arm64", "amd64", "component cam")
+    (tmp_path / "qemu-aarch64").write_text("enabled\ninterpreter /usr/bin/qemu\nflags: POF\n")
     machine.check_emulation("arm64", "amd64", "component cam")  # registered: fine
 
 
