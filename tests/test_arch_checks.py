@@ -8,10 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from robocore.commands import arch_checks, machine
+from robocore.commands import arch_checks, build, images, machine
 from robocore.config.model import Host
-from robocore.errors import ArchMismatch
+from robocore.errors import ArchMismatch, ConfigError
 from robocore.plan import arches
+from robocore.project import Project
 
 
 def _elf(machine: int) -> bytes:
@@ -102,3 +103,59 @@ def test_a_daemon_that_cannot_run_the_hosts_arch_is_refused(tmp_path: Path, monk
     assert "\n" not in info.value.message and why in info.value.message
     assert "its Docker daemon runs on amd64 and cannot run arm64 images" in info.value.message
     assert "qemu-user-static" in (info.value.hint or "")
+
+
+ROBOT = """\
+ros_distro: noetic
+base: {{kind: debian}}
+hosts:
+  - {{name: ipc, ip: 192.168.1.10, arch: amd64}}
+  - {{name: jetson, ip: 192.168.1.20, arch: arm64}}
+discovery: {{servers: [{{host: {master}}}]}}
+components:
+  - {{name: talker, folder: components/talker, runs_on: {talker}}}
+"""
+PACKAGE = """<?xml version="1.0"?>
+<package format="3"><name>demo_talker</name><version>0.1.0</version><description>d</description>
+<maintainer email="me@example.com">me</maintainer><license>MIT</license>
+<buildtool_depend>catkin</buildtool_depend></package>
+"""
+
+
+def _project(tmp_path: Path, *, talker: str = "jetson", master: str = "ipc") -> Project:
+    (tmp_path / "robot.yaml").write_text(ROBOT.format(talker=talker, master=master))
+    pkg = tmp_path / "components" / "talker" / "src" / "demo_talker"
+    pkg.mkdir(parents=True, exist_ok=True)
+    (pkg / "package.xml").write_text(PACKAGE)
+    (pkg / "CMakeLists.txt").write_text("project(demo_talker)\n")
+    return Project.load(tmp_path)
+
+
+def test_a_build_for_another_arch_than_the_last_one_starts_clean(tmp_path: Path) -> None:
+    project = _project(tmp_path)
+    plan = build.plan_build(project, project.component("talker"), "img")
+    assert plan.arch == "arm64" and plan.changed is None and not plan.clean
+    (plan.out / "install").mkdir(parents=True)
+    build.write_atomic(plan.out / "install" / arches.INSTALL_ARCH_FILE, "arm64\n")
+    build.record_build(plan)
+    again = build.plan_build(project, project.component("talker"), "img")
+    assert again.changed == [] and not again.clean
+    moved = _project(tmp_path, talker="ipc")  # the talker now runs on the amd64 host
+    redo = build.plan_build(moved, moved.component("talker"), "img")
+    assert redo.clean and redo.changed is None and redo.reason == "arch changed (arm64 -> amd64): clean build"
+    with_cache = build.with_cmake_toolchain(moved, redo, {"dev.robocore.toolchain": "cmake"})
+    assert with_cache.ccache == moved.state_dir / "ccache" / "amd64"
+
+
+def test_a_master_on_a_host_of_another_arch_is_refused_before_any_build(tmp_path: Path) -> None:
+    project = _project(tmp_path, master="jetson")
+    native = machine.native_arch()
+    if native == "arm64":  # the rule is relative to the dev machine: its base runs the master
+        project = _project(tmp_path, master="ipc")
+    with pytest.raises(ConfigError) as info:
+        images.refuse_config_problems(project)
+    [problem] = info.value.problems
+    assert "the discovery server (ROS master) runs here" in str(problem) and "hosts.1.arch" in str(problem)
+    fine = _project(tmp_path, master="ipc" if native == "amd64" else "jetson")
+    images.refuse_config_problems(fine)
+    assert images.arches(fine) == ["amd64", "arm64"]

@@ -40,7 +40,7 @@ def refuse_config_problems(project: Project) -> None:
         index, host = next((i, h) for i, h in enumerate(robot.hosts) if h.name == server.host)
         if host.arch.value != native:
             found.append((("hosts", index, "arch"), f"{host.arch.value}: the discovery server (ROS master) runs here "
-                          f"in the base image of this machine's arch ({native}); put it on a {native} host"))
+                          f"in the base image of this machine's arch ({native}); put it on a host of arch {native}"))
     if found:
         raise ConfigError([Problem(ROBOT_FILE, None, ".".join(str(p) for p in path), message)
                            for path, message in found])
