@@ -52,7 +52,7 @@ def root_strap(project: Project, arch: str) -> per_arch.RootStrap | None:
 def _base_parent(project: Project, client: docker.DockerClient | None, arch: str, *, dry_run: bool,
                  say: Callable[[str], None]) -> tuple[str, str]:
     """(FROM reference, its image ID) of the base for ``arch``: always the per-arch local name of its root
-    (:func:`robocore.plan.per_arch.base_root`); without a client (a dry run) the ID is :data:`DRY_RUN_UNKNOWN`."""
+    (:func:`robocore.plan.arches.base_root`); without a client (a dry run) the ID is :data:`DRY_RUN_UNKNOWN`."""
     from robocore.adapters import rootfs
     from robocore.adapters.image_builder import image_state
 
