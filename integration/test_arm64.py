@@ -79,8 +79,11 @@ def mixed(robot_fleets: Callable[..., RobotFleet], docker_client: Any, run_roboc
     timings = {}
     for step in ("prepare-base", "stage", "build", "sync"):
         started = time.monotonic()
-        run_robocore(root, step, "--quiet")
+        done = json.loads(run_robocore(root, step, "--json").stdout)
         timings[step] = time.monotonic() - started
+        for result in done["results"]:  # each image and build, with its seconds
+            if result.get("seconds") is not None:
+                print(f"{step}: {result.get('what')} {result.get('action')} {result['seconds']:.1f} s")
     print("arm64 robot set-up (s):", {k: round(v, 1) for k, v in timings.items()})
     yield fleet, root
     remove_project_containers(docker_client, NAME)
