@@ -16,6 +16,11 @@ if [ "${ROBOCORE_TEST_TOOLS:-0}" = 1 ]; then
   command -v docker-compose >/dev/null || docker compose version >/dev/null 2>&1 || need_debs+=(docker-compose)
   command -v docker-registry >/dev/null || need_debs+=(docker-registry)
   command -v ssh-keygen >/dev/null || need_debs+=(openssh-client)
+  command -v file >/dev/null || need_debs+=(file)
+  # the arm64 suites run arm64 containers on amd64 through qemu (registered below)
+  if [ "$(uname -m)" = x86_64 ]; then
+    command -v qemu-aarch64-static >/dev/null || need_debs+=(qemu-user-static)
+  fi
 fi
 install_debs() {
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
@@ -28,33 +33,13 @@ install_debs() {
     echo "warning: please install ${need_debs[*]} (Debian/Ubuntu: apt-get install ${need_debs[*]})" >&2
   fi
 }
-# With ROBOCORE_PREFETCH_ROOT=1 (scripts/demo), a machine that has no Debian 12 image gets the root image of
-# the wheels base as prepare-base would make it (robocore/adapters/rootfs.py: mmdebstrap, then docker import),
-# here, while the venv is made, so that the two downloads overlap; prepare-base then finds it. On failure
-# prepare-base tries again and says why.
-prefetch_root() {
-  command -v mmdebstrap >/dev/null && command -v docker >/dev/null || return 0
-  docker image inspect robocore/debian:bookworm >/dev/null 2>&1 && return 0
-  docker image inspect debian:bookworm >/dev/null 2>&1 && return 0
-  local tmp
-  tmp="$(mktemp -d)"
-  echo "bootstrapping the Debian 12 root image (robocore/debian:bookworm) while the venv is made" >&2
-  if mmdebstrap --variant=apt --include=python3,python3-venv,ca-certificates,procps bookworm "$tmp/root.tar" \
-       "${ROBOCORE_DEBIAN_MIRROR:-http://deb.debian.org/debian}" >"$tmp/log" 2>&1; then
-    docker import "$tmp/root.tar" robocore/debian:bookworm >/dev/null || true
-  else
-    echo "warning: bootstrapping the Debian root image ahead failed; prepare-base will try again" >&2
-  fi
-  rm -rf "$tmp"
-}
-# the Debian tools install (and the root image bootstraps) while the venv is made; the venv step waits for them
+# the Debian tools install while the venv is made; the venv step waits for them
 # at the end
 background() {
   if [ ${#need_debs[@]} -gt 0 ]; then install_debs; fi
-  if [ "${ROBOCORE_PREFETCH_ROOT:-0}" = 1 ]; then prefetch_root; fi
 }
 debs_pid=""
-if [ ${#need_debs[@]} -gt 0 ] || [ "${ROBOCORE_PREFETCH_ROOT:-0}" = 1 ]; then
+if [ ${#need_debs[@]} -gt 0 ]; then
   background &
   debs_pid=$!
 fi
@@ -81,5 +66,20 @@ if [ ! -f "$stamp" ] || [ "$ROOT/pyproject.toml" -nt "$stamp" ]; then
 fi
 if [ -n "$debs_pid" ]; then
   wait "$debs_pid"
+fi
+# arm64 on an amd64 test machine (design.md section 8): Debian's qemu-user-static puts qemu-aarch64.conf on disk
+# but registers nothing where no init system runs. As root: mount binfmt_misc if needed, then write that line to
+# its register file (flags POF: F opens the interpreter now, so arm64 binaries run in any container, Docker in
+# Docker included). robocore itself never changes the kernel: without this it says what to run.
+if [ "${ROBOCORE_TEST_TOOLS:-0}" = 1 ] && [ "$(uname -m)" = x86_64 ] && [ ! -e /proc/sys/fs/binfmt_misc/qemu-aarch64 ]; then
+  conf=/usr/lib/binfmt.d/qemu-aarch64.conf
+  if [ "$(id -u)" = 0 ] && [ -r "$conf" ]; then
+    [ -e /proc/sys/fs/binfmt_misc/register ] || mount binfmt_misc -t binfmt_misc /proc/sys/fs/binfmt_misc
+    grep -m1 '^:qemu-aarch64:' "$conf" > /proc/sys/fs/binfmt_misc/register
+    echo "registered qemu-aarch64 with binfmt_misc" >&2
+  else
+    echo "warning: qemu-aarch64 is not registered with binfmt_misc: the arm64 suites will fail; as root:" \
+      "apt-get install qemu-user-static && grep '^:qemu-aarch64:' $conf > /proc/sys/fs/binfmt_misc/register" >&2
+  fi
 fi
 export PATH="$VENV/bin:$PATH"
