@@ -25,7 +25,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
 
-from robocore.commands.build import colcon_listener, plan_build, workspace_packages
+from robocore.commands.build import plan_build, workspace_packages
+from robocore.commands.colcon_output import colcon_listener
 from robocore.commands.context import Options
 from robocore.commands.hosts import in_parallel
 from robocore.commands.machine import MAX_PARALLEL, check_emulation, local_docker, native_arch
