@@ -208,3 +208,22 @@ def _lock_refused(host: Host, code: int, stderr: str) -> RobocoreError | None:
         return HostError(f"host {host.name}: flock is not installed there (robocore locks builds and syncs with it)",
                          hint="install util-linux on the host (apt-get install util-linux)")
     return None
+
+
+def fetch_install(project: Project, comp: Component, host: Host, report: Reporter) -> None:
+    """Bring the install tree that ``comp``'s host built back to this machine (for the dev shell), deltas only;
+    when it cannot, one line says why and the shell goes on without it."""
+    why = f"component {comp.name} is built on host {host.name} (builds_here: true)"
+    state = read_build_state(project.host_build_state_file(comp.name))
+    if state.get("host") != host.name:
+        report.notice(f"{why} and was not built there yet: the shell has no install tree of it")
+        return
+    local = project.build_dir(comp.name) / "install"
+    local.mkdir(parents=True, exist_ok=True)
+    where = plan.host_build(host, comp.name)
+    try:
+        rsync.run(host, plan.fetch_install_argv(where, host, ssh.rsh_command(host), local), timeout=1800)
+    except RobocoreError as exc:
+        report.notice(f"{why}; its install tree could not be fetched ({exc.message}): the shell starts without it")
+        return
+    report.info(f"{comp.name}: install tree fetched from {host.name}, where it was built")

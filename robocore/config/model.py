@@ -128,12 +128,7 @@ class Host(Strict):
     tls: TlsFiles | None = None
     insecure: bool = Field(default=False, description="Allow plain unauthenticated TCP to this host's daemon.")
     mount_root: MountRoot | None = None
-    builds_here: bool = Field(
-        default=False,
-        description="Build this host's components on the host itself (a native build on the robot, the fast path "
-        "for big C++ workspaces on another arch): build sends each workspace there with rsync and runs colcon in "
-        "the component's image on the host's daemon; the install tree stays there and sync releases it from there.",
-    )
+    builds_here: bool = Field(default=False, description="Build this host's components natively on the host itself.")
 
     @property
     def is_local(self) -> bool:

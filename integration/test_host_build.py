@@ -1,0 +1,132 @@
+"""A robot host that builds its own components (``builds_here: true``): the noetic project on the debian base.
+
+Two Docker-in-Docker hosts over ssh: robot-a builds its own components and runs the roscpp talker and the
+ROS master; robot-b runs the rospy listener, built on this machine as usual.
+
+- ``build`` compiles the talker on robot-a: its build container is created on robot-a's daemon and never on
+  this machine's (Docker's events of both daemons, negative control), the install tree is on robot-a and
+  not on this machine; a second ``build`` is up to date without a container anywhere;
+- ``sync`` releases that tree from robot-a's own build folder (this machine has none to send), ``run`` starts
+  both hosts, robot-b's listener hears robot-a's talker through the master; robot-b alone hears nothing
+  (negative control);
+- a one-line edit of the talker is rebuilt on robot-a incrementally (only demo_talker; its build folder
+  persists there), released by ``sync`` and heard.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import pytest
+import yaml
+from deploy_helpers import HEARD, log_lines, remove_project_containers, wait_for
+
+if TYPE_CHECKING:
+    from conftest import RobocoreCli
+    from robot_host.hosts import RobotFleet
+
+pytestmark = pytest.mark.docker
+
+NAME = "robocore-it-hostbuild"
+TALKER_TEXT = "hello from talker #"
+
+
+@pytest.fixture(scope="module")
+def project(robot_fleets: Callable[..., RobotFleet], run_robocore: RobocoreCli,
+            docker_client: Any) -> Iterator[tuple[RobotFleet, Path]]:
+    """The template's noetic project, staged: talker and master on robot-a (builds_here), listener on robot-b."""
+    fleet = robot_fleets(2)
+    parent = Path(tempfile.mkdtemp(prefix="robocore-it-"))
+    root = parent / NAME
+    run_robocore(None, "init", str(root), "--defaults", "--distro", "noetic", "--base", "debian")
+    data = yaml.safe_load((root / "robot.yaml").read_text())
+    data["hosts"] = [{"name": "robot-a", "ip": fleet.hosts[0].ip, "user": "root", "arch": "amd64",
+                      "builds_here": True},
+                     {"name": "robot-b", "ip": fleet.hosts[1].ip, "user": "root", "arch": "amd64"}]
+    data["discovery"] = {"servers": [{"host": "robot-a"}]}
+    for comp in data["components"]:
+        comp["runs_on"] = "robot-a" if comp["name"] == "talker" else "robot-b"
+    (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    for step in ("prepare-base", "stage"):
+        run_robocore(root, step, "--quiet")
+    yield fleet, root
+    remove_project_containers(docker_client, NAME)
+    shutil.rmtree(parent, ignore_errors=True)
+
+
+def _build_creations(client: Any, since: float) -> list[str]:
+    """The components whose build containers of this project were created on ``client``'s daemon since ``since``."""
+    events = client.events(since=int(since), until=int(time.time()) + 1, decode=True,
+                           filters={"type": "container", "event": "create",
+                                    "label": [f"dev.robocore.project={NAME}", "dev.robocore.role=build"]})
+    return sorted(e["Actor"]["Attributes"]["dev.robocore.component"] for e in events)
+
+
+def _results(run_robocore: RobocoreCli, root: Path, *args: str) -> list[dict[str, Any]]:
+    return list(json.loads(run_robocore(root, *args, "--json").stdout)["results"])
+
+
+def _heard(fleet: RobotFleet, needle: str, since: float | None = None) -> list[str]:
+    container = fleet.client(1).containers.get(f"{NAME}-listener")
+    return [line for line in log_lines(container, HEARD, since=since) if needle in line]
+
+
+def test_the_host_builds_its_talker_and_robot_b_hears_it(project: tuple[RobotFleet, Path], run_robocore: RobocoreCli,
+                                                         docker_client: Any) -> None:
+    fleet, root = project
+    host = fleet.hosts[0]
+    start = time.time() - 1
+    done = {r["what"]: r for r in _results(run_robocore, root, "build") if r["kind"] == "build"}
+    assert done["talker"]["action"] == done["listener"]["action"] == "built", done
+    assert "built on robot-a" in done["talker"]["reason"], done
+    # the talker's build container ran on robot-a's daemon, the listener's here; never the talker's here
+    assert _build_creations(fleet.client(0), start) == ["talker"]
+    assert _build_creations(docker_client, start) == ["listener"]
+    assert not (root / ".robocore" / "build" / "talker" / "install").exists()  # the tree stayed there
+    talker = "/root/robocore/talker/work/install/demo_talker/lib/demo_talker/talker"
+    assert host.ssh(fleet, "sh", "-c", 'head -c 4 "$1" | od -c | head -1', "sh", talker).split()[1:5] == \
+        ["177", "E", "L", "F"]
+
+    # nothing changed: up to date, no container anywhere
+    again = time.time() - 1
+    done = {r["what"]: r["action"] for r in _results(run_robocore, root, "build") if r["kind"] == "build"}
+    assert done == {"talker": "up-to-date", "listener": "up-to-date"}, done
+    time.sleep(1)
+    assert _build_creations(fleet.client(0), again) == [] and _build_creations(docker_client, again) == []
+
+    synced = {r["component"]: r for r in _results(run_robocore, root, "sync") if r["kind"] == "sync"}
+    assert synced["talker"]["changed"] and synced["talker"]["host"] == "robot-a", synced
+    assert host.ssh(fleet, "test", "-x", "/root/robocore/talker/current/install/demo_talker/lib/demo_talker/talker",
+                    check=False) == ""
+    # robot-b alone: no master, no talker, nothing heard (negative control)
+    run_robocore(root, "run", "--host", "robot-b", "--quiet")
+    time.sleep(8)
+    assert _heard(fleet, TALKER_TEXT) == []
+    run_robocore(root, "run", "--host", "robot-a", "--quiet")
+    assert wait_for(lambda: _heard(fleet, TALKER_TEXT), 90, 1), "robot-b never heard the talker built on robot-a"
+    # a sync with nothing new keeps the release
+    synced = {r["component"]: r for r in _results(run_robocore, root, "sync") if r["kind"] == "sync"}
+    assert not synced["talker"]["changed"], synced
+
+
+def test_a_one_line_edit_is_rebuilt_on_the_host_incrementally(project: tuple[RobotFleet, Path],
+                                                              run_robocore: RobocoreCli, docker_client: Any) -> None:
+    fleet, root = project
+    [code] = (root / "components" / "talker").rglob("greeting.h")
+    original = code.read_text()
+    code.write_text(original.replace(f'"{TALKER_TEXT}"', '"built on robot-a #"'))
+    start = time.time() - 1
+    done = {r["what"]: r for r in _results(run_robocore, root, "build") if r["kind"] == "build"}
+    assert done["talker"]["action"] == "built" and done["listener"]["action"] == "up-to-date", done
+    assert done["talker"]["packages"] == ["demo_talker"], done  # demo_msgs was not rebuilt
+    assert _build_creations(fleet.client(0), start) == ["talker"] and _build_creations(docker_client, start) == []
+    since = time.time()
+    run_robocore(root, "sync", "--quiet")
+    run_robocore(root, "run", "--quiet")
+    assert wait_for(lambda: _heard(fleet, "built on robot-a #", since), 90, 1), "the edited talker was never heard"
