@@ -164,7 +164,7 @@ def _colcon(client: docker.DockerClient, project_name: str, build: HostBuildPlan
     for argv in attempts:
         code = run_streaming(
             client, build.image, argv, user=user, volumes=build.where.mounts(ccache=build.ccache),
-            environment=_env(build), labels=build_labels(project_name, name), on_line=on_line,
+            environment=container_env(build), labels=build_labels(project_name, name), on_line=on_line,
         )
         # an image whose colcon lacks colcon-package-selection: build everything instead
         if not (code == 2 and any("--packages-above" in line for line in other[-3:])):
@@ -173,7 +173,8 @@ def _colcon(client: docker.DockerClient, project_name: str, build: HostBuildPlan
     return code, events, other
 
 
-def _env(build: HostBuildPlan) -> dict[str, str]:
+def container_env(build: HostBuildPlan) -> dict[str, str]:
+    """The build container's environment on the host: a local build's, without this machine's core count."""
     env = colcon.build_env(1, ccache=build.ccache)
     for key in ("CMAKE_BUILD_PARALLEL_LEVEL", "MAKEFLAGS"):  # the host's own cores, not the dev machine's
         env.pop(key, None)

@@ -64,6 +64,14 @@ echo {DONE}
 """
 
 
+# $1: the current release's install tree (--link-dest), $2: the host's install tree, $3: the staging one.
+RELEASE_SCRIPT = """\
+set -eu
+mkdir -p -- "$3"
+exec rsync -a --delete --stats "--link-dest=$1" -- "$2" "$3"
+"""
+
+
 @dataclass(frozen=True)
 class HostBuild:
     """Where one component is built on its host."""
@@ -144,11 +152,8 @@ def release_install_argv(build: HostBuild) -> list[str]:
     """Remote argv (run on the host, under sync's lock) copying the host's install tree into the release
     being made: hard links to the ``current`` release for unchanged files, a new file for each changed
     one (rsync writes a temp file and renames it, so no earlier release is ever changed in place)."""
-    return [
-        "rsync", "-a", "--delete", "--stats",
-        f"--link-dest={build.root / CURRENT / 'install'}/", "--",
-        f"{build.install}/", f"{build.root / STAGING / 'install'}/",
-    ]
+    return remote_sh(RELEASE_SCRIPT, f"{build.root / CURRENT / 'install'}/", f"{build.install}/",
+                     f"{build.root / STAGING / 'install'}/")
 
 
 def fetch_install_argv(build: HostBuild, host: Host, rsh: str, local_install: Path, *,
