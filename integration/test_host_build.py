@@ -10,7 +10,10 @@ ROS master; robot-b runs the rospy listener, built on this machine as usual.
   both hosts, robot-b's listener hears robot-a's talker through the master; robot-b alone hears nothing
   (negative control);
 - a one-line edit of the talker is rebuilt on robot-a incrementally (only demo_talker; its build folder
-  persists there), released by ``sync`` and heard.
+  persists there), released by ``sync`` and heard;
+- ``release`` to a local registry pushes one manifest list per image naming each arch in use; ``run --tag``
+  has each host pull that one reference and run its own arch (``uname -m``, the image's Architecture); a
+  pull of an arch the list does not name fails (negative control).
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 import pytest
 import yaml
 from deploy_helpers import HEARD, log_lines, remove_project_containers, wait_for
+from local_registry import manifest, serve_registry
 
 if TYPE_CHECKING:
     from conftest import RobocoreCli
@@ -130,3 +134,44 @@ def test_a_one_line_edit_is_rebuilt_on_the_host_incrementally(project: tuple[Rob
     run_robocore(root, "sync", "--quiet")
     run_robocore(root, "run", "--quiet")
     assert wait_for(lambda: _heard(fleet, "built on robot-a #", since), 90, 1), "the edited talker was never heard"
+
+
+def test_release_gives_each_host_its_own_arch_under_one_reference(project: tuple[RobotFleet, Path],
+                                                                 run_robocore: RobocoreCli, docker_client: Any,
+                                                                 tmp_path_factory: pytest.TempPathFactory) -> None:
+    fleet, root = project
+    original = (root / "robot.yaml").read_text()
+    arches = {"robot-a": "amd64", "robot-b": "amd64"}
+    with serve_registry(fleet, tmp_path_factory.mktemp("registry")) as registry:
+        try:
+            data = yaml.safe_load(original)
+            data["registry"] = registry
+            (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+            run_robocore(root, "release", "--tag", "v1", "--quiet")
+            for repo, hosts in (("base", ["robot-a", "robot-b"]), ("talker", ["robot-a"]), ("listener", ["robot-b"])):
+                listed = manifest(registry, f"{NAME}-{repo}", "v1")
+                assert listed["mediaType"] == "application/vnd.docker.distribution.manifest.list.v2+json", listed
+                platforms = sorted(m["platform"]["architecture"] for m in listed["manifests"])
+                assert platforms == sorted({arches[h] for h in hosts}), listed
+            # negative control: the list names no image of an arch nobody runs; a host asking for it gets none
+            from docker.errors import APIError
+
+            with pytest.raises(APIError, match=r"no matching manifest"):
+                fleet.client(1).images.pull(f"{registry}/{NAME}-listener", tag="v1", platform="linux/arm64")
+
+            run_robocore(root, "run", "--tag", "v1", "--quiet")
+            for index, (host, component) in enumerate((("robot-a", "talker"), ("robot-b", "listener"))):
+                container = fleet.client(index).containers.get(f"{NAME}-{component}")
+                assert container.attrs["Config"]["Image"] == f"{registry}/{NAME}-{component}:v1"
+                machine = container.exec_run(["uname", "-m"]).output.decode().strip()
+                assert machine == {"amd64": "x86_64", "arm64": "aarch64"}[arches[host]], (host, machine)
+                image = fleet.client(index).images.get(f"{registry}/{NAME}-{component}:v1")
+                assert image.attrs["Architecture"] == arches[host]
+            assert wait_for(lambda: _heard(fleet, TALKER_TEXT, time.time() - 20) or
+                            _heard(fleet, "built on robot-a #", time.time() - 20), 90, 1)
+        finally:
+            (root / "robot.yaml").write_text(original)
+            for image in docker_client.images.list():
+                for tag in image.tags:
+                    if tag.startswith(f"{registry}/"):
+                        docker_client.images.remove(tag)
