@@ -88,7 +88,7 @@ def test_the_host_builds_its_talker_and_robot_b_hears_it(project: tuple[RobotFle
     start = time.time() - 1
     done = {r["what"]: r for r in _results(run_robocore, root, "build") if r["kind"] == "build"}
     assert done["talker"]["action"] == done["listener"]["action"] == "built", done
-    assert "built on robot-a" in done["talker"]["reason"], done
+    assert done["talker"]["reason"] == "on host robot-a: first build", done
     # the talker's build container ran on robot-a's daemon, the listener's here; never the talker's here
     assert _build_creations(fleet.client(0), start) == ["talker"]
     assert _build_creations(docker_client, start) == ["listener"]

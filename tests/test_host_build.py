@@ -138,7 +138,7 @@ def test_the_host_plan_says_what_changed_since_the_last_build_there(tmp_path: Pa
     comp = project.component("talker")
     jetson = project.host("jetson")
     first = host_build.plan_host_build(project, comp, jetson, "img:latest", "sha256:1", {"demo_talker": "a"})
-    assert first.changed is None and first.reason == "first build on host jetson (built on jetson)"
+    assert first.changed is None and first.reason == "on host jetson: first build"
     assert "--packages-above" not in first.argv
     host_build.record_host_build(project, first)
     same = host_build.plan_host_build(project, comp, jetson, "img:latest", "sha256:1", {"demo_talker": "a"})
@@ -150,10 +150,10 @@ def test_the_host_plan_says_what_changed_since_the_last_build_there(tmp_path: Pa
     env = host_build.container_env(edited)
     assert env["CMAKE_CXX_COMPILER_LAUNCHER"] == "ccache" and "MAKEFLAGS" not in env  # the host's own cores
     new_image = host_build.plan_host_build(project, comp, jetson, "img:latest", "sha256:2", {"demo_talker": "a"})
-    assert new_image.changed is None and new_image.reason.startswith("image changed")
+    assert new_image.changed is None and new_image.reason == "on host jetson: image changed"
     moved = Host(name="other", ip="10.0.0.8", builds_here=True)
     elsewhere = host_build.plan_host_build(project, comp, moved, "img:latest", "sha256:1", {"demo_talker": "a"})
-    assert elsewhere.changed is None and "now on host other" in elsewhere.reason
+    assert elsewhere.changed is None and elsewhere.reason == "on host other: last built on host jetson"
 
 
 def test_sync_releases_a_host_built_tree_from_the_host_or_asks_for_a_build(tmp_path: Path) -> None:
@@ -179,5 +179,6 @@ def test_dry_run_lists_every_step_with_values_quoted(tmp_path: Path) -> None:
                                        "robocore-talker:latest", None, {"demo_talker": "a"})
     steps = host_build.dry_run_steps(build, tmp_path / "components" / "talker")
     assert steps[0] == "deliver robocore-talker:latest to host jetson"
+    assert steps[1] == "hold the lock /home/pi/robocore/.robocore-sync.lock on jetson (as sync does) while:"
     assert shlex.split(steps[2])[0] == "rsync"
     assert steps[3].endswith(shlex.join(build.argv))

@@ -30,6 +30,7 @@ from robocore.config.model import Component, Host
 from robocore.errors import BuildError, HostError, RobocoreError
 from robocore.plan import colcon, naming
 from robocore.plan import remote_build as plan
+from robocore.plan.sync import LOCK_BUSY, LOCK_FILE
 from robocore.project import Project
 
 if TYPE_CHECKING:
@@ -69,9 +70,9 @@ def plan_host_build(project: Project, comp: Component, host: Host, image: str, i
     old = before.get("packages") if isinstance(before.get("packages"), dict) else {}
     changed: list[str] | None
     if not before:
-        changed, reason = None, f"first build on host {host.name}"
+        changed, reason = None, "first build"
     elif before.get("host") != host.name or before.get("root") != str(where.root):
-        changed, reason = None, f"last built on {before.get('host')}, now on host {host.name}"
+        changed, reason = None, f"last built on host {before.get('host')}"
     elif image_id is not None and before.get("image") != image_id:
         changed, reason = None, "image changed"
     elif set(old or {}) != set(packages):
@@ -82,7 +83,7 @@ def plan_host_build(project: Project, comp: Component, host: Host, image: str, i
     if image_id is None and before:
         reason += f"; whether the staged image changed: {DRY_RUN_UNKNOWN}"
     return HostBuildPlan(component=comp, host=host, image=image, image_id=image_id, where=where,
-                         packages=packages, changed=changed, reason=f"{reason} (built on {host.name})", ccache=ccache)
+                         packages=packages, changed=changed, reason=f"on host {host.name}: {reason}", ccache=ccache)
 
 
 def dry_run_steps(build: HostBuildPlan, workspace: Path) -> list[str]:
@@ -93,7 +94,7 @@ def dry_run_steps(build: HostBuildPlan, workspace: Path) -> list[str]:
     where = build.where
     return [
         f"deliver {build.image} to host {build.host.name}",
-        shlex.join(ssh.ssh_argv(build.host, plan.lock_argv(build.host, "HOLDER", where))),
+        f"hold the lock {build.host.deploy_root}/{LOCK_FILE} on {build.host.name} (as sync does) while:",
         shlex.join(plan.workspace_rsync_argv(workspace, where, build.host, rsh, skip_dirs=_skip_dirs())),
         f"on {build.host.name}'s daemon, in {build.image} with "
         + " ".join(f"{h}:{c}" for h, c in where.mounts(ccache=build.ccache).items()) + ": " + shlex.join(build.argv),
@@ -199,8 +200,6 @@ def record_host_build(project: Project, build: HostBuildPlan) -> None:
 
 
 def _lock_refused(host: Host, code: int, stderr: str) -> RobocoreError | None:
-    from robocore.plan.sync import LOCK_BUSY
-
     if code == LOCK_BUSY:
         holder = stderr.strip().splitlines()[-1] if stderr.strip() else "another robocore"
         return HostError(f"host {host.name}: a sync or build on this host is in progress: {holder}",
