@@ -147,7 +147,7 @@ def test_release_gives_each_host_its_own_arch_under_one_reference(project: tuple
             data = yaml.safe_load(original)
             data["registry"] = registry
             (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
-            run_robocore(root, "release", "--tag", "v1", "--quiet")
+            run_robocore(root, "release", "--tag", "v1")
             for repo, hosts in (("base", ["robot-a", "robot-b"]), ("talker", ["robot-a"]), ("listener", ["robot-b"])):
                 listed = manifest(registry, f"{NAME}-{repo}", "v1")
                 assert listed["mediaType"] == "application/vnd.docker.distribution.manifest.list.v2+json", listed
