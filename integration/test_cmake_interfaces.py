@@ -159,7 +159,7 @@ def test_no_op_build_and_a_msg_edit_rebuild_only_that_package_and_its_users(proj
 def test_a_clean_rebuild_reuses_the_ccache(project: Path, docker_client: Any, run_robocore: RobocoreCli) -> None:
     """ccache's folder outlives the build folder: compiling the client's interfaces again from scratch
     hits it (the server's and the client's copies compiled at the same container paths)."""
-    cache = project / ".robocore" / "ccache"
+    cache = project / ".robocore" / "ccache" / "amd64"  # per arch (robocore.plan.arches)
     assert any(cache.rglob("*")), "the first build left nothing in ccache's folder"
     before = _ccache_hits(docker_client, cache)
     shutil.rmtree(project / ".robocore" / "build" / "client")

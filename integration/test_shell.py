@@ -38,7 +38,7 @@ pytestmark = pytest.mark.docker
 
 PREFIX = "robocore-it-shell"
 TEST_IMAGE = f"{PREFIX}-x11:latest"
-ROOT_CANDIDATES = ("robocore/debian:bookworm", "debian:bookworm", "robocore-test/debian:bookworm")
+ROOT_CANDIDATES = ("robocore/amd64/debian:bookworm-wheels", "debian:bookworm", "robocore-test/debian:bookworm")
 DOCKERFILE = """\
 FROM {root}
 RUN apt-get update \\
@@ -62,8 +62,14 @@ def _root_image(client: Any) -> str:
         except ImageNotFound:
             continue
     rootfs = importlib.import_module("robocore.adapters.rootfs")  # bootstraps Debian 12 with mmdebstrap
+    from robocore.config.model import BaseKind
+    from robocore.plan import arches, dockerfiles
+
     with tempfile.TemporaryDirectory(prefix=f"{PREFIX}-") as work:
-        ref, _ = rootfs.ensure_root_image(client, None, work_dir=Path(work), status=print)
+        ref, _ = rootfs.ensure_root_image(
+            client, target=ROOT_CANDIDATES[0], upstream="debian:bookworm", arch="amd64",
+            strap=arches.root_strap(BaseKind.wheels, "amd64", dockerfiles.WHEELS_APT), work_dir=Path(work),
+            status=print)
     return str(ref)
 
 

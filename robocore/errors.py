@@ -66,6 +66,11 @@ class UsageError(RobocoreError):
     exit_code = 2
 
 
+class ArchMismatch(UsageError):
+    """Something of one CPU arch would go where another runs: an install tree synced to a host of another arch,
+    a host whose daemon cannot run its arch, a ROS master on a host its image is not built for."""
+
+
 class UnsafePath(RobocoreError):
     """A file or folder robocore would read, copy or connect through is not safe to use: a symlink
     leading out of the project, a folder another user owns or may write to."""

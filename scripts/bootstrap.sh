@@ -16,6 +16,11 @@ if [ "${ROBOCORE_TEST_TOOLS:-0}" = 1 ]; then
   command -v docker-compose >/dev/null || docker compose version >/dev/null 2>&1 || need_debs+=(docker-compose)
   command -v docker-registry >/dev/null || need_debs+=(docker-registry)
   command -v ssh-keygen >/dev/null || need_debs+=(openssh-client)
+  command -v file >/dev/null || need_debs+=(file)
+  # the arm64 suites run arm64 containers on amd64 through qemu (registered below)
+  if [ "$(uname -m)" = x86_64 ]; then
+    command -v qemu-aarch64-static >/dev/null || need_debs+=(qemu-user-static)
+  fi
 fi
 if [ ${#need_debs[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
@@ -26,6 +31,22 @@ if [ ${#need_debs[@]} -gt 0 ]; then
     sudo apt-get update -qq >/dev/null && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${need_debs[@]}" >/dev/null
   else
     echo "warning: please install ${need_debs[*]} (Debian/Ubuntu: apt-get install ${need_debs[*]})" >&2
+  fi
+fi
+
+# arm64 on an amd64 test machine (design.md section 8): Debian's qemu-user-static puts qemu-aarch64.conf on disk
+# but registers nothing where no init system runs. As root: mount binfmt_misc if needed, then write that line to
+# its register file (flags POF: F opens the interpreter now, so arm64 binaries run in any container, Docker in
+# Docker included). robocore itself never changes the kernel: without this it says what to run.
+if [ "${ROBOCORE_TEST_TOOLS:-0}" = 1 ] && [ "$(uname -m)" = x86_64 ] && [ ! -e /proc/sys/fs/binfmt_misc/qemu-aarch64 ]; then
+  conf=/usr/lib/binfmt.d/qemu-aarch64.conf
+  if [ "$(id -u)" = 0 ] && [ -r "$conf" ]; then
+    [ -e /proc/sys/fs/binfmt_misc/register ] || mount binfmt_misc -t binfmt_misc /proc/sys/fs/binfmt_misc
+    grep -m1 '^:qemu-aarch64:' "$conf" > /proc/sys/fs/binfmt_misc/register
+    echo "registered qemu-aarch64 with binfmt_misc" >&2
+  else
+    echo "warning: qemu-aarch64 is not registered with binfmt_misc: the arm64 suites will fail; as root:" \
+      "apt-get install qemu-user-static && grep '^:qemu-aarch64:' $conf > /proc/sys/fs/binfmt_misc/register" >&2
   fi
 fi
 

@@ -284,7 +284,7 @@ def test_build_runs_jobs_on_every_core_and_ccache_where_the_image_has_it(tmp_pat
     plan = build.plan_build(project, project.component("msgs"), "img")
     assert plan.workers >= 1 and plan.argv[plan.argv.index("--parallel-workers") + 1] == str(plan.workers)
     with_cache = build.with_cmake_toolchain(project, plan, {cmake_packages.LABEL_TOOLCHAIN: "cmake"})
-    assert with_cache.ccache == project.state_dir / "ccache"
+    assert with_cache.ccache == project.state_dir / "ccache" / plan.arch  # one cache per arch
     with pytest.raises(BuildError, match=r"my_msgs build with CMake, but its image was staged without"):
         build.with_cmake_toolchain(project, plan, {})
     python_only = build.plan_build(project, project.component("py"), "img")

@@ -185,7 +185,10 @@ def test_cross_arch_without_binfmt_says_how_to_set_up_qemu(tmp_path: Path, monke
     with pytest.raises(ToolMissing) as info:
         machine.check_emulation("arm64", "amd64", "component cam")
     assert "component cam" in info.value.message and "qemu-user-static" in (info.value.hint or "")
-    (tmp_path / "qemu-aarch64").write_text("enabled\n")
+    (tmp_path / "qemu-aarch64").write_text("enabled\nflags: PO\n")
+    with pytest.raises(ToolMissing, match="lacks the F flag"):  # containers could not find the interpreter
+        machine.check_emulation("arm64", "amd64", "component cam")
+    (tmp_path / "qemu-aarch64").write_text("enabled\ninterpreter /usr/bin/qemu\nflags: POF\n")
     machine.check_emulation("arm64", "amd64", "component cam")  # registered: fine
 
 
@@ -193,9 +196,12 @@ def test_missing_mmdebstrap_is_tool_missing_with_a_hint(tmp_path: Path, monkeypa
     import pytest
 
     from robocore.adapters import rootfs
+    from robocore.config.model import BaseKind
     from robocore.errors import ToolMissing
+    from robocore.plan import arches
 
     monkeypatch.setattr(rootfs.shutil, "which", lambda name: None)
     with pytest.raises(ToolMissing) as info:
-        rootfs.bootstrap(object(), work_dir=tmp_path)  # type: ignore[arg-type]
+        rootfs.bootstrap(object(), arches.root_strap(BaseKind.wheels, "arm64", ["python3"]),  # type: ignore[arg-type]
+                         target="robocore/arm64/debian:bookworm-wheels", work_dir=tmp_path)
     assert "mmdebstrap" in info.value.message and "apt-get install mmdebstrap" in (info.value.hint or "")

@@ -25,6 +25,7 @@ PACKAGES = [
     "procps",
     "ca-certificates",
     "iptables",
+    "mount",  # the entry point mounts binfmt_misc: an arm64 host simulated on amd64 shows its qemu entry
 ]
 MIRROR = "http://deb.debian.org/debian"
 SUITE = "bookworm"

@@ -9,6 +9,11 @@ if [ -n "${AUTHORIZED_KEY:-}" ]; then
     chmod 600 /root/.ssh/authorized_keys
 fi
 ssh-keygen -A >/dev/null
+# The kernel's binfmt_misc entries, readable as on a real machine (robocore's doctor and run read
+# qemu-aarch64 there before running arm64 images on an amd64 daemon). Best effort.
+if [ -d /proc/sys/fs/binfmt_misc ] && [ ! -e /proc/sys/fs/binfmt_misc/register ]; then
+    mount -t binfmt_misc binfmt_misc /proc/sys/fs/binfmt_misc 2>/dev/null || true
+fi
 /usr/sbin/sshd -e
 # Optional: wait for files put into the container after it started (e.g. TLS certificates for its address).
 if [ -n "${DOCKERD_WAIT_FILE:-}" ]; then

@@ -1,12 +1,17 @@
-"""The Debian 12 root image of the wheels base: found locally, pulled, or bootstrapped.
+"""The root image a base is built FROM, one per arch, under its per-arch local name (see :mod:`robocore.plan.arches`).
 
-Order: ``base.image`` when given (local, else pulled); else an image robocore bootstrapped
-before or ``debian:bookworm`` if present; else ``debian:bookworm`` pulled; else a root file
-system made with mmdebstrap from a Debian mirror and ``docker import``-ed (the air-gapped path).
+Order, for the arch asked: the per-arch name itself when it already holds an image of that arch (a root robocore
+bootstrapped with the current inputs, or one pulled before); else the upstream reference (``debian:bookworm``,
+``ros:<distro>-ros-base`` or ``base.image``) when present locally with that arch, or pulled with that platform,
+then tagged with the per-arch name; else, for the wheels and debian bases, a root file system made with
+``mmdebstrap --arch`` from a Debian mirror (the air-gapped path) and turned into an image of that arch by a
+``FROM scratch`` + ``ADD root.tar /`` build with its platform (``docker import`` labels every import with the
+daemon's own arch on Docker 20.10).
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import shutil
 import subprocess
@@ -15,87 +20,142 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from robocore.adapters.image_builder import image_state
-from robocore.errors import BuildError, DockerError, ToolMissing
+from robocore.adapters.image_builder import ImageState, image_state
+from robocore.errors import BuildError, DockerError, ToolMissing, UsageError
+from robocore.plan import arches, naming
+from robocore.plan.arches import RootStrap
 
 if TYPE_CHECKING:
     import docker
 
-BOOTSTRAPPED = "robocore/debian:bookworm"
-UPSTREAM = "debian:bookworm"
 MIRROR_ENV = "ROBOCORE_DEBIAN_MIRROR"
 DEFAULT_MIRROR = "http://deb.debian.org/debian"
-INCLUDE = "python3,python3-venv,ca-certificates,procps"
+#: Role label of a bootstrapped root (its inputs label is :func:`strap_hash`).
+ROLE_ROOT = "root"
+_MIRROR_SCHEMES = ("http://", "https://", "file:///")
 
 
-def _try_pull(client: docker.DockerClient, ref: str, platform: str | None) -> bool:
+def strap_hash(strap: RootStrap) -> str:
+    """The content hash of a bootstrapped root's inputs (arch, variant, packages, excludes)."""
+    return "sha256:" + hashlib.sha256(strap.key().encode()).hexdigest()
+
+
+def _usable(state: ImageState | None, arch: str, strap: RootStrap | None) -> bool:
+    if state is None or state.arch != arch:
+        return False
+    made = state.labels.get(naming.LABEL_INPUTS)
+    if state.labels.get(naming.LABEL_ROLE) != ROLE_ROOT or made is None:
+        return True  # pulled: the base's apt step installs what it lacks
+    return strap is not None and made == strap_hash(strap)
+
+
+def _try_pull(client: docker.DockerClient, ref: str, arch: str) -> ImageState | None:
     from docker.errors import DockerException
 
-    repository, _, tag = ref.rpartition(":") if ":" in ref.rsplit("/", 1)[-1] else (ref, "", "latest")
+    repository, tag = arches.split_reference(ref)
     try:
-        client.images.pull(repository, tag=tag or "latest", platform=platform)
+        if "@" in ref:
+            client.images.pull(ref, platform=arches.platform(arch))
+        else:
+            client.images.pull(repository, tag=tag, platform=arches.platform(arch))
     except DockerException:
-        return False
-    return image_state(client, ref) is not None
+        return None
+    return image_state(client, ref)
+
+
+def _tag(client: docker.DockerClient, image_id: str, target: str) -> None:
+    repository, tag = arches.split_reference(target)
+    client.api.tag(image_id, repository, tag=tag, force=True)
 
 
 def ensure_root_image(
     client: docker.DockerClient,
-    override: str | None,
     *,
+    target: str,
+    upstream: str,
+    arch: str,
+    strap: RootStrap | None,
     work_dir: Path,
     status: Callable[[str], None],
 ) -> tuple[str, str]:
-    """The root image (reference, image ID) of the wheels base, bootstrapping it if need be."""
-    if override:
-        state = image_state(client, override)
-        if state is None and _try_pull(client, override, None):
-            state = image_state(client, override)
-        if state is None:
-            raise DockerError(
-                f"robot.yaml: base.image {override!r} is not present locally and cannot be pulled",
-                hint="docker load/import it, or remove base.image to let robocore bootstrap Debian 12",
-            )
-        return override, state.id
-    for ref in (BOOTSTRAPPED, UPSTREAM):
-        state = image_state(client, ref)
-        if state is not None:
-            return ref, state.id
-    status(f"pulling {UPSTREAM}")
-    if _try_pull(client, UPSTREAM, None):
-        state = image_state(client, UPSTREAM)
-        if state is not None:
-            return UPSTREAM, state.id
-    status(f"no registry reachable: bootstrapping {BOOTSTRAPPED} with mmdebstrap")
-    return BOOTSTRAPPED, bootstrap(client, work_dir=work_dir)
+    """The root image ``target`` (reference, image ID) of ``arch``: kept, taken from ``upstream`` (local or
+    pulled with its platform) or, when ``strap`` is given, bootstrapped; DockerError when none can be had."""
+    if _usable(image_state(client, target), arch, strap):
+        state = image_state(client, target)
+        assert state is not None
+        return target, state.id
+    found = image_state(client, upstream)
+    if found is None or found.arch != arch:
+        status(f"pulling {upstream} for {arches.platform(arch)}")
+        found = _try_pull(client, upstream, arch)
+    if found is not None and found.arch == arch:
+        _tag(client, found.id, target)
+        return target, found.id
+    if strap is None:
+        raise DockerError(
+            f"robot.yaml: base image {upstream} for {arches.platform(arch)} is not present locally and cannot be "
+            "pulled",
+            hint=f"pull or docker load it (its {arch} image) on this machine, or use base.kind: debian "
+                 "(ROS 1) or wheels (ROS 2, amd64), built from Debian packages",
+        )
+    status(f"no registry reachable: bootstrapping {target} with mmdebstrap --arch={arch}")
+    return target, bootstrap(client, strap, target=target, work_dir=work_dir)
 
 
-def bootstrap(client: docker.DockerClient, *, work_dir: Path) -> str:
-    """mmdebstrap a Debian 12 root file system and import it as :data:`BOOTSTRAPPED`; return its ID."""
-    from docker.errors import DockerException
+def _mirror() -> str:
+    mirror = os.environ.get(MIRROR_ENV, DEFAULT_MIRROR)
+    if not mirror.startswith(_MIRROR_SCHEMES) or any(ch.isspace() for ch in mirror):
+        raise UsageError(f"{MIRROR_ENV}={mirror!r} is not a mirror URL", hint=f"e.g. {DEFAULT_MIRROR}")
+    return mirror
 
+
+def bootstrap(client: docker.DockerClient, strap: RootStrap, *, target: str, work_dir: Path) -> str:
+    """mmdebstrap a Debian 12 root of ``strap.arch`` and build it into the image ``target``; return its ID."""
     if shutil.which("mmdebstrap") is None:
         raise ToolMissing(
-            "mmdebstrap is needed to bootstrap the Debian 12 root image of the wheels base (no image could be pulled)",
+            "mmdebstrap is needed to bootstrap the Debian 12 root image of the base (no image could be pulled)",
             hint="sudo apt-get install mmdebstrap (Debian/Ubuntu), or set base.image to a local Debian 12 image",
         )
-    mirror = os.environ.get(MIRROR_ENV, DEFAULT_MIRROR)
+    mirror = _mirror()
     work_dir.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=work_dir, prefix="rootfs-") as tmp:
-        tarball = Path(tmp) / "root.tar"
-        argv = ["mmdebstrap", "--variant=apt", f"--include={INCLUDE}", "bookworm", str(tarball), mirror]
-        done = subprocess.run(argv, capture_output=True, text=True, check=False)
+    with tempfile.TemporaryDirectory(dir=work_dir, prefix=f"rootfs-{strap.arch}-") as tmp:
+        tarball = Path(tmp).resolve() / "root.tar"
+        done = subprocess.run(strap.argv(str(tarball), mirror), capture_output=True, text=True, check=False)
         if done.returncode != 0:
             tail = "\n".join((done.stderr or done.stdout).strip().splitlines()[-15:])
-            raise BuildError(f"mmdebstrap failed (exit {done.returncode}):\n{tail}",
-                             hint=f"check that {mirror} is reachable (set {MIRROR_ENV} for another mirror)")
-        repository, _, tag = BOOTSTRAPPED.rpartition(":")
+            raise BuildError(f"mmdebstrap --arch={strap.arch} failed (exit {done.returncode}):\n{tail}",
+                             hint=f"check that {mirror} is reachable (set {MIRROR_ENV} for another mirror)"
+                             + ("" if strap.arch == _native() else "; an arch other than this machine's needs "
+                                "qemu-user-static registered with binfmt_misc"))
+        return image_from_tarball(client, tarball, strap, target=target)
+
+
+def _native() -> str:
+    import platform
+
+    from robocore.config.model import docker_arch
+
+    return docker_arch(platform.machine())
+
+
+def image_from_tarball(client: docker.DockerClient, tarball: Path, strap: RootStrap, *, target: str) -> str:
+    """A ``FROM scratch`` + ``ADD root.tar /`` image of ``strap.arch`` tagged ``target``, labelled with the
+    strap's hash; its ID. The tarball is moved into the build folder, not copied."""
+    from docker.errors import DockerException
+
+    labels = {naming.LABEL_ROLE: ROLE_ROOT, naming.LABEL_INPUTS: strap_hash(strap)}
+    with tempfile.TemporaryDirectory(dir=tarball.parent, prefix="context-") as context:
+        os.replace(tarball, Path(context) / "root.tar")
+        Path(context, "Dockerfile").write_text("FROM scratch\nADD root.tar /\nCMD [\"bash\"]\n")
         try:
-            with tarball.open("rb") as handle:
-                client.api.import_image_from_data(handle, repository=repository, tag=tag)
+            stream = client.api.build(path=context, tag=target, platform=arches.platform(strap.arch), labels=labels,
+                                      rm=True, forcerm=True, pull=False, decode=True)
+            for chunk in stream:
+                if "error" in chunk:
+                    raise DockerError(f"image {target}: building the root file system failed: {chunk['error']}")
         except DockerException as exc:
-            raise DockerError(f"docker import of the Debian root file system failed: {exc}") from None
-    state = image_state(client, BOOTSTRAPPED)
-    if state is None:
-        raise DockerError(f"docker import did not produce {BOOTSTRAPPED}")
+            raise DockerError(f"image {target}: the Docker daemon refused the root file system: {exc}") from None
+    state = image_state(client, target)
+    if state is None or state.arch != strap.arch:
+        raise DockerError(f"the root file system build did not produce {target} for {arches.platform(strap.arch)}")
     return state.id

@@ -7,7 +7,6 @@ The base is rebuilt only when its inputs hash changes. Its parent is the officia
 from __future__ import annotations
 
 from collections.abc import Callable
-from contextlib import suppress
 from typing import TYPE_CHECKING
 
 from robocore.commands.context import DRY_RUN_UNKNOWN, Options
@@ -28,8 +27,8 @@ from robocore.commands.machine import check_emulation, find_ca_bundle, local_doc
 from robocore.commands.reporting import Outcome, report_outcomes
 from robocore.commands.workspace import wheels_cmake_packages
 from robocore.config.model import BaseKind
-from robocore.errors import DockerError
 from robocore.files import ROBOT_FILE, refuse_links_leaving
+from robocore.plan import arches as per_arch
 from robocore.plan import dockerfiles, naming
 from robocore.plan.dockerfiles import ContextEntry, ImagePlan
 from robocore.project import Project
@@ -41,42 +40,35 @@ if TYPE_CHECKING:
 ROOTFS_KINDS = frozenset({BaseKind.wheels, BaseKind.debian})
 
 
+def root_strap(project: Project, arch: str) -> per_arch.RootStrap | None:
+    """How the base's root is bootstrapped for ``arch`` (None: the official base and ``base.image`` are pulled)."""
+    robot = project.robot
+    if robot.base.kind not in ROOTFS_KINDS or robot.base.image:
+        return None
+    packages = dockerfiles.DEBIAN_APT if robot.base.kind is BaseKind.debian else dockerfiles.WHEELS_APT
+    return per_arch.root_strap(robot.base.kind, arch, packages)
+
+
 def _base_parent(project: Project, client: docker.DockerClient | None, arch: str, *, dry_run: bool,
                  say: Callable[[str], None]) -> tuple[str, str]:
-    """(FROM reference, its image ID) of the base for ``arch``; without a client (a dry run) the ID is
-    :data:`DRY_RUN_UNKNOWN`."""
+    """(FROM reference, its image ID) of the base for ``arch``: always the per-arch local name of its root
+    (:func:`robocore.plan.arches.base_root`); without a client (a dry run) the ID is :data:`DRY_RUN_UNKNOWN`."""
     from robocore.adapters import rootfs
     from robocore.adapters.image_builder import image_state
 
     robot = project.robot
+    target = per_arch.base_root(robot, arch)
     if client is None:
-        default = rootfs.BOOTSTRAPPED if robot.base.kind in ROOTFS_KINDS else dockerfiles.official_image(robot)
-        return robot.base.image or default, DRY_RUN_UNKNOWN
-    if robot.base.kind in ROOTFS_KINDS:
-        if dry_run:
-            for ref in ([robot.base.image] if robot.base.image else [rootfs.BOOTSTRAPPED, rootfs.UPSTREAM]):
-                state = image_state(client, ref)
-                if state is not None:
-                    return ref, state.id
-            return robot.base.image or rootfs.BOOTSTRAPPED, "(to be bootstrapped)"
-        return rootfs.ensure_root_image(client, robot.base.image, work_dir=project.cache_dir, status=say)
-    ref = dockerfiles.official_image(robot)
-    state = image_state(client, ref)
-    if state is None and not dry_run:
-        say(f"pulling {ref}")
-        from docker.errors import DockerException
-
-        with suppress(DockerException):
-            client.images.pull(ref, platform=dockerfiles.platform(arch))
-        state = image_state(client, ref)
-    if state is None:
-        if dry_run:
-            return ref, "(to be pulled)"
-        raise DockerError(
-            f"robot.yaml: base image {ref} is not present locally and cannot be pulled",
-            hint="pull or docker load it on this machine, or use base.kind: wheels (built from Debian and PyPI)",
-        )
-    return ref, state.id
+        return target, DRY_RUN_UNKNOWN
+    if dry_run:
+        state = image_state(client, target)
+        if state is not None and state.arch == arch:
+            return target, state.id
+        strap = root_strap(project, arch)
+        return target, "(to be bootstrapped)" if strap is not None else "(to be pulled)"
+    return rootfs.ensure_root_image(client, target=target, upstream=per_arch.upstream_root(robot), arch=arch,
+                                    strap=root_strap(project, arch), work_dir=project.cache_dir / "rootfs",
+                                    status=say)
 
 
 def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *, dry_run: bool = False,

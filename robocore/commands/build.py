@@ -32,7 +32,7 @@ from robocore.commands.workspace import check_workspace, selected_components, wh
 from robocore.config.model import Component
 from robocore.errors import BuildError, UsageError
 from robocore.files import write_atomic
-from robocore.plan import cmake_packages, colcon, dockerfiles, install_patch, naming
+from robocore.plan import arches, cmake_packages, colcon, dockerfiles, install_patch, naming
 from robocore.plan.inputs import FileDigest, digest_bytes, tree_hash
 from robocore.plan.remote_build import builds_on_host
 from robocore.project import Project
@@ -93,7 +93,8 @@ class BuildPlan:
     patches: tuple[install_patch.Patch, ...] = ()  # non-empty: copy files instead of running colcon
     copies: Mapping[str, Mapping[str, list[str]]] | None = None  # the last build's plain copies
     workers: int = 1  # packages and compile jobs at once: the cores
-    ccache: Path | None = None  # the host folder of ccache's cache, when the image has ccache
+    ccache: Path | None = None  # the host folder of ccache's cache (per arch), when the image has ccache
+    clean: bool = False  # the build and install trees hold another arch's objects: removed before colcon
 
     @property
     def argv(self) -> list[str]:
@@ -121,6 +122,7 @@ def plan_build(project: Project, comp: Component, image_id: str | None, *, full:
     """
     ws = check_workspace(project, comp)
     out = project.build_dir(comp.name)
+    arch = project.robot.host(comp.runs_on).arch.value
     roots, files = workspace_packages(ws)
     packages = _hashes(roots, files)
     state_file = project.build_state_file(comp.name)
@@ -129,7 +131,11 @@ def plan_build(project: Project, comp: Component, image_id: str | None, *, full:
     changed: list[str] | None
     patches: list[install_patch.Patch] = []
     copies = before.get("copies") if isinstance(before.get("copies"), dict) else None
-    if not (out / "install").is_dir() or (image_id is not None and before.get("image") != image_id):
+    built_for = str(before.get("arch") or arch_of_install(out / "install") or arch)
+    clean = built_for != arch and (out / "install").is_dir()
+    if clean:
+        changed, reason = None, f"arch changed ({built_for} -> {arch}): clean build"
+    elif not (out / "install").is_dir() or (image_id is not None and before.get("image") != image_id):
         changed, reason = None, "first build" if not before else "image changed"
     elif set(old) != set(packages):
         changed, reason = None, "packages added or removed"
@@ -145,17 +151,17 @@ def plan_build(project: Project, comp: Component, image_id: str | None, *, full:
     if image_id is None and before:
         reason += f"; whether the staged image changed: {DRY_RUN_UNKNOWN}"
     image = f"{naming.component_image(project.robot, project.name, comp.name)}:latest"
-    return BuildPlan(component=comp, image=image, image_id=image_id, arch=project.robot.host(comp.runs_on).arch.value,
+    return BuildPlan(component=comp, image=image, image_id=image_id, arch=arch,
                      workspace=ws, out=out, state_file=state_file, packages=packages,
                      files=files, roots=roots, changed=changed, reason=reason,
-                     patches=tuple(patches), copies=copies, workers=os.cpu_count() or 1)
+                     patches=tuple(patches), copies=copies, workers=os.cpu_count() or 1, clean=clean)
 
 
 def with_cmake_toolchain(project: Project, plan: BuildPlan, labels: Mapping[str, str]) -> BuildPlan:
     """``plan`` building with ccache when its staged image (``labels``) has the CMake tool chain; a
     BuildError when the wheels base lacks the tool chain that packages of the workspace need."""
     if labels.get(cmake_packages.LABEL_TOOLCHAIN) == cmake_packages.TOOLCHAIN_CMAKE:
-        return dataclasses.replace(plan, ccache=project.state_dir / "ccache")
+        return dataclasses.replace(plan, ccache=project.state_dir / arches.CCACHE_FOLDER / plan.arch)
     missing = wheels_cmake_packages(project, [plan.workspace])
     if missing:
         raise BuildError(f"component {plan.component.name}: {', '.join(missing)} build with CMake, but its image "
@@ -181,6 +187,9 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callabl
     """colcon build of one component in a throw-away container of its staged image."""
     from robocore.adapters.image_builder import run_streaming
 
+    if plan.clean:  # CMake would keep the other arch's objects (same compiler path, older sources)
+        for sub in ("build", "install"):
+            remove_tree(plan.out / sub)
     for sub in ("build", "install", "log"):
         (plan.out / sub).mkdir(parents=True, exist_ok=True)
     uid, gid = os.getuid(), os.getgid()
@@ -221,6 +230,7 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callabl
                              hint=f"fix it in {plan.component.folder}, then run build --component {name}")
         tail = "\n".join(f"  {line}" for line in other[-20:])
         raise BuildError(f"component {name}: colcon build exited {code}\n{tail}")
+    write_atomic(plan.out / "install" / arches.INSTALL_ARCH_FILE, plan.arch + "\n")
     record_build(plan)
     built = [e.package for e in events if e.state == "finished"]
     return Outcome(what=name, role="build", action="built", reason=plan.reason, image_id=plan.image_id,
@@ -337,6 +347,25 @@ def _run_colcon(project: Project, todo: Sequence[BuildPlan], on_hosts: Sequence[
 # ---------------------------------------------------------------------------------------------- state
 
 
+def arch_of_install(install: Path) -> str | None:
+    """The arch an install tree records (:data:`robocore.plan.arches.INSTALL_ARCH_FILE`), None when it records none."""
+    try:
+        text = (install / arches.INSTALL_ARCH_FILE).read_text().strip()
+    except OSError:
+        return None
+    return text or None
+
+
+def remove_tree(path: Path) -> None:
+    """Remove a build output folder of robocore's own (a symlink is removed, never followed)."""
+    import shutil
+
+    if path.is_symlink() or path.is_file():
+        path.unlink()
+    elif path.is_dir():
+        shutil.rmtree(path)
+
+
 def output_candidates(out: Path, files: WorkspaceFiles) -> dict[str, str]:
     """Digests of the regular files under ``out``/{install,build} named like some source file."""
     names = {rel.rsplit("/", 1)[-1] for members in files.values() for rel in members}
@@ -363,6 +392,7 @@ def record_build(plan: BuildPlan) -> None:
 
 def _record(plan: BuildPlan, copies: Mapping[str, Mapping[str, list[str]]]) -> None:
     write_build_state(plan.state_file, {
+        "arch": plan.arch,
         "image": plan.image_id,
         "packages": plan.packages,
         "files": {p: {rel: [d, x] for rel, (d, x) in sorted(m.items())} for p, m in sorted(plan.files.items())},

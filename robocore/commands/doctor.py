@@ -14,9 +14,10 @@ from typing import Any, ClassVar
 
 from robocore.adapters import ssh
 from robocore.adapters.docker_hosts import client_for, describe
+from robocore.commands.arch_checks import host_arch
 from robocore.commands.context import Options
 from robocore.commands.hosts import for_each_host, select_hosts
-from robocore.config.model import DockerAccess, Host, docker_arch
+from robocore.config.model import DockerAccess, Host
 from robocore.errors import GroupError, HostError, RobocoreError
 from robocore.project import Project
 
@@ -127,12 +128,10 @@ def _check_docker(host: Host, client: Any, report: HostReport) -> None:
     if _version_tuple(text) < MIN_DOCKER:
         report.found(f"Docker {text} is older than {'.'.join(map(str, MIN_DOCKER))}",
                      "upgrade docker (Debian/Ubuntu: apt-get install docker.io)")
-    machine = str(client.info().get("Architecture", "?"))
-    arch = docker_arch(machine)
-    report.facts.append(arch)
-    if arch != host.arch.value:
-        report.found(f"robot.yaml says arch: {host.arch.value} but the daemon runs on {machine}",
-                     f"set arch: {arch} for host {host.name} in robot.yaml")
+    found = host_arch(host, str(client.info().get("Architecture", "?")))
+    report.facts.append(found.describe())
+    if found.problem:
+        report.found(found.problem, found.hint or "")
 
 
 def _check_ssh(host: Host, report: HostReport) -> None:

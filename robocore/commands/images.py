@@ -21,7 +21,7 @@ from robocore.commands.reporting import Outcome, Reporter, report_outcomes
 from robocore.config.model import Component
 from robocore.errors import BuildError, ConfigError, Problem
 from robocore.files import ROBOT_FILE
-from robocore.plan import dockerfiles, naming
+from robocore.plan import discovery, dockerfiles, naming
 from robocore.plan.dockerfiles import ContextEntry, ImagePlan
 from robocore.plan.inputs import inputs_hash
 from robocore.project import Project
@@ -31,19 +31,30 @@ if TYPE_CHECKING:
 
 
 def refuse_config_problems(project: Project) -> None:
-    """ConfigError when robot.yaml asks for images robocore cannot make (the wheels base's limits)."""
+    """ConfigError when robot.yaml asks for images robocore cannot make (the wheels base's limits, a discovery
+    server on a host of another arch than this machine: its image is this machine's base)."""
     found = dockerfiles.wheels_problems(project.robot)
+    native = native_arch()
+    robot = project.robot
+    for server in discovery.for_robot(robot).servers():
+        index, host = next((i, h) for i, h in enumerate(robot.hosts) if h.name == server.host)
+        if host.arch.value != native:
+            found.append((("hosts", index, "arch"), f"{host.arch.value}: the discovery server (ROS master) runs here "
+                          f"in the base image of this machine's arch ({native}); put it on a host of arch {native}"))
     if found:
         raise ConfigError([Problem(ROBOT_FILE, None, ".".join(str(p) for p in path), message)
                            for path, message in found])
 
 
 def arches(project: Project, components: Sequence[Component] | None = None) -> list[str]:
-    """The archs the components (default: all) built from source run on; the native one when none is."""
+    """The archs the components (default: all) built from source run on, plus the discovery servers' hosts'
+    (they run the base image) when all are asked; the native one when none is."""
     robot = project.robot
     comps = robot.components if components is None else components
-    found = sorted({robot.host(c.runs_on).arch.value for c in comps if c.image is None})
-    return found or [native_arch()]
+    found = {robot.host(c.runs_on).arch.value for c in comps if c.image is None}
+    if components is None:
+        found |= {robot.host(s.host).arch.value for s in discovery.for_robot(robot).servers()}
+    return sorted(found) or [native_arch()]
 
 
 def allowed_protocol(entry: object) -> str | None:

@@ -24,18 +24,43 @@ def native_arch() -> str:
     return docker_arch(host_platform.machine())
 
 
+def emulation_hint(arch: str) -> str:
+    """What to run, as root, so that a Linux machine runs ``arch`` binaries through qemu (design.md section 8)."""
+    qemu = f"qemu-{machine_arch(arch)}"
+    return (f"as root: apt-get install qemu-user-static, then mount -t binfmt_misc binfmt_misc {BINFMT_DIR} "
+            f"(if {BINFMT_DIR}/register is missing) and grep '^:{qemu}:' /usr/lib/binfmt.d/{qemu}.conf > "
+            f"{BINFMT_DIR}/register (systemd machines: systemctl restart systemd-binfmt)")
+
+
+def binfmt_problem(text: str | None) -> str | None:
+    """Why a binfmt_misc entry's text (None: no entry) does not run foreign binaries in containers; None if it does.
+
+    Containers need the F flag: the interpreter is opened at registration, so no qemu file is needed in the image.
+    """
+    if text is None:
+        return "is not registered"
+    if not text.startswith("enabled"):
+        return "is disabled"
+    flags = next((line.split(":", 1)[1].strip() for line in text.splitlines() if line.startswith("flags:")), "")
+    return None if "F" in flags else f"lacks the F flag (flags: {flags or 'none'})"
+
+
 def check_emulation(arch: str, native: str, who: str) -> None:
-    """Raise ToolMissing when ``arch`` binaries cannot run here (no binfmt/qemu registration)."""
+    """Raise ToolMissing when ``arch`` binaries cannot run in this machine's containers (no qemu registration)."""
     if arch == native:
         return
-    qemu = machine_arch(arch)
-    if (BINFMT_DIR / f"qemu-{qemu}").exists():
+    entry = BINFMT_DIR / f"qemu-{machine_arch(arch)}"
+    try:
+        text: str | None = entry.read_text()
+    except OSError:
+        text = None
+    why = binfmt_problem(text)
+    if why is None:
         return
     raise ToolMissing(
-        f"{who} needs {arch} images but this machine is {native} and cannot run {arch} binaries "
-        f"({BINFMT_DIR}/qemu-{qemu} is missing)",
-        hint=f"sudo apt-get install qemu-user-static binfmt-support (registers qemu-{qemu} with binfmt_misc), "
-        f"or run `docker run --privileged --rm tonistiigi/binfmt --install {arch}`",
+        f"{who} needs {arch} images but this machine is {native} and cannot run {arch} binaries in containers "
+        f"({entry} {why})",
+        hint=emulation_hint(arch),
     )
 
 

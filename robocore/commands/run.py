@@ -17,6 +17,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
+from robocore.commands.arch_checks import refuse_daemon_arch
 from robocore.commands.composefiles import write_compose_files
 from robocore.commands.context import DRY_RUN_UNKNOWN, Options
 from robocore.commands.hosts import connect, for_each_host, managed_containers, select_hosts, short_error
@@ -152,6 +153,7 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
     client = connect(project, host)
     local = None
     try:
+        refuse_daemon_arch(host, str(client.info().get("Architecture", "?")))
         if not host.is_local:
             from robocore.adapters.docker_hosts import local_client
 

@@ -24,6 +24,7 @@ from pathlib import Path, PurePosixPath
 from typing import ClassVar
 
 from robocore.adapters import rsync, ssh
+from robocore.commands.arch_checks import refuse_foreign_install
 from robocore.commands.context import Options
 from robocore.commands.hosts import for_each_host, lock_holder, select_hosts
 from robocore.commands.reporting import Reporter
@@ -89,6 +90,7 @@ def plan_host(project: Project, host: Host, *, dry_run: bool = False) -> list[pl
                                  hint=f"run `build --component {comp.name}` first")
             refuse_links_leaving(install, project.root, what=f"the install tree of component {comp.name}, "
                                  f"sent to host {host.name}")
+            refuse_foreign_install(install, host, comp.name)
             sources.append(plan.Source(install, "install"))
         if not dds_dir.is_dir() or not compose.is_file():
             raise UsageError(f"host {host.name}: {compose if not compose.is_file() else dds_dir} is missing",

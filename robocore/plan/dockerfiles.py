@@ -28,7 +28,7 @@ from pathlib import Path, PurePosixPath
 from robocore.config.loader import ROBOT_FILE
 from robocore.config.model import Arch, BaseKind, Component, Repository, Robot
 from robocore.errors import ConfigError, Problem
-from robocore.plan import cmake_packages, colcon, naming
+from robocore.plan import arches, cmake_packages, colcon, naming
 
 #: ROS 2 wheels from PyPI, pinned per distro (x86_64, CPython 3.11/3.12). See design.md §5.
 WHEELS: dict[str, tuple[str, ...]] = {
@@ -106,8 +106,8 @@ class ImagePlan:
 
 
 def platform(arch: str) -> str:
-    """Docker platform string of an arch."""
-    return f"linux/{arch}"
+    """Docker platform string of an arch (see :func:`robocore.plan.arches.platform`)."""
+    return arches.platform(arch)
 
 
 def venv(distro: str) -> str:
@@ -116,8 +116,8 @@ def venv(distro: str) -> str:
 
 
 def official_image(robot: Robot) -> str:
-    """The FROM image of an official base."""
-    return robot.base.image or f"ros:{robot.ros_distro.value}-ros-base"
+    """The reference an official base's root is pulled from (its FROM is the per-arch name of it)."""
+    return arches.upstream_root(robot)
 
 
 def wheels_problems(robot: Robot) -> list[tuple[tuple[str | int, ...], str]]:
@@ -139,8 +139,8 @@ def wheels_problems(robot: Robot) -> list[tuple[tuple[str | int, ...], str]]:
 
 
 def base_tag(arch: str, native_arch: str) -> str:
-    """Tag of the base image for ``arch``: ``latest`` on the dev machine's arch, else ``latest-<arch>``."""
-    return "latest" if arch == native_arch else f"latest-{arch}"
+    """Tag of the base image for ``arch`` (see :func:`robocore.plan.arches.base_tag`)."""
+    return arches.base_tag(arch, native_arch)
 
 
 def _env_lines(pairs: Sequence[tuple[str, str]]) -> str:
@@ -206,7 +206,8 @@ def _debian_lines(distro: str) -> list[str]:
         # nodes run Debian's python3: a component's pip_packages go there, beside Debian's ROS modules
         _env_lines([("ROS_DISTRO", distro), ("LANG", "C.UTF-8"), ("PIP_DISABLE_PIP_VERSION_CHECK", "1"),
                     ("PIP_NO_CACHE_DIR", "1"), ("PIP_BREAK_SYSTEM_PACKAGES", "1")]),
-        f"RUN {_apt_install(DEBIAN_APT)}",
+        # the root robocore bootstraps has them already (mmdebstrap --include): apt runs only for another root
+        f"RUN dpkg -s {' '.join(DEBIAN_APT)} >/dev/null 2>&1 || ({_apt_install(DEBIAN_APT)})",
         f"RUN python3 -m venv --system-site-packages {env} && {env}/bin/pip install {' '.join(DEBIAN_TOOLS)} "
         f"&& ln -sf {env}/bin/colcon /usr/local/bin/colcon",
         f"COPY debian-setup.bash /opt/ros/{distro}/setup.bash",

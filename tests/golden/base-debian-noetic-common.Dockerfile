@@ -6,7 +6,7 @@ ENV ROS_DISTRO=noetic \
     PIP_DISABLE_PIP_VERSION_CHECK=1 \
     PIP_NO_CACHE_DIR=1 \
     PIP_BREAK_SYSTEM_PACKAGES=1
-RUN apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends ros-core-dev rosbash python3-rospy python3-roslaunch python3-rosnode python3-rostopic python3-rosservice python3-rosmsg g++ cmake make ccache libgtest-dev python3-venv python3-pip python3-pytest procps ca-certificates && rm -rf /var/lib/apt/lists/*
+RUN dpkg -s ros-core-dev rosbash python3-rospy python3-roslaunch python3-rosnode python3-rostopic python3-rosservice python3-rosmsg g++ cmake make ccache libgtest-dev python3-venv python3-pip python3-pytest procps ca-certificates >/dev/null 2>&1 || (apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends ros-core-dev rosbash python3-rospy python3-roslaunch python3-rosnode python3-rostopic python3-rosservice python3-rosmsg g++ cmake make ccache libgtest-dev python3-venv python3-pip python3-pytest procps ca-certificates && rm -rf /var/lib/apt/lists/*)
 RUN python3 -m venv --system-site-packages /opt/ros/noetic/venv && /opt/ros/noetic/venv/bin/pip install colcon-core colcon-ros colcon-cmake colcon-python-setup-py colcon-library-path colcon-bash colcon-package-selection colcon-parallel-executor colcon-output && ln -sf /opt/ros/noetic/venv/bin/colcon /usr/local/bin/colcon
 COPY debian-setup.bash /opt/ros/noetic/setup.bash
 RUN ln -sfn noetic /opt/ros/Debian

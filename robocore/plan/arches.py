@@ -1,0 +1,180 @@
+"""Per-arch names and facts of everything robocore makes for a CPU arch (pure).
+
+An arch is a value carried with every image, tree and cache key, decided here once:
+
+- the **root image** a base is built FROM is always a per-arch local name, ``robocore/<arch>/...``, so two
+  arches never share a name even when they come from one multi-arch reference: the wheels and debian
+  bases' Debian root is ``robocore/<arch>/debian:bookworm-<kind>`` (bootstrapped with ``mmdebstrap
+  --arch``, or ``debian:bookworm`` pulled with its platform and tagged so), an official base's
+  ``ros:<distro>-ros-base`` (or ``base.image``) is pulled with its platform and tagged
+  ``robocore/<arch>/<reference>``;
+- the **base image** is ``<prefix>base:latest`` on the dev machine's arch and ``<prefix>base:latest-<arch>``
+  for another; every image's inputs hash includes its platform, a root's includes its arch;
+- **ccache** is ``.robocore/ccache/<arch>``;
+- an **install tree** records the arch it was built for in ``install/`` :data:`INSTALL_ARCH_FILE`, and
+  ``sync`` compares it (and the ELF headers of its files) with the host's arch.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from robocore.config.model import BaseKind, Robot, machine_arch
+from robocore.plan import naming
+
+#: The Debian release of the registry-free roots.
+SUITE = "bookworm"
+#: Repository of the per-arch local names (``robocore/<arch>/...``).
+LOCAL_PREFIX = "robocore"
+#: File in an install tree naming the arch its binaries were built for (one line: ``arm64``).
+INSTALL_ARCH_FILE = ".robocore-arch"
+#: ELF ``e_machine`` values of the arches robocore knows.
+ELF_MACHINES = {62: "amd64", 183: "arm64"}
+#: Folder of the per-arch ccache caches, under the project's ``.robocore/``.
+CCACHE_FOLDER = "ccache"
+
+_UNSAFE = re.compile(r"[^a-z0-9._/-]+")
+
+
+def platform(arch: str) -> str:
+    """Docker platform string of an arch (``linux/arm64``)."""
+    return f"linux/{arch}"
+
+
+def base_tag(arch: str, native: str) -> str:
+    """Tag of the base image for ``arch``: ``latest`` on the dev machine's arch, else ``latest-<arch>``."""
+    return "latest" if arch == native else f"latest-{arch}"
+
+
+def root_image(kind: BaseKind, arch: str) -> str:
+    """The Debian root image of a wheels or debian base for ``arch``: ``robocore/<arch>/debian:bookworm-<kind>``."""
+    return f"{LOCAL_PREFIX}/{arch}/debian:{SUITE}-{kind.value}"
+
+
+def split_reference(ref: str) -> tuple[str, str]:
+    """``(repository, tag)`` of an image reference; ``latest`` when it has none, the digest for ``repo@sha256:``."""
+    if "@" in ref:
+        repository, _, digest = ref.partition("@")
+        return repository, digest.replace(":", "-")[:40]
+    last = ref.rsplit("/", 1)[-1]
+    if ":" in last:
+        repository, _, tag = ref.rpartition(":")
+        return repository, tag
+    return ref, "latest"
+
+
+def pinned_image(ref: str, arch: str) -> str:
+    """The per-arch local name of a pulled image: ``ros:noetic-ros-base`` -> ``robocore/arm64/ros:noetic-ros-base``.
+
+    A multi-arch reference holds one arch at a time on a daemon (pulling another platform moves the tag);
+    the per-arch name keeps each arch's image where the base's FROM finds it.
+    """
+    repository, tag = split_reference(ref)
+    safe = _UNSAFE.sub("-", repository.lower().replace(":", "-")).strip("/-") or "image"
+    return f"{LOCAL_PREFIX}/{arch}/{safe}:{tag}"
+
+
+def base_root(robot: Robot, arch: str) -> str:
+    """What the base image for ``arch`` is built FROM (always a per-arch local name)."""
+    if robot.base.kind is BaseKind.official:
+        return pinned_image(upstream_root(robot), arch)
+    if robot.base.image:
+        return pinned_image(robot.base.image, arch)
+    return root_image(robot.base.kind, arch)
+
+
+def upstream_root(robot: Robot) -> str:
+    """The reference a base's root comes from when it is pulled (``ros:<distro>-ros-base``, ``debian:bookworm``
+    or ``base.image``)."""
+    if robot.base.image:
+        return robot.base.image
+    if robot.base.kind is BaseKind.official:
+        return f"ros:{robot.ros_distro.value}-ros-base"
+    return f"debian:{SUITE}"
+
+
+@dataclass(frozen=True)
+class RootStrap:
+    """How a registry-free root is bootstrapped for one arch (the mmdebstrap inputs of its content hash)."""
+
+    arch: str
+    packages: tuple[str, ...]
+    variant: str = "apt"
+    excludes: tuple[str, ...] = ("/usr/share/doc/*", "/usr/share/man/*", "/usr/share/locale/*")
+
+    def argv(self, tarball: str, mirror: str) -> list[str]:
+        """The mmdebstrap command line writing the root to ``tarball`` from ``mirror`` (the caller checks that
+        the mirror is a URL and the tarball an absolute path, so neither is read as an option)."""
+        argv = ["mmdebstrap", f"--arch={self.arch}", f"--variant={self.variant}",
+                f"--include={','.join(self.packages)}", '--aptopt=APT::Install-Recommends "false"']
+        argv += [f"--dpkgopt=path-exclude={pattern}" for pattern in self.excludes]
+        return [*argv, SUITE, tarball, mirror]
+
+    def key(self) -> str:
+        """The text its content hash is made from (arch, variant, packages, excludes)."""
+        return "\n".join([SUITE, self.arch, self.variant, *self.packages, "--", *self.excludes])
+
+
+def root_strap(kind: BaseKind, arch: str, packages: Sequence[str]) -> RootStrap:
+    """The bootstrap of ``kind``'s root for ``arch``: the base's own apt packages are unpacked by mmdebstrap
+    (natively, with only maintainer scripts emulated), so the base's apt step has nothing left to do."""
+    del kind  # the packages are the kind's; the name carries the kind
+    return RootStrap(arch=arch, packages=tuple(sorted(set(packages))))
+
+
+@dataclass(frozen=True)
+class ArchPlan:
+    """Everything robocore names for one arch of a robot, as ``prepare-base``/``stage``/``build`` use it."""
+
+    arch: str
+    native: bool  # the dev machine runs it natively (else through qemu-user via binfmt_misc)
+    platform: str
+    root: str  # the base's FROM
+    upstream: str  # what the root is pulled from (with this arch's platform) when it is not here yet
+    bootstrapped: bool  # without a registry, the root is made with mmdebstrap --arch (wheels and debian bases)
+    base: str  # the base image reference
+    ccache: str  # project-relative folder of this arch's ccache
+    components: tuple[str, ...]  # components built from source for this arch
+
+    def describe(self) -> str:
+        """Lines for a dry run and the golden files."""
+        how = "native" if self.native else f"emulated (qemu-{machine_arch(self.arch)})"
+        return "\n".join([
+            f"arch {self.arch} [{self.platform}] {how}",
+            f"  root: {self.root} (local, else {self.upstream} pulled for {self.platform}"
+            + (f", else mmdebstrap --arch={self.arch})" if self.bootstrapped else ")"),
+            f"  base: {self.base}",
+            f"  ccache: {self.ccache}",
+            f"  components: {', '.join(self.components) or '(none)'}",
+        ])
+
+
+def arch_plans(robot: Robot, project_name: str, native: str) -> list[ArchPlan]:
+    """One :class:`ArchPlan` per arch the robot's source-built components run on (the native one when none is)."""
+    by_arch: dict[str, list[str]] = {}
+    for comp in robot.components:
+        if comp.image is None:
+            by_arch.setdefault(robot.host(comp.runs_on).arch.value, []).append(comp.name)
+    if not by_arch:
+        by_arch[native] = []
+    base_name = naming.base_image(robot, project_name)
+    plans = []
+    for arch in sorted(by_arch):
+        upstream = upstream_root(robot)
+        plans.append(ArchPlan(
+            arch=arch, native=arch == native, platform=platform(arch), root=base_root(robot, arch),
+            upstream=upstream, bootstrapped=robot.base.kind is not BaseKind.official and not robot.base.image,
+            base=f"{base_name}:{base_tag(arch, native)}",
+            ccache=f".robocore/{CCACHE_FOLDER}/{arch}", components=tuple(by_arch[arch]),
+        ))
+    return plans
+
+
+def elf_arch(header: bytes) -> str | None:
+    """The arch of an ELF file from its first 20 bytes (``arm64``, ``amd64``, ``machine-<n>``); None if not ELF."""
+    if len(header) < 20 or header[:4] != b"\x7fELF":
+        return None
+    machine = int.from_bytes(header[18:20], "little" if header[5] == 1 else "big")
+    return ELF_MACHINES.get(machine, f"machine-{machine}")

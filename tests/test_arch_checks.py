@@ -1,0 +1,161 @@
+"""Refusals about arches (robocore.commands.arch_checks): install trees of another arch, daemons that cannot run
+their host's arch; and the build's per-arch records (ccache folder, install marker, clean build on an arch change)."""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import pytest
+
+from robocore.commands import arch_checks, build, images, machine
+from robocore.config.model import Host
+from robocore.errors import ArchMismatch, ConfigError
+from robocore.plan import arches
+from robocore.project import Project
+
+
+def _elf(machine: int) -> bytes:
+    return b"\x7fELF" + bytes([2, 1, 1]) + bytes(9) + struct.pack("<HH", 2, machine) + bytes(40)
+
+
+def _tree(tmp_path: Path, *, marker: str | None, elves: dict[str, int]) -> Path:
+    install = tmp_path / "install"
+    (install / "lib" / "pkg").mkdir(parents=True)
+    (install / "setup.bash").write_text("# not an ELF\n")
+    if marker is not None:
+        (install / arches.INSTALL_ARCH_FILE).write_text(marker + "\n")
+    for name, code in elves.items():
+        (install / "lib" / "pkg" / name).write_bytes(_elf(code))
+    return install
+
+
+def _host(arch: str, name: str = "jetson") -> Host:
+    return Host.model_validate({"name": name, "ip": "10.0.0.2", "arch": arch})
+
+
+def test_a_tree_of_the_hosts_arch_passes(tmp_path: Path) -> None:
+    install = _tree(tmp_path, marker="arm64", elves={"talker": 183})
+    arch_checks.refuse_foreign_install(install, _host("arm64"), "talker")
+    assert arch_checks.install_tree_arch(install) == ("arm64", None)
+
+
+def test_a_tree_built_for_another_arch_is_refused_in_one_line(tmp_path: Path) -> None:
+    install = _tree(tmp_path, marker="amd64", elves={"talker": 62})
+    with pytest.raises(ArchMismatch) as info:
+        arch_checks.refuse_foreign_install(install, _host("arm64"), "talker")
+    message = info.value.message
+    assert "\n" not in message and "was built for amd64, but host jetson is arm64" in message
+    assert info.value.exit_code == 2 and "build --component talker" in (info.value.hint or "")
+
+
+def test_an_elf_of_another_arch_in_a_marked_tree_is_refused(tmp_path: Path) -> None:
+    install = _tree(tmp_path, marker="arm64", elves={"a_good": 183, "talker": 62})
+    with pytest.raises(ArchMismatch, match=r"mixes arches \(arm64 and lib/pkg/talker \(amd64\)\)"):
+        arch_checks.refuse_foreign_install(install, _host("arm64"), "talker")
+
+
+def test_an_unmarked_tree_is_judged_by_its_elf_headers(tmp_path: Path) -> None:
+    install = _tree(tmp_path, marker=None, elves={"talker": 62})
+    with pytest.raises(ArchMismatch, match="was built for amd64"):
+        arch_checks.refuse_foreign_install(install, _host("arm64"), "talker")
+    python_only = _tree(tmp_path / "py", marker=None, elves={})
+    arch_checks.refuse_foreign_install(python_only, _host("arm64"), "listener")
+
+
+def test_a_symlinked_elf_is_not_followed(tmp_path: Path) -> None:
+    install = _tree(tmp_path, marker="arm64", elves={})
+    outside = tmp_path / "x86"
+    outside.write_bytes(_elf(62))
+    (install / "lib" / "pkg" / "link").symlink_to(outside)
+    arch_checks.refuse_foreign_install(install, _host("arm64"), "talker")
+
+
+def _binfmt(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, text: str | None) -> None:
+    folder = tmp_path / "binfmt_misc"
+    folder.mkdir()
+    if text is not None:
+        (folder / "qemu-aarch64").write_text(text)
+    monkeypatch.setattr(machine, "BINFMT_DIR", folder)
+
+
+def test_native_and_emulated_hosts(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    _binfmt(tmp_path, monkeypatch, "enabled\ninterpreter /usr/libexec/qemu-binfmt/aarch64-binfmt-P\nflags: POF\n")
+    local = Host.model_validate({"name": "dev", "ip": "127.0.0.1", "arch": "arm64"})
+    assert arch_checks.host_arch(local, "aarch64").describe() == "arm64 native"
+    emulated = arch_checks.refuse_daemon_arch(local, "x86_64")
+    assert emulated.emulated and emulated.describe() == "arm64 emulated (qemu-aarch64 on amd64)"
+
+
+@pytest.mark.parametrize(("text", "why"), [
+    (None, "is not registered"),
+    ("disabled\nflags: POF\n", "is disabled"),
+    ("enabled\nflags: PO\n", "lacks the F flag (flags: PO)"),
+])
+def test_a_daemon_that_cannot_run_the_hosts_arch_is_refused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                            text: str | None, why: str) -> None:
+    _binfmt(tmp_path, monkeypatch, text)
+    local = Host.model_validate({"name": "dev", "ip": "127.0.0.1", "arch": "arm64"})
+    found = arch_checks.host_arch(local, "x86_64")
+    assert found.describe() == "arm64 (cannot run on amd64)"
+    with pytest.raises(ArchMismatch) as info:
+        arch_checks.refuse_daemon_arch(local, "x86_64")
+    assert "\n" not in info.value.message and why in info.value.message
+    assert "its Docker daemon runs on amd64 and cannot run arm64 images" in info.value.message
+    assert "qemu-user-static" in (info.value.hint or "")
+
+
+ROBOT = """\
+ros_distro: noetic
+base: {{kind: debian}}
+hosts:
+  - {{name: ipc, ip: 192.168.1.10, arch: amd64}}
+  - {{name: jetson, ip: 192.168.1.20, arch: arm64}}
+discovery: {{servers: [{{host: {master}}}]}}
+components:
+  - {{name: talker, folder: components/talker, runs_on: {talker}}}
+"""
+PACKAGE = """<?xml version="1.0"?>
+<package format="3"><name>demo_talker</name><version>0.1.0</version><description>d</description>
+<maintainer email="me@example.com">me</maintainer><license>MIT</license>
+<buildtool_depend>catkin</buildtool_depend></package>
+"""
+
+
+def _project(tmp_path: Path, *, talker: str = "jetson", master: str = "ipc") -> Project:
+    (tmp_path / "robot.yaml").write_text(ROBOT.format(talker=talker, master=master))
+    pkg = tmp_path / "components" / "talker" / "src" / "demo_talker"
+    pkg.mkdir(parents=True, exist_ok=True)
+    (pkg / "package.xml").write_text(PACKAGE)
+    (pkg / "CMakeLists.txt").write_text("project(demo_talker)\n")
+    return Project.load(tmp_path)
+
+
+def test_a_build_for_another_arch_than_the_last_one_starts_clean(tmp_path: Path) -> None:
+    project = _project(tmp_path)
+    plan = build.plan_build(project, project.component("talker"), "img")
+    assert plan.arch == "arm64" and plan.changed is None and not plan.clean
+    (plan.out / "install").mkdir(parents=True)
+    build.write_atomic(plan.out / "install" / arches.INSTALL_ARCH_FILE, "arm64\n")
+    build.record_build(plan)
+    again = build.plan_build(project, project.component("talker"), "img")
+    assert again.changed == [] and not again.clean
+    moved = _project(tmp_path, talker="ipc")  # the talker now runs on the amd64 host
+    redo = build.plan_build(moved, moved.component("talker"), "img")
+    assert redo.clean and redo.changed is None and redo.reason == "arch changed (arm64 -> amd64): clean build"
+    with_cache = build.with_cmake_toolchain(moved, redo, {"dev.robocore.toolchain": "cmake"})
+    assert with_cache.ccache == moved.state_dir / "ccache" / "amd64"
+
+
+def test_a_master_on_a_host_of_another_arch_is_refused_before_any_build(tmp_path: Path) -> None:
+    project = _project(tmp_path, master="jetson")
+    native = machine.native_arch()
+    if native == "arm64":  # the rule is relative to the dev machine: its base runs the master
+        project = _project(tmp_path, master="ipc")
+    with pytest.raises(ConfigError) as info:
+        images.refuse_config_problems(project)
+    [problem] = info.value.problems
+    assert "the discovery server (ROS master) runs here" in str(problem) and "hosts.1.arch" in str(problem)
+    fine = _project(tmp_path, master="ipc" if native == "amd64" else "jetson")
+    images.refuse_config_problems(fine)
+    assert images.arches(fine) == ["amd64", "arm64"]
