@@ -1,11 +1,13 @@
 """A robot host that builds its own components (``builds_here: true``): the noetic project on the debian base.
 
-Two Docker-in-Docker hosts over ssh: robot-a builds its own components and runs the roscpp talker and the
-ROS master; robot-b runs the rospy listener, built on this machine as usual.
+Two Docker-in-Docker hosts over ssh: robot-a is an arm64 host (its daemon runs arm64 containers through the
+kernel's qemu registration, as an arm64 robot's own daemon runs them natively) that builds its own components
+and runs the roscpp talker; robot-b (amd64) runs the ROS master and the rospy listener, built on this machine.
 
 - ``build`` compiles the talker on robot-a: its build container is created on robot-a's daemon and never on
-  this machine's (Docker's events of both daemons, negative control), the install tree is on robot-a and
-  not on this machine; a second ``build`` is up to date without a container anywhere;
+  this machine's (Docker's events of both daemons, negative control), the install tree is on robot-a (an
+  aarch64 ELF, the arch recorded) and not on this machine; a second ``build`` is up to date without a
+  container anywhere;
 - ``sync`` releases that tree from robot-a's own build folder (this machine has none to send), ``run`` starts
   both hosts, robot-b's listener hears robot-a's talker through the master; robot-b alone hears nothing
   (negative control);
@@ -39,21 +41,26 @@ pytestmark = pytest.mark.docker
 
 NAME = "robocore-it-hostbuild"
 TALKER_TEXT = "hello from talker #"
+ARCHES = {"robot-a": "arm64", "robot-b": "amd64"}
+#: ELF e_machine of each arch (bytes 18-19 of the header, little-endian).
+ELF_MACHINE = {"amd64": "62 0", "arm64": "183 0"}
+MACHINES = {"amd64": "x86_64", "arm64": "aarch64"}
 
 
 @pytest.fixture(scope="module")
 def project(robot_fleets: Callable[..., RobotFleet], run_robocore: RobocoreCli,
             docker_client: Any) -> Iterator[tuple[RobotFleet, Path]]:
-    """The template's noetic project, staged: talker and master on robot-a (builds_here), listener on robot-b."""
+    """The template's noetic project, staged: the talker on robot-a (arm64, builds_here), master and listener on
+    robot-b (amd64)."""
     fleet = robot_fleets(2)
     parent = Path(tempfile.mkdtemp(prefix="robocore-it-"))
     root = parent / NAME
     run_robocore(None, "init", str(root), "--defaults", "--distro", "noetic", "--base", "debian")
     data = yaml.safe_load((root / "robot.yaml").read_text())
-    data["hosts"] = [{"name": "robot-a", "ip": fleet.hosts[0].ip, "user": "root", "arch": "amd64",
+    data["hosts"] = [{"name": "robot-a", "ip": fleet.hosts[0].ip, "user": "root", "arch": ARCHES["robot-a"],
                       "builds_here": True},
-                     {"name": "robot-b", "ip": fleet.hosts[1].ip, "user": "root", "arch": "amd64"}]
-    data["discovery"] = {"servers": [{"host": "robot-a"}]}
+                     {"name": "robot-b", "ip": fleet.hosts[1].ip, "user": "root", "arch": ARCHES["robot-b"]}]
+    data["discovery"] = {"servers": [{"host": "robot-b"}]}
     for comp in data["components"]:
         comp["runs_on"] = "robot-a" if comp["name"] == "talker" else "robot-b"
     (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
@@ -94,8 +101,10 @@ def test_the_host_builds_its_talker_and_robot_b_hears_it(project: tuple[RobotFle
     assert _build_creations(docker_client, start) == ["listener"]
     assert not (root / ".robocore" / "build" / "talker" / "install").exists()  # the tree stayed there
     talker = "/root/robocore/talker/work/install/demo_talker/lib/demo_talker/talker"
-    assert host.ssh(fleet, "sh", "-c", 'head -c 4 "$1" | od -c | head -1', "sh", talker).split()[1:5] == \
-        ["177", "E", "L", "F"]
+    header = host.ssh(fleet, "sh", "-c", 'od -An -tu1 -j18 -N2 "$1"', "sh", talker).split()
+    assert " ".join(header) == ELF_MACHINE[ARCHES["robot-a"]], header  # compiled for robot-a's arch
+    recorded = host.ssh(fleet, "cat", "/root/robocore/talker/work/install/.robocore-arch").strip()
+    assert recorded == ARCHES["robot-a"]
 
     # nothing changed: up to date, no container anywhere
     again = time.time() - 1
@@ -108,11 +117,14 @@ def test_the_host_builds_its_talker_and_robot_b_hears_it(project: tuple[RobotFle
     assert synced["talker"]["changed"] and synced["talker"]["host"] == "robot-a", synced
     assert host.ssh(fleet, "test", "-x", "/root/robocore/talker/current/install/demo_talker/lib/demo_talker/talker",
                     check=False) == ""
-    # robot-b alone: no master, no talker, nothing heard (negative control)
+    # robot-b alone: the master and the listener, no talker, nothing heard (negative control)
     run_robocore(root, "run", "--host", "robot-b", "--quiet")
     time.sleep(8)
     assert _heard(fleet, TALKER_TEXT) == []
     run_robocore(root, "run", "--host", "robot-a", "--quiet")
+    talker_container = fleet.client(0).containers.get(f"{NAME}-talker")
+    machine = talker_container.exec_run(["uname", "-m"]).output.decode().strip()
+    assert machine == MACHINES[ARCHES["robot-a"]], machine
     assert wait_for(lambda: _heard(fleet, TALKER_TEXT), 90, 1), "robot-b never heard the talker built on robot-a"
     # a sync with nothing new keeps the release
     synced = {r["component"]: r for r in _results(run_robocore, root, "sync") if r["kind"] == "sync"}
@@ -141,7 +153,6 @@ def test_release_gives_each_host_its_own_arch_under_one_reference(project: tuple
                                                                  tmp_path_factory: pytest.TempPathFactory) -> None:
     fleet, root = project
     original = (root / "robot.yaml").read_text()
-    arches = {"robot-a": "amd64", "robot-b": "amd64"}
     with serve_registry(fleet, tmp_path_factory.mktemp("registry")) as registry:
         try:
             data = yaml.safe_load(original)
@@ -152,7 +163,7 @@ def test_release_gives_each_host_its_own_arch_under_one_reference(project: tuple
                 listed = manifest(registry, f"{NAME}-{repo}", "v1")
                 assert listed["mediaType"] == "application/vnd.docker.distribution.manifest.list.v2+json", listed
                 platforms = sorted(m["platform"]["architecture"] for m in listed["manifests"])
-                assert platforms == sorted({arches[h] for h in hosts}), listed
+                assert platforms == sorted({ARCHES[h] for h in hosts}), listed
             # negative control: the list names no image of an arch nobody runs; a host asking for it gets none
             from docker.errors import APIError
 
@@ -164,9 +175,9 @@ def test_release_gives_each_host_its_own_arch_under_one_reference(project: tuple
                 container = fleet.client(index).containers.get(f"{NAME}-{component}")
                 assert container.attrs["Config"]["Image"] == f"{registry}/{NAME}-{component}:v1"
                 machine = container.exec_run(["uname", "-m"]).output.decode().strip()
-                assert machine == {"amd64": "x86_64", "arm64": "aarch64"}[arches[host]], (host, machine)
+                assert machine == MACHINES[ARCHES[host]], (host, machine)
                 image = fleet.client(index).images.get(f"{registry}/{NAME}-{component}:v1")
-                assert image.attrs["Architecture"] == arches[host]
+                assert image.attrs["Architecture"] == ARCHES[host]
             assert wait_for(lambda: _heard(fleet, TALKER_TEXT, time.time() - 20) or
                             _heard(fleet, "built on robot-a #", time.time() - 20), 90, 1)
         finally:

@@ -18,6 +18,7 @@ from robocore.config.model import Host, Robot
 from robocore.errors import UsageError
 from robocore.plan import colcon, naming
 from robocore.plan import remote_build as plan
+from robocore.plan.arches import INSTALL_ARCH_FILE
 from robocore.plan.sync import LOCK_BUSY
 from robocore.project import Project
 
@@ -124,10 +125,14 @@ def test_the_lock_script_takes_the_sync_lock_makes_the_folders_and_says_who_buil
     second = subprocess.run(plan.lock_argv(host, "bob@dev", where), capture_output=True, text=True,
                             stdin=subprocess.DEVNULL)
     assert second.returncode == LOCK_BUSY and "alice@dev" in second.stderr
-    holder.stdin.write("done\n")
+    holder.stdin.write(plan.finish_line("arm64") + "\n")  # a successful build: its arch goes into the tree
     holder.stdin.flush()
     assert holder.stdout.readline().strip() == plan.DONE
     assert holder.wait(timeout=10) == 0
+    assert Path(str(where.install / INSTALL_ARCH_FILE)).read_text() == "arm64\n"
+    assert plan.finish_line(None) == "done"
+    with pytest.raises(ValueError):
+        plan.finish_line("arm64; rm -rf /")
     assert not (tmp_path / "pwned").exists() and (tmp_path / "root; touch pwned" / ".robocore-sync.lock").is_file()
     with pytest.raises(ValueError):
         plan.parse_ids(["uid=; rm", "gid=0"])

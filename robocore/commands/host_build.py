@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from robocore.adapters import rsync, ssh
+from robocore.commands.arch_checks import refuse_daemon_arch
 from robocore.commands.colcon_output import colcon_listener
 from robocore.commands.context import DRY_RUN_UNKNOWN
 from robocore.commands.hosts import connect
@@ -28,7 +29,7 @@ from robocore.commands.reporting import Outcome, Reporter
 from robocore.commands.state import read_build_state, write_build_state
 from robocore.config.model import Component, Host
 from robocore.errors import BuildError, HostError, RobocoreError
-from robocore.plan import colcon, naming
+from robocore.plan import arches, colcon, naming
 from robocore.plan import remote_build as plan
 from robocore.plan.sync import LOCK_BUSY, LOCK_FILE
 from robocore.project import Project
@@ -117,6 +118,8 @@ def build_on_host(project: Project, build: HostBuildPlan, workspace: Path, holde
     start = time.monotonic()
     client = connect(project, host)
     try:
+        # the host's daemon must run the host's arch (natively, or emulated with qemu registered there)
+        emulated = refuse_daemon_arch(host, str(client.info().get("Architecture", "?"))).emulated
         update(name, f"image to {host.name}")
         ensure_images(client, [build.image], registry=project.robot.registry, progress=False, label=host.name)
         refused = functools.partial(_lock_refused, host)
@@ -132,8 +135,9 @@ def build_on_host(project: Project, build: HostBuildPlan, workspace: Path, holde
             rsync.run(host, plan.workspace_rsync_argv(workspace, build.where, host, ssh.rsh_command(host),
                                                       skip_dirs=_skip_dirs()))
             update(name, f"colcon build on {host.name}")
-            code, events, other = _colcon(client, project.name, build, user, report, update)
-            session.finish("done", done=plan.DONE, what="releasing the host's lock")
+            code, events, other = _colcon(client, project.name, build, user, report, update, emulated=emulated)
+            session.finish(plan.finish_line(host.arch.value if code == 0 else None), done=plan.DONE,
+                           what="recording the arch of the install tree and releasing the host's lock")
     finally:
         client.close()
     if code != 0:
@@ -151,8 +155,9 @@ def build_on_host(project: Project, build: HostBuildPlan, workspace: Path, holde
 
 
 def _colcon(client: docker.DockerClient, project_name: str, build: HostBuildPlan, user: str, report: Reporter,
-            update: Callable[[str, str], None]) -> tuple[int, list[colcon.PackageEvent], list[str]]:
-    """colcon build in a throw-away container of the component's image on the host's daemon, as ``user``."""
+            update: Callable[[str, str], None], *, emulated: bool) -> tuple[int, list[colcon.PackageEvent], list[str]]:
+    """colcon build in a throw-away container of the component's image on the host's daemon, as ``user``
+    (``emulated``: the daemon's own arch is another one, so the platform is named, as a local build does)."""
     from robocore.adapters.image_builder import run_streaming
 
     name = build.component.name
@@ -166,6 +171,7 @@ def _colcon(client: docker.DockerClient, project_name: str, build: HostBuildPlan
         code = run_streaming(
             client, build.image, argv, user=user, volumes=build.where.mounts(ccache=build.ccache),
             environment=container_env(build), labels=build_labels(project_name, name), on_line=on_line,
+            platform=arches.platform(build.host.arch.value) if emulated else None,
         )
         # an image whose colcon lacks colcon-package-selection: build everything instead
         if not (code == 2 and any("--packages-above" in line for line in other[-3:])):

@@ -24,6 +24,7 @@ from pathlib import Path, PurePosixPath
 
 from robocore.config.model import Host
 from robocore.plan import colcon, naming
+from robocore.plan.arches import INSTALL_ARCH_FILE
 from robocore.plan.layout import component_root
 from robocore.plan.sync import CURRENT, LOCK_BUSY, LOCK_FILE, STAGING, remote_path, remote_sh
 
@@ -32,6 +33,8 @@ WORK = "work"
 LOCKED = "robocore-build-locked"
 #: Printed by :data:`LOCK_SCRIPT` when it lets the lock go.
 DONE = "robocore-build-done"
+#: The last line :data:`LOCK_SCRIPT` reads after a successful build: the arch to record in the install tree.
+ARCH_PREFIX = "arch="
 
 #: Top-level names of a workspace that are never sent (colcon's own output) and names never sent anywhere
 #: in it (hidden files and folders, byte code): what :func:`robocore.commands.workspace.workspace_files` skips.
@@ -41,7 +44,8 @@ _EXCLUDES = (".*", "*.pyc", "*.pyo", "__pycache__/")
 # The host's side of a build. Arguments: the mount root, a line saying who builds, then the component's work
 # folder. Takes the host's sync lock (exit LOCK_BUSY with the holder's line on stderr when taken), makes the
 # work folders (so that Docker does not make them as root), prints the ssh user's uid and gid, then LOCKED;
-# keeps the lock until a line (or the end of) stdin, then prints DONE.
+# keeps the lock until a line (or the end of) stdin: "arch=<arch>" after a successful build writes the arch
+# into the install tree (robocore.plan.arches.INSTALL_ARCH_FILE), anything else writes nothing; prints DONE.
 LOCK_SCRIPT = f"""\
 set -eu
 mount_root=$1; holder=$2; work=$3
@@ -59,7 +63,14 @@ mkdir -p -- "$work/ws" "$work/build" "$work/install" "$work/log" "$work/ccache"
 echo "uid=$(id -u)"
 echo "gid=$(id -g)"
 echo {LOCKED}
-read -r _ || true
+line=
+read -r line || true
+case $line in
+{ARCH_PREFIX}*)
+    arch=${{line#{ARCH_PREFIX}}}
+    case $arch in ''|*[!a-z0-9_]*) echo "not an arch: $arch" >&2; exit 64;; esac
+    printf '%s\n' "$arch" > "$work/install/{INSTALL_ARCH_FILE}" ;;
+esac
 echo {DONE}
 """
 
@@ -131,6 +142,16 @@ def parse_ids(greeting: Sequence[str]) -> str:
     if not (uid.isdigit() and gid.isdigit()):
         raise ValueError(f"no uid=/gid= lines in {list(greeting)!r}")
     return f"{uid}:{gid}"
+
+
+def finish_line(arch: str | None) -> str:
+    """The line that lets :data:`LOCK_SCRIPT` go: with ``arch`` (a successful build), it records it in the install
+    tree first."""
+    if arch is None:
+        return "done"
+    if not arch.isalnum():
+        raise ValueError(f"not an arch: {arch!r}")
+    return f"{ARCH_PREFIX}{arch}"
 
 
 def workspace_rsync_argv(workspace: Path, build: HostBuild, host: Host, rsh: str, *,
