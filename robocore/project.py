@@ -23,6 +23,8 @@ STATE_FOLDERS = ("build", "cache", "compose", "dds", "desktop", "history", "home
                  "test-runs", "x11")
 #: Inside a component's build folder: the state of its last successful build (package hashes, files, copies).
 BUILD_STATE = ".robocore-build.json"
+#: Inside a component's build folder: the state of its last successful build on its host (``builds_here``).
+HOST_BUILD_STATE = ".robocore-host-build.json"
 
 
 @dataclass(frozen=True)
@@ -53,6 +55,10 @@ class ProjectFolder:
     def build_state_file(self, component: str) -> Path:
         """The state of ``component``'s last successful build, beside its colcon folders."""
         return self.build_dir(component) / BUILD_STATE
+
+    def host_build_state_file(self, component: str) -> Path:
+        """The state of ``component``'s last successful build on its host (a host with ``builds_here``)."""
+        return self.build_dir(component) / HOST_BUILD_STATE
 
     @property
     def build_lock(self) -> Path:

@@ -88,6 +88,29 @@ def ensure_images(client: docker.DockerClient, images: list[str], *, registry: s
     return results
 
 
+def pull_for_arch(client: docker.DockerClient, refs: list[str], *, arch: str, label: str = "") -> dict[str, Delivery]:
+    """Pull each of ``refs`` (a release's multi-arch names) on ``client``'s daemon for ``arch``, which the
+    registry's manifest list resolves to that arch's image; a DockerError when it has none of that arch."""
+    from docker.errors import APIError
+
+    results: dict[str, Delivery] = {}
+    for ref in refs:
+        name = normalize(ref)
+        repo, tag = name.rsplit(":", 1)
+        try:
+            check_stream(client.api.pull(repo, tag, stream=True, decode=True, platform=f"linux/{arch}"),
+                         f"{label or 'host'}: pull {name} for linux/{arch}")
+            found = str(client.images.get(name).attrs.get("Architecture") or "")
+        except APIError as exc:
+            raise DockerError(f"{label or 'host'}: pull of {name} for linux/{arch} failed: {exc.explanation or exc}",
+                              hint="was it released (`robocore release --tag V`) with an image of that arch?") from None
+        if found != arch:
+            raise DockerError(f"{label or 'host'}: {name} resolved to an image of arch {found or 'unknown'}, "
+                              f"not {arch}", hint="release again: every host's arch needs its image in the release")
+        results[ref] = Delivery(name, "pulled")
+    return results
+
+
 def _get(client: docker.DockerClient, ref: str) -> Any:
     from docker.errors import ImageNotFound
 

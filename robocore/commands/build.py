@@ -13,6 +13,7 @@ contents are written over those copies and colcon is not started at all
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -20,8 +21,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from robocore.commands import host_build
+from robocore.commands.colcon_output import colcon_listener
 from robocore.commands.context import DRY_RUN_UNKNOWN, Options
-from robocore.commands.hosts import in_parallel
+from robocore.commands.hosts import in_parallel, lock_holder
 from robocore.commands.machine import MAX_PARALLEL, check_emulation, local_docker, native_arch
 from robocore.commands.reporting import Outcome, Reporter, report_outcomes
 from robocore.commands.state import read_build_state, write_build_state
@@ -31,6 +34,7 @@ from robocore.errors import BuildError, UnsafePath, UsageError
 from robocore.files import check_no_links, make_folder, read_project_file, remove_tree, write_atomic
 from robocore.plan import arches, cmake_packages, colcon, dockerfiles, install_patch, naming
 from robocore.plan.inputs import FileDigest, digest_bytes, tree_hash
+from robocore.plan.remote_build import builds_on_host
 from robocore.project import Project
 
 #: Output folders searched for plain copies of source files (not log/).
@@ -181,28 +185,6 @@ def _log_tail(out: Path, package: str, lines: int = 30) -> str:
 # ---------------------------------------------------------------------------------------------- colcon
 
 
-def colcon_listener(component: str, doing: str, done: str, events: list[colcon.PackageEvent], other: list[str],
-                    update: Callable[[str, str], None], report: Reporter) -> Callable[[str], None]:
-    """A reader of colcon's output lines: package events go to ``events`` and are shown (``<doing> <pkg>``
-    in the progress line, ``<pkg> [<done> ]finished 2.1s`` as a message); other lines go to ``other``."""
-    prefix = f"{done} " if done else ""
-
-    def on_line(line: str) -> None:
-        event = colcon.parse_event(line)
-        if event is None:
-            if line.strip():
-                other.append(line)
-            return
-        events.append(event)
-        if event.state == "started":
-            update(component, f"{doing} {event.package}")
-        else:
-            secs = f" {event.seconds:.1f}s" if event.seconds is not None else ""
-            report.info(f"{component}: {event.package} {prefix}{event.state}{secs}")
-
-    return on_line
-
-
 def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callable[[str, str], None]) -> Outcome:
     """colcon build of one component in a throw-away container of its staged image."""
     from robocore.adapters.image_builder import run_streaming
@@ -277,14 +259,27 @@ def build(options: Options, *, component: str | None, full: bool = False) -> Non
                 state = image_state(client, ref)
                 if state is None:
                     raise BuildError(f"component {comp.name}: no staged image {ref}", hint="run `stage` first")
-                check_emulation(project.robot.host(comp.runs_on).arch.value, native_arch(),
-                                f"component {comp.name}")
+                if not builds_on_host(project.robot.host(comp.runs_on)):  # else built natively on its host
+                    check_emulation(project.robot.host(comp.runs_on).arch.value, native_arch(),
+                                    f"component {comp.name}")
                 plans.append(with_cmake_toolchain(project, plan_build(project, comp, state.id, full=full),
                                                   state.labels))
         finally:
             client.close()
     outcomes: list[Outcome] = []
     todo: list[BuildPlan] = []
+    on_hosts, plans = _host_plans(project, plans)
+    for hplan in on_hosts:
+        if hplan.changed == []:
+            outcomes.append(Outcome(what=hplan.component.name, role="build", action="up-to-date", reason=hplan.reason))
+        elif options.dry_run:
+            report.plain(f"# {hplan.component.name} ({hplan.reason}):")
+            steps = host_build.dry_run_steps(hplan, check_workspace(project, hplan.component))
+            for step in steps:
+                report.plain(f"  {step}")
+            outcomes.append(Outcome(what=hplan.component.name, role="build", action="would-build",
+                                    reason=hplan.reason, plan="\n".join(steps)))
+    on_hosts = [h for h in on_hosts if h.changed != []] if not options.dry_run else []
     for plan in plans:
         if plan.changed == []:
             outcomes.append(Outcome(what=plan.component.name, role="build", action="up-to-date"))
@@ -310,17 +305,39 @@ def build(options: Options, *, component: str | None, full: bool = False) -> Non
             plan = dataclasses.replace(plan, patches=(), reason=f"changed: {', '.join(plan.changed or [])} "
                                        "(colcon: an output differs from what the last build wrote)")
         todo.append(plan)
-    outcomes += _run_colcon(project, todo, report)
+    outcomes += _run_colcon(project, todo, on_hosts, report)
     report_outcomes(report, outcomes)
 
 
-def _run_colcon(project: Project, todo: Sequence[BuildPlan], report: Reporter) -> list[Outcome]:
-    """colcon builds of several components side by side (one container each); every one is tried."""
-    if not todo:
+def _host_plans(project: Project, plans: Sequence[BuildPlan]) -> tuple[list[host_build.HostBuildPlan],
+                                                                         list[BuildPlan]]:
+    """``plans`` split into the builds on the components' own hosts (``builds_here``) and those on this machine."""
+    on_hosts: list[host_build.HostBuildPlan] = []
+    here: list[BuildPlan] = []
+    for plan in plans:
+        host = project.robot.host(plan.component.runs_on)
+        if builds_on_host(host):
+            on_hosts.append(host_build.plan_host_build(project, plan.component, host, plan.image, plan.image_id,
+                                                       plan.packages, ccache=plan.ccache is not None))
+        else:
+            here.append(plan)
+    return on_hosts, here
+
+
+def _run_colcon(project: Project, todo: Sequence[BuildPlan], on_hosts: Sequence[host_build.HostBuildPlan],
+                report: Reporter) -> list[Outcome]:
+    """colcon builds of several components side by side (one container each, here or on their hosts); every
+    one is tried."""
+    if not todo and not on_hosts:
         return []
+    holder = lock_holder()
     with report.progress() as update:
-        done = in_parallel(todo, lambda plan: _colcon(project, plan, report, update), limit=MAX_PARALLEL,
-                           name="robocore-colcon")
+        jobs: list[Callable[[], Outcome]] = [functools.partial(_colcon, project, plan, report, update)
+                                             for plan in todo]
+        jobs += [functools.partial(host_build.build_on_host, project, hplan,
+                                   check_workspace(project, hplan.component), holder, report, update)
+                 for hplan in on_hosts]
+        done = in_parallel(jobs, lambda job: job(), limit=MAX_PARALLEL, name="robocore-colcon")
     outcomes = [result for _, result in done if not isinstance(result, BaseException)]
     errors = [result for _, result in done if isinstance(result, BaseException)]
     if errors:

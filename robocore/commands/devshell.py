@@ -26,12 +26,14 @@ from typing import TYPE_CHECKING, Any
 from robocore.adapters import x11
 from robocore.adapters.docker_hosts import local_client
 from robocore.commands.context import Options
+from robocore.commands.host_build import fetch_install
 from robocore.commands.reporting import Reporter
 from robocore.errors import DockerError, ToolMissing, UsageError
 from robocore.files import make_folder, remove_tree, write_atomic
 from robocore.plan import devshell as plan
 from robocore.plan import discovery, naming
 from robocore.plan.gui import X11_SOCKETS
+from robocore.plan.remote_build import builds_on_host
 from robocore.project import Project
 
 if TYPE_CHECKING:
@@ -86,6 +88,9 @@ def run(options: Options, *, component: str, cmd: str | None, new: bool, devices
         raise ToolMissing("the docker command-line client is not installed (the shell runs `docker exec`)",
                           hint="install it (Debian: apt-get install docker.io, or docker-ce-cli)")
     argv[0] = docker_cli
+    host = project.robot.host(comp.runs_on)
+    if comp.has_workspace and builds_on_host(host):
+        fetch_install(project, comp, host, report)
 
     with _container_lock(project, spec.name):
         container = None if new else _running(client, spec.name)

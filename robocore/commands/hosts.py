@@ -107,3 +107,18 @@ def for_each_host(hosts: Sequence[Host], work: Callable[[Host], T]) -> tuple[dic
     if bugs:
         raise bugs[0]
     return results, failures
+
+
+def lock_holder() -> str:
+    """Who holds a host's lock (a sync or a build there), for a developer who finds it taken: user@machine,
+    pid and time."""
+    import getpass
+    import os
+    import socket
+    import time
+
+    try:
+        user = getpass.getuser()
+    except (KeyError, OSError):
+        user = str(os.getuid())
+    return f"{user}@{socket.gethostname()} (pid {os.getpid()}) since {time.strftime('%Y-%m-%d %H:%M:%S %Z')}"

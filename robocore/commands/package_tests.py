@@ -27,7 +27,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
 
-from robocore.commands.build import colcon_listener, plan_build, workspace_packages
+from robocore.commands.build import plan_build, workspace_packages
+from robocore.commands.colcon_output import colcon_listener
 from robocore.commands.context import Options
 from robocore.commands.hosts import in_parallel
 from robocore.commands.machine import MAX_PARALLEL, check_emulation, local_docker, native_arch
@@ -115,6 +116,25 @@ def plan_tests(project: Project, components: Sequence[Component], select: Sequen
             out=project.build_dir(comp.name), packages=chosen,
             select=chosen if select and chosen != packages else ()))
     return plans
+
+
+def _built_here(project: Project, comps: Sequence[Component], report: Reporter, *, named: bool) -> list[Component]:
+    """``comps`` without those built on their hosts (``builds_here``), whose build folder is there, not here:
+    one line each, a UsageError when the component was named."""
+    from robocore.plan.remote_build import builds_on_host
+
+    kept = []
+    for comp in comps:
+        host = project.robot.host(comp.runs_on)
+        if not builds_on_host(host):
+            kept.append(comp)
+            continue
+        why = (f"component {comp.name} is built on host {host.name} (builds_here: true), so its build folder, which "
+               "colcon test needs, is there and not on this machine")
+        if named:
+            raise UsageError(why, hint=f"set builds_here: false on host {host.name} to build and test it here")
+        report.notice(f"{why}: not tested")
+    return kept
 
 
 def _rel(project: Project, path: Path) -> str:
@@ -250,6 +270,7 @@ def test(options: Options, *, component: str | None, packages: Sequence[str] = (
     comps = [c for c in selected_components(project, component) if c.folder is not None]
     if component and not comps:
         raise UsageError(f"component {component!r} has no folder: nothing to test")
+    comps = _built_here(project, comps, report, named=component is not None)
     plans = plan_tests(project, comps, packages)
     if build_first and plans:
         from robocore.commands.build import build

@@ -1,8 +1,10 @@
 """release and rollback: versioned images in a registry, and going back to what ran before.
 
-``release [--tag V]`` tags the base image and every staged component image as
-``<registry>/<image>:V`` (default V: ``git describe --tags --always --dirty`` of the project)
-and pushes them to ``robot.yaml``'s ``registry``. ``run --tag V`` then deploys those images.
+``release [--tag V]`` pushes the base image of each arch in use and every staged component image to
+``robot.yaml``'s ``registry`` as ``<registry>/<image>:V-<arch>`` (default V: ``git describe --tags
+--always --dirty`` of the project), then one multi-arch name ``<registry>/<image>:V`` per image (a
+manifest list, :mod:`robocore.plan.release`). ``run --tag V`` then has each host pull
+``<registry>/<image>:V`` for its own arch.
 
 Every successful ``run`` appends what a host now runs (image tag, synced release per
 component) to the host's release history (:mod:`robocore.commands.state`). ``rollback`` takes
@@ -14,20 +16,34 @@ then. A rollback is itself recorded, so a second rollback returns to where the f
 
 from __future__ import annotations
 
+import shlex
 import subprocess
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from robocore.commands.context import Options
 from robocore.commands.hosts import for_each_host, select_hosts
+from robocore.commands.images import arches
+from robocore.commands.machine import native_arch
 from robocore.commands.run import deploy_host
 from robocore.commands.state import history, read_synced, record_run, with_synced_release, write_synced
 from robocore.config.model import Host
 from robocore.errors import DockerError, GroupError, HostError, RobocoreError, UsageError
-from robocore.plan import naming
+from robocore.plan import dockerfiles, naming
 from robocore.plan.containers import host_specs
+from robocore.plan.release import (
+    LocalImage,
+    Push,
+    manifest_create_argv,
+    manifest_push_argv,
+    plain_http,
+    plan_release,
+)
 from robocore.plan.sync import KEEP_RELEASES
 from robocore.project import Project
+
+if TYPE_CHECKING:
+    import docker
 
 # $1 = component root, $2 = release id: point current at an existing release, atomically.
 _SWITCH_SCRIPT = """\
@@ -75,16 +91,23 @@ def default_tag(project: Project) -> str:
     return proc.stdout.strip()
 
 
-def released_images(project: Project) -> list[str]:
-    """Local repositories (no tag) that a release carries: the base and every built component image."""
+def released_images(project: Project) -> list[LocalImage]:
+    """The images of this machine that a release carries: the base of each arch in use and every built
+    component image (of its host's arch)."""
     robot = project.robot
-    images = [naming.base_image(robot, project.name)]
-    images += [naming.component_image(robot, project.name, c.name) for c in robot.components if not c.image]
+    native = native_arch()
+    base = naming.base_image(robot, project.name)
+    images = [LocalImage(repo=base, arch=arch, source=f"{base}:{dockerfiles.base_tag(arch, native)}")
+              for arch in arches(project)]
+    for comp in robot.components:
+        if not comp.image:
+            repo = naming.component_image(robot, project.name, comp.name)
+            images.append(LocalImage(repo=repo, arch=robot.host(comp.runs_on).arch.value, source=f"{repo}:latest"))
     return images
 
 
 def release(options: Options, *, tag: str | None) -> None:
-    """Tag every image of the project with a version and push it to the registry."""
+    """Push every image of the project under a version, one per arch, and one multi-arch name per image."""
     project = options.load()
     report = options.report
     robot = project.robot
@@ -94,38 +117,57 @@ def release(options: Options, *, tag: str | None) -> None:
     version = tag or default_tag(project)
     if not naming.is_image_tag(version):
         raise UsageError(f"{version!r} is not a valid image tag", hint="letters, digits, '_', '.', '-' (max 128)")
-    plan = [(f"{repo}:latest", naming.registry_image(robot, repo), version) for repo in released_images(project)]
+    plan = plan_release(robot.registry, version, released_images(project))
     if options.dry_run:
-        for source, target, v in plan:
-            report.out(f"docker tag {source} {target}:{v} && docker push {target}:{v}")
+        for push in plan.pushes:
+            report.out(f"docker tag {push.source} {push.ref} && docker push {push.ref}")
+        for manifest in plan.lists:
+            report.out(shlex.join(manifest_create_argv("docker", manifest, insecure=False)))
+            report.out(shlex.join(manifest_push_argv("docker", manifest, insecure=False)))
+        report.out("# (--insecure is added when this machine's Docker daemon reaches the registry over plain http)")
         return
-    from docker.errors import APIError, ImageNotFound
-
+    from robocore.adapters import docker_manifest
     from robocore.adapters.docker_hosts import local_client
-    from robocore.adapters.image_delivery import check_stream
 
+    docker = docker_manifest.docker_cli()
     client = local_client(timeout=1800)
-    pushed = []
     try:
-        for source, target, v in plan:
-            try:
-                image = client.images.get(source)
-            except ImageNotFound:
-                raise UsageError(f"image {source} does not exist",
-                                 hint="run `prepare-base` and `stage` first") from None
-            image.tag(target, v)
-            try:
-                check_stream(client.images.push(target, v, stream=True, decode=True), f"push {target}:{v}")
-            except APIError as exc:
-                raise DockerError(f"push {target}:{v} failed: {exc.explanation or exc}",
-                                  hint=f"is the registry {robot.registry} reachable (and trusted) from this machine?"
-                                  ) from None
-            pushed.append(f"{target}:{v}")
-            report.info(f"pushed {target}:{v}")
+        insecure = plain_http(robot.registry, client.info().get("RegistryConfig") or {})
+        pushed = [_push(client, push, robot.registry) for push in plan.pushes]
     finally:
         client.close()
-    report.add(Release(tag=version, pushed=pushed))
+    for push in plan.pushes:
+        report.info(f"pushed {push.ref} ({push.arch})")
+    for manifest in plan.lists:
+        docker_manifest.run(manifest_create_argv(docker, manifest, insecure=insecure),
+                            what=f"manifest list {manifest.ref}")
+        docker_manifest.run(manifest_push_argv(docker, manifest, insecure=insecure), what=f"push of {manifest.ref}")
+        report.info(f"pushed {manifest.ref}: {', '.join(manifest.members)}")
+    report.add(Release(tag=version, pushed=pushed + [m.ref for m in plan.lists]))
     report.info(f"released {version}: deploy it with `run --tag {version}`")
+
+
+def _push(client: docker.DockerClient, push: Push, registry: str) -> str:
+    """Tag one arch's local image for the registry and push it; its reference."""
+    from docker.errors import APIError, ImageNotFound
+
+    from robocore.adapters.image_delivery import check_stream
+
+    try:
+        image = client.images.get(push.source)
+    except ImageNotFound:
+        raise UsageError(f"image {push.source} does not exist", hint="run `prepare-base` and `stage` first") from None
+    found = str(image.attrs.get("Architecture") or "")
+    if found and found != push.arch:
+        raise UsageError(f"image {push.source} is of arch {found}, not {push.arch}: not released as {push.ref}",
+                         hint="run `prepare-base` and `stage` again")
+    image.tag(push.target, push.tag)
+    try:
+        check_stream(client.images.push(push.target, push.tag, stream=True, decode=True), f"push {push.ref}")
+    except APIError as exc:
+        raise DockerError(f"push {push.ref} failed: {exc.explanation or exc}",
+                          hint=f"is the registry {registry} reachable (and trusted) from this machine?") from None
+    return push.ref
 
 
 # --------------------------------------------------------------------------- rollback

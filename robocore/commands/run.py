@@ -28,6 +28,7 @@ from robocore.errors import DockerError, GroupError, RobocoreError, UsageError
 from robocore.plan import discovery, naming
 from robocore.plan.actions import Action, Existing, decide, latest_start, servers_started, with_node_restarts
 from robocore.plan.containers import ROLE_DISCOVERY, ContainerSpec, host_specs, state_volumes
+from robocore.plan.release import is_released
 from robocore.project import Project
 
 if TYPE_CHECKING:
@@ -89,8 +90,9 @@ def check_install_trees(project: Project, host: Host) -> None:
 
 
 def _robocore_images(specs: Sequence[ContainerSpec], project: Project) -> list[str]:
+    """robocore's images on this machine that ``specs`` run (not a release's, which hosts pull themselves)."""
     own = {c.image for c in project.robot.components if c.image}
-    return sorted({s.image for s in specs if s.image not in own})
+    return sorted({s.image for s in specs if s.image not in own and not is_released(project.robot.registry, s.image)})
 
 
 def _image_id(client: docker.DockerClient, ref: str) -> str | None:
@@ -157,7 +159,7 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
 
             local = local_client(timeout=600)  # also streams images (docker save) to the host
             if not dry_run:
-                _deliver(client, local, _robocore_images(specs, project), project, host, outcome, report=report)
+                _deliver(client, local, specs, project, host, outcome, report=report)
         image_ids = _image_ids(client, local, specs, project, host, dry_run=dry_run)
         containers = {c.name: c for c in managed_containers(client, project.name)}
         _check_name_conflicts(client, specs, containers, host)
@@ -180,13 +182,17 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
     return outcome
 
 
-def _deliver(client: docker.DockerClient, local: docker.DockerClient, images: list[str], project: Project,
+def _deliver(client: docker.DockerClient, local: docker.DockerClient, specs: Sequence[ContainerSpec], project: Project,
              host: Host, outcome: HostOutcome, *, report: Reporter) -> None:
-    """Put robocore's images on a remote host (pulled from the registry, or streamed from this machine)."""
-    from robocore.adapters.image_delivery import ensure_images
+    """Put robocore's images on a remote host (pulled from the registry, or streamed from this machine); a
+    release's images (``run --tag``) are pulled by the host for its own arch."""
+    images = _robocore_images(specs, project)
+    from robocore.adapters.image_delivery import ensure_images, pull_for_arch
 
     deliveries = ensure_images(client, images, registry=project.robot.registry, progress=report.human,
                                label=host.name, source=local)
+    released = sorted({s.image for s in specs if is_released(project.robot.registry, s.image)})
+    deliveries.update(pull_for_arch(client, released, arch=host.arch.value, label=host.name))
     outcome.notes += [str(d) for d in deliveries.values() if getattr(d, "action", "present") != "present"]
 
 

@@ -20,19 +20,19 @@ import os
 import shlex
 import time
 from dataclasses import dataclass
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import ClassVar
 
 from robocore.adapters import rsync, ssh
 from robocore.commands.arch_checks import refuse_foreign_install
 from robocore.commands.context import Options
-from robocore.commands.hosts import for_each_host, select_hosts
+from robocore.commands.hosts import for_each_host, lock_holder, select_hosts
 from robocore.commands.reporting import Reporter
-from robocore.commands.state import read_synced, write_synced
+from robocore.commands.state import read_build_state, read_synced, write_synced
 from robocore.config.model import Component, Host, read_only_project_path
 from robocore.errors import GroupError, HostError, RobocoreError, UnsafePath, UsageError
 from robocore.files import make_folder, read_own_file, refuse_links_leaving, remove_tree
-from robocore.plan import gui, layout
+from robocore.plan import gui, layout, remote_build
 from robocore.plan import sync as plan
 from robocore.project import Project
 from robocore.ui import human_size
@@ -80,7 +80,10 @@ def plan_host(project: Project, host: Host, *, dry_run: bool = False) -> list[pl
     items = []
     for comp in robot.components_on(host.name):
         sources: list[plan.Source] = []
-        if comp.has_workspace:
+        on_host: tuple[PurePosixPath | None, str] = (None, "")
+        if comp.has_workspace and remote_build.builds_on_host(host):
+            on_host = _built_on_host(project, host, comp)
+        elif comp.has_workspace:
             install = project.build_dir(comp.name) / "install"
             if not install.is_dir():
                 raise UsageError(f"component {comp.name}: no install tree at {install}",
@@ -104,9 +107,20 @@ def plan_host(project: Project, host: Host, *, dry_run: bool = False) -> list[pl
             sources.append(files)
         items.append(plan.ComponentSync(
             component=comp.name, host=host.name, root=layout.component_root(host, comp.name),
-            sources=tuple(sources), compose_name=compose.name,
+            sources=tuple(sources), compose_name=compose.name, install_on_host=on_host[0], host_build_id=on_host[1],
         ))
     return items
+
+
+def _built_on_host(project: Project, host: Host, comp: Component) -> tuple[PurePosixPath, str]:
+    """The install tree ``comp``'s last build left on ``host`` (``builds_here``) and that build's id, or a
+    UsageError when it was not built there."""
+    state = read_build_state(project.host_build_state_file(comp.name))
+    where = remote_build.host_build(host, comp.name)
+    if state.get("host") != host.name or state.get("root") != str(where.root) or not state.get("build"):
+        raise UsageError(f"component {comp.name}: not built on host {host.name} yet (builds_here: true)",
+                         hint=f"run `build --component {comp.name}` first")
+    return where.install, str(state["build"])
 
 
 def _project_files(project: Project, host: Host, comp: Component, *, dry_run: bool = False) -> plan.Source | None:
@@ -190,21 +204,9 @@ def sync_host(project: Project, host: Host, items: list[plan.ComponentSync]) -> 
     host's sync lock and reports each component's state, waits while rsync copies the components
     whose tree may differ (one rsync each), then releases, discards or keeps each copy.
     """
-    with ssh.hold(host, plan.session_argv(host.deploy_root, _holder(), items), ready=plan.LOCKED,
+    with ssh.hold(host, plan.session_argv(host.deploy_root, lock_holder(), items), ready=plan.LOCKED,
                   what="taking the sync lock", refused=functools.partial(_lock_refused, host)) as session:
         return _sync_locked(project, host, items, session)
-
-
-def _holder() -> str:
-    """Who is syncing, for a developer who finds the lock taken: user@machine, pid and time."""
-    import getpass
-    import socket
-
-    try:
-        user = getpass.getuser()
-    except (KeyError, OSError):
-        user = str(os.getuid())
-    return f"{user}@{socket.gethostname()} (pid {os.getpid()}) since {time.strftime('%Y-%m-%d %H:%M:%S %Z')}"
 
 
 def _lock_refused(host: Host, code: int, stderr: str) -> RobocoreError | None:
@@ -244,6 +246,8 @@ def _sync_locked(project: Project, host: Host, items: list[plan.ComponentSync],
             continue
         t = time.monotonic()
         stats[item.component] = rsync.run(host, plan.rsync_argv(item, host, rsh))
+        if item.install_on_host is not None:  # built there: the host copies its own tree into the release
+            stats[item.component] = _add(stats[item.component], _release_host_install(host, item))
         seconds[item.component] = time.monotonic() - t
         changed = stats[item.component].changed or resuming or not same_release or digest != previous.get("digest")
         steps.append(plan.RELEASE if changed else plan.DISCARD)
@@ -265,8 +269,25 @@ def _sync_locked(project: Project, host: Host, items: list[plan.ComponentSync],
     return results
 
 
+def _release_host_install(host: Host, item: plan.ComponentSync) -> plan.RsyncStats:
+    """Copy the install tree built on ``host`` into ``item``'s staging there (rsync on the host itself)."""
+    argv = remote_build.release_install_argv(remote_build.host_build(host, item.component))
+    try:
+        proc = ssh.run(host, argv, timeout=3600)
+    except HostError as exc:
+        raise HostError(f"host {host.name}: cannot release the install tree built there for {item.component}: "
+                        f"{exc.message}", hint=f"run `build --component {item.component}` again") from None
+    return plan.parse_stats(proc.stdout.decode(errors="replace"))
+
+
+def _add(a: plan.RsyncStats, b: plan.RsyncStats) -> plan.RsyncStats:
+    return plan.RsyncStats(**{f.name: getattr(a, f.name) + getattr(b, f.name) for f in dataclasses.fields(a)})
+
+
 def _tree_digest(item: plan.ComponentSync) -> str:
     rows: list[tuple[str, int, int, int, str]] = []
+    if item.install_on_host is not None:
+        rows.append((f"{item.install_on_host} on the host", 0, 0, 0, item.host_build_id))
     for source in item.sources:
         for path in _walk(source.path, follow=source.follow):
             st = path.stat() if source.follow else path.lstat()
@@ -297,7 +318,7 @@ def _dry_run(report: Reporter, hosts: list[Host], plans: dict[str, list[plan.Com
         items = plans[h.name]
         if not items:
             continue
-        session = ssh.ssh_argv(h, plan.session_argv(h.deploy_root, _holder(), items))
+        session = ssh.ssh_argv(h, plan.session_argv(h.deploy_root, lock_holder(), items))
         report.out(f"# {h.name}: " + ", ".join(f"{i.component} -> {i.root}" for i in items))
         report.out(f"# one session (holding flock on {h.deploy_root}/{plan.LOCK_FILE} there) prepares, waits "
                    f"for the rsyncs, then releases each changed copy")
@@ -305,6 +326,10 @@ def _dry_run(report: Reporter, hosts: list[Host], plans: dict[str, list[plan.Com
         for item in items:
             argv = plan.rsync_argv(item, h, rsh)
             report.out(shlex.join(argv))
+            if item.install_on_host is not None:
+                report.out(f"# {item.component} was built on {h.name}: its install tree is copied there")
+                report.out(shlex.join(ssh.ssh_argv(h, remote_build.release_install_argv(
+                    remote_build.host_build(h, item.component)))))
             report.add(PlannedSync(component=item.component, host=h.name, root=str(item.root), session=session,
                                    rsync=argv))
         steps = " ".join(plan.RELEASE for _ in items)

@@ -249,6 +249,9 @@ def _hosts(parts: Parts) -> Iterator[Found]:
         if host.docker_port is not None and access not in (DockerAccess.tcp, DockerAccess.tls):
             yield (("hosts", index, "docker_port"),
                    f"docker_port only applies to docker: tcp or tls (not {access.value!r})")
+        if host.builds_here and host.is_local:
+            yield (("hosts", index, "builds_here"),
+                   "builds_here: true only applies to a remote host (this machine builds its own components anyway)")
 
 
 def check_mapping(value: str, *, kind: str) -> str | None:

@@ -129,6 +129,7 @@ class Host(Strict):
     tls: TlsFiles | None = None
     insecure: bool = Field(default=False, description="Allow plain unauthenticated TCP to this host's daemon.")
     mount_root: MountRoot | None = None
+    builds_here: bool = Field(default=False, description="Build this host's components natively on the host itself.")
 
     @property
     def is_local(self) -> bool:

@@ -2,7 +2,8 @@
 
 On a remote host every component gets ``<mount_root>/<component>/``::
 
-    releases/<id>/install/      colcon install tree (built on the dev machine)
+    releases/<id>/install/      colcon install tree (built on the dev machine, or on the host itself:
+                                copied there from the host's build folder, see plan/remote_build.py)
     releases/<id>/dds/          generated Fast DDS profiles
     releases/<id>/<host>.yaml   the host's compose file (also hard-linked as compose.yaml)
     releases/<id>/files/<path>  read-only project volumes (``./config:/config:ro``), from the project
@@ -147,6 +148,10 @@ class ComponentSync:
     root: PurePosixPath  # <mount_root>/<component> on the host
     sources: tuple[Source, ...]
     compose_name: str  # name of the compose file inside the release ("" when none)
+    #: Built on its host (``builds_here``): the host's install tree, copied into the release on the host.
+    install_on_host: PurePosixPath | None = None
+    #: The id of that build (part of the quick check: a new build on the host is a new tree).
+    host_build_id: str = ""
 
     @property
     def staging(self) -> PurePosixPath:
