@@ -322,3 +322,15 @@ def test_copier_update_brings_a_new_version_and_keeps_the_users_edits(repo: Path
     robot = load_robot(project)
     assert (robot.ros_domain_id, robot.base.kind.value) == (42, "wheels")
 
+
+
+@pytest.mark.parametrize("source", ["file:///nonexistent/robocore.git", "git+file:///nonexistent/robocore.git"])
+def test_a_git_source_that_git_cannot_read_is_one_line_and_writes_nothing(tmp_path: Path, source: str) -> None:
+    done = run([sys.executable, "-m", "robocore", "init", "r", "--defaults", "--base", "wheels", "--source", source],
+               cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert "Traceback" not in done.stderr
+    problems = [line for line in done.stderr.splitlines() if line.startswith("error:")]
+    assert problems == [line for line in done.stderr.splitlines() if "git ls-remote failed: fatal:" in line]
+    assert len(problems) == 1
+    assert not (tmp_path / "r").exists()

@@ -75,6 +75,7 @@ class CopyRequest:
 def _copier_errors(what: str) -> Iterator[None]:
     """Turn copier's exceptions into one-line robocore errors."""
     from copier.errors import CopierError, InteractiveSessionError, UnsafeTemplateError
+    from plumbum.commands.processes import ProcessExecutionError
 
     try:
         yield
@@ -91,6 +92,18 @@ def _copier_errors(what: str) -> Iterator[None]:
         raise TemplateError(f"{what}: {_one_line(error)}") from None
     except ValueError as error:  # copier's answer validation (pydantic / validator messages)
         raise TemplateError(f"{what}: {_one_line(error)}") from None
+    except ProcessExecutionError as error:  # copier runs git through plumbum: an unreachable or broken repository
+        raise TemplateError(f"{what}: {_git_failure(error)}",
+                            hint="check that the template source is a git repository you can read") from None
+
+
+def _git_failure(error: Any) -> str:
+    """``git ls-remote`` failed (exit 128): fatal: ... as one line, from a plumbum ProcessExecutionError."""
+    argv = [str(arg) for arg in (getattr(error, "argv", None) or [])]
+    tool = " ".join(Path(argv[0]).name.split() + argv[1:2]) if argv else "git"
+    lines = [line.strip() for line in str(getattr(error, "stderr", "") or "").splitlines() if line.strip()]
+    said = lines[0] if lines else f"exit code {getattr(error, 'retcode', '?')}"
+    return f"{tool} failed: {said}"
 
 
 def _one_line(error: BaseException) -> str:
