@@ -49,6 +49,12 @@ def test_deep_nesting_is_one_line_with_its_line(text: str) -> None:
     assert line.startswith("robot.yaml:") and f"nested more than {yamltext.MAX_DEPTH} levels deep" in line
 
 
+def test_a_number_too_long_to_convert_is_one_line_about_the_number() -> None:
+    (line,) = refusal("ros_distro: jazzy\nros_domain_id: " + "9" * 5000 + "\n")
+    assert line.startswith("robot.yaml:2: ") and "a number of 5000 digits is too large" in line
+    assert "set_int_max_str_digits" not in line and len(line) < 300
+
+
 def test_nesting_within_the_limit_is_read_as_usual() -> None:
     lines = refusal("ros_distro: jazzy\nhosts: [{name: main, ip: 10.0.0.1}]\nextra: " + "[" * 40 + "]" * 40 + "\n")
     assert lines == ["robot.yaml:3: extra: unknown key 'extra' (allowed: base, common_packages, components, "

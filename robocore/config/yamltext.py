@@ -295,6 +295,8 @@ def _construct(loader: Any, node: yaml.Node, file: str) -> Any:
         bad, why = culprit
         tag = bad.tag.rsplit(":", 1)[-1]
         reason = str(why) if isinstance(why, (ValueError, yaml.YAMLError)) else "malformed value"
+        if "integer string conversion" in reason:  # Python's digit limit, not a setting the user can change here
+            reason = f"a number of {len(str(bad.value).strip())} digits is too large"
         message = f"YAML value {shown(bad.value)} could not be read as {tag}: {reason}"
         raise ConfigError([problem(file, bad.start_mark.line + 1, "", message)]) from None
 
