@@ -17,16 +17,14 @@ from robocore.config.mappings import is_project_path as is_project_path
 from robocore.config.mappings import port_pattern as port_pattern
 from robocore.config.mappings import read_only_project_path as read_only_project_path
 from robocore.config.sources import (
-    DEFAULT_GIT_URL,
-    DEFAULT_PROTOCOLS,
-    OPT_IN_PROTOCOLS,
+    ALLOW_PROTOCOL_HELP,
     CheckoutFolder,
     GitOptIn,
     GitRef,
     GitUrl,
     default_folder,
     git_protocol,
-    url_pattern,
+    url_rules,
 )
 from robocore.config.values import (
     ENV_NAME,
@@ -158,35 +156,16 @@ class Host(Strict):
         return "/root/robocore" if self.user == "root" else f"/home/{self.user}/robocore"
 
 
-_ALLOW_PROTOCOL = (
-    f"Fetch this URL although it is not {' or '.join(DEFAULT_PROTOCOLS)}: http and git (unencrypted, "
-    "unauthenticated), file (a local path or file:// URL: this machine's files) or ext (ext:: runs a command on "
-    "this machine; validate warns)."
-)
-
-
-def _url_rules(schema: dict[str, Any], key: str) -> None:
-    """Tie the URL form to ``allow_protocol`` in the JSON Schema, as validate does."""
-    options: list[Any] = [{"properties": {key: {"pattern": schema_pattern(DEFAULT_GIT_URL)}}}]
-    for protocol in OPT_IN_PROTOCOLS:
-        pattern = schema_pattern(url_pattern(protocol))
-        options.append({
-            "properties": {"allow_protocol": {"const": protocol}, key: {"pattern": pattern}},
-            "required": ["allow_protocol"],
-        })
-    schema["anyOf"] = options
-
-
 class CommonPackage(Strict):
     """A ROS package shared by every component, built into the base image."""
 
-    model_config = ConfigDict(json_schema_extra=lambda schema: _url_rules(schema, "repo"))
+    model_config = ConfigDict(json_schema_extra=lambda schema: url_rules(schema, "repo"))
 
     name: Name
     folder: OneLine | None = Field(default=None, description="Local folder of the package (inside the project).")
     repo: GitUrl | None = Field(default=None, description="Git URL, fetched on the dev machine.")
     branch: GitRef | None = Field(default=None, description="Branch, tag or commit of repo.")
-    allow_protocol: GitOptIn | None = Field(default=None, description=_ALLOW_PROTOCOL)
+    allow_protocol: GitOptIn | None = Field(default=None, description=ALLOW_PROTOCOL_HELP)
 
     @property
     def repo_protocol(self) -> str | None:
@@ -197,13 +176,13 @@ class CommonPackage(Strict):
 class Repository(Strict):
     """A source dependency in vcstool's .repos terms."""
 
-    model_config = ConfigDict(json_schema_extra=lambda schema: _url_rules(schema, "url"))
+    model_config = ConfigDict(json_schema_extra=lambda schema: url_rules(schema, "url"))
 
     url: GitUrl
     version: GitRef | None = None
     folder: CheckoutFolder | None = None
     type: Literal["git"] = "git"
-    allow_protocol: GitOptIn | None = Field(default=None, description=_ALLOW_PROTOCOL)
+    allow_protocol: GitOptIn | None = Field(default=None, description=ALLOW_PROTOCOL_HELP)
 
     @property
     def protocol(self) -> str:

@@ -13,11 +13,11 @@ check-ref-format``) or commit ids, in a conservative character set.
 from __future__ import annotations
 
 import re
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator
 
-from robocore.config.values import HOSTNAME, IPV4, IPV6, has_control, pattern_field, shown
+from robocore.config.values import HOSTNAME, IPV4, IPV6, has_control, pattern_field, schema_pattern, shown
 
 #: Protocols fetched without an opt-in.
 DEFAULT_PROTOCOLS = ("https", "ssh")
@@ -210,3 +210,23 @@ GitRef = Annotated[str, AfterValidator(git_ref), pattern_field(
 CheckoutFolder = Annotated[str, AfterValidator(checkout_folder), pattern_field(
     CHECKOUT_FOLDER, "Folder name under the workspace's src/ (default: from the URL).",
 )]
+
+
+#: The help of ``allow_protocol`` (robot.yaml and the JSON Schema).
+ALLOW_PROTOCOL_HELP = (
+    f"Fetch this URL although it is not {' or '.join(DEFAULT_PROTOCOLS)}: http and git (unencrypted, "
+    "unauthenticated), file (a local path or file:// URL: this machine's files) or ext (ext:: runs a command on "
+    "this machine; validate warns)."
+)
+
+
+def url_rules(schema: dict[str, Any], key: str) -> None:
+    """Tie the URL form to ``allow_protocol`` in the JSON Schema, as validate does."""
+    options: list[Any] = [{"properties": {key: {"pattern": schema_pattern(DEFAULT_GIT_URL)}}}]
+    for protocol in OPT_IN_PROTOCOLS:
+        pattern = schema_pattern(url_pattern(protocol))
+        options.append({
+            "properties": {"allow_protocol": {"const": protocol}, key: {"pattern": pattern}},
+            "required": ["allow_protocol"],
+        })
+    schema["anyOf"] = options
