@@ -26,7 +26,8 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 import yaml
-from deploy_helpers import HEARD, free_tcp_port, log_lines, wait_for
+from deploy_helpers import HEARD, log_lines, wait_for
+from local_registry import serve_registry
 
 from robocore.adapters.image_delivery import ensure_images
 from robocore.config.model import Host
@@ -76,44 +77,14 @@ def registry(fleet: RobotFleet, tmp_path_factory: pytest.TempPathFactory, docker
     """Debian's docker-registry on this machine's loopback, reachable as the same 127.0.0.1:PORT on
     every robot host through an ssh reverse tunnel (loopback registries need no TLS in dockerd).
     Afterwards this machine's tags under the registry (those ``release`` pushed) are removed."""
-    import shutil
-    import urllib.request
-
-    binary = shutil.which("docker-registry")
-    assert binary, "the release tests need Debian's docker-registry package (apt-get install docker-registry)"
-    port = free_tcp_port()
-    base = tmp_path_factory.mktemp("registry")
-    config = base / "config.yml"
-    config.write_text(f"version: 0.1\nstorage:\n  filesystem:\n    rootdirectory: {base / 'data'}\n"
-                      f"http:\n  addr: 127.0.0.1:{port}\nlog:\n  level: warn\n")
-    server = subprocess.Popen([binary, "serve", str(config)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    tunnels = []
-    def serving() -> bool:
-        with contextlib.suppress(OSError), urllib.request.urlopen(f"http://127.0.0.1:{port}/v2/", timeout=2):
-            return True
-        return False
-
-    try:
-        assert wait_for(serving, 30, interval=0.2), f"docker-registry did not answer on 127.0.0.1:{port}"
-        for host in fleet.hosts:
-            tunnels.append(subprocess.Popen(
-                ["ssh", "-F", str(fleet.ssh_config), "-N", "-o", "ExitOnForwardFailure=yes",
-                 "-R", f"{port}:127.0.0.1:{port}", f"root@{host.ip}"], stdin=subprocess.DEVNULL))
-        probe = ["sh", "-c", '"$@" && echo up || true', "sh", "bash", "-c", f"exec 3<>/dev/tcp/127.0.0.1/{port}"]
-        for host in fleet.hosts:
-            assert wait_for(lambda h=host: h.ssh(fleet, *probe).strip() == "up", 20, interval=0.3), \
-                f"registry tunnel to {host.name} did not come up"
-        yield f"127.0.0.1:{port}"
-    finally:
-        for tunnel in tunnels:
-            tunnel.kill()
-            tunnel.wait()
-        server.kill()
-        server.wait()
-        for image in docker_client.images.list():
-            for tag in image.tags:
-                if tag.startswith(f"127.0.0.1:{port}/"):
-                    docker_client.images.remove(tag)
+    with serve_registry(fleet, tmp_path_factory.mktemp("registry")) as address:
+        try:
+            yield address
+        finally:
+            for image in docker_client.images.list():
+                for tag in image.tags:
+                    if tag.startswith(f"{address}/"):
+                        docker_client.images.remove(tag)
 
 
 def registry_tags(registry: str, repo: str) -> list[str]:
