@@ -26,7 +26,7 @@ from robocore.config.model import Host
 from robocore.plan import colcon, naming
 from robocore.plan.arches import INSTALL_ARCH_FILE
 from robocore.plan.layout import component_root
-from robocore.plan.sync import CURRENT, LOCK_BUSY, LOCK_FILE, STAGING, remote_path, remote_sh
+from robocore.plan.sync import CURRENT, STAGING, TAKE_LOCK, remote_path, remote_sh
 
 WORK = "work"
 #: Printed by :data:`LOCK_SCRIPT` once it holds the host's lock (after the ``uid=``/``gid=`` lines).
@@ -49,17 +49,7 @@ _EXCLUDES = (".*", "*.pyc", "*.pyo", "__pycache__/")
 LOCK_SCRIPT = f"""\
 set -eu
 mount_root=$1; holder=$2; work=$3
-mkdir -p -- "$mount_root"
-lock="$mount_root/{LOCK_FILE}"
-exec 9>>"$lock"
-code=0
-flock -n -E {LOCK_BUSY} 9 || code=$?
-if [ "$code" -ne 0 ]; then
-    if [ "$code" -eq {LOCK_BUSY} ]; then cat -- "$lock.holder" >&2 2>/dev/null || true; fi
-    exit "$code"
-fi
-printf '%s\\n' "$holder" > "$lock.holder"
-mkdir -p -- "$work/ws" "$work/build" "$work/install" "$work/log" "$work/ccache"
+{TAKE_LOCK}mkdir -p -- "$work/ws" "$work/build" "$work/install" "$work/log" "$work/ccache"
 echo "uid=$(id -u)"
 echo "gid=$(id -g)"
 echo {LOCKED}

@@ -72,10 +72,9 @@ RELEASE, DISCARD, KEEP = "release", "discard", "keep"
 #     RELEASE renames staging to releases/<id>, switches current to it with a rename, prunes old
 #     releases; DISCARD removes staging (an unchanged copy); KEEP leaves the component alone. Prints
 #     DONE. If stdin ends first (robocore died), nothing is switched: staging is resumed next time.
-SESSION_SCRIPT = f"""\
-set -eu
-mount_root=$1; holder=$2; keep=$3; shift 3
-case $keep in ''|*[!0-9]*) echo "releases to keep: not a number: $keep" >&2; exit 64;; esac
+#: Shell lines shared by every script that takes a host's sync lock (``$mount_root`` and ``$holder`` set):
+#: exit LOCK_BUSY with the holder's line on stderr when another robocore holds it, else record the holder.
+TAKE_LOCK = f"""\
 mkdir -p -- "$mount_root"
 lock="$mount_root/{LOCK_FILE}"
 exec 9>>"$lock"
@@ -86,7 +85,13 @@ if [ "$code" -ne 0 ]; then
     exit "$code"
 fi
 printf '%s\\n' "$holder" > "$lock.holder"
-root=
+"""
+
+SESSION_SCRIPT = f"""\
+set -eu
+mount_root=$1; holder=$2; keep=$3; shift 3
+case $keep in ''|*[!0-9]*) echo "releases to keep: not a number: $keep" >&2; exit 64;; esac
+{TAKE_LOCK}root=
 for arg in "$@"; do
     if [ -z "$root" ]; then root=$arg; continue; fi
     mkdir -p -- "$root/releases"
