@@ -83,10 +83,17 @@ def split_project(argv: Sequence[str], task_names: set[str]) -> tuple[str | None
 
 def config_file_problem(rest: Sequence[str]) -> str | None:
     """Why the invoke configuration file named by ``-f FILE``/``--config FILE`` cannot be read (a FIFO would
-    block invoke's read for ever, a folder or device fail with a traceback), else None."""
+    block invoke's read for ever, a folder or device fail with a traceback), else None. Only invoke's own
+    flags, before the first task, are read: a task's ``-f`` (``logs -f``) is that task's flag."""
     import stat
 
-    for flag, value in zip(rest, [*rest[1:], None], strict=True):
+    i = 0
+    while i < len(rest):
+        flag = rest[i]
+        value = rest[i + 1] if i + 1 < len(rest) else None
+        if not flag.startswith("-"):
+            break  # the first task: what follows belongs to the tasks
+        i += 2 if flag in VALUE_FLAGS else 1
         name = value if flag in ("-f", "--config") else flag.split("=", 1)[1] if flag.startswith("--config=") else None
         if name is None:
             continue

@@ -216,3 +216,14 @@ def test_seed_form_init_creates_the_project_in_dir(tmp_path: Path) -> None:
     assert (target / "robot.yaml").is_file()
     checked = robocore(str(target), "validate")
     assert checked.returncode == 0, checked.stderr
+
+
+def test_a_tasks_own_f_flag_is_not_taken_for_invokes_config_file(tmp_path: Path) -> None:
+    from robocore.cli import config_file_problem
+
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    assert config_file_problem(["logs", "-f", "--tail", "0"]) is None
+    assert config_file_problem(["build", "logs", "-f"]) is None
+    assert "not a regular file" in (config_file_problem(["-f", str(fifo), "logs", "-f"]) or "")
+    assert "cannot be read" in (config_file_problem(["--config=/nonexistent/x.yaml", "validate"]) or "")
