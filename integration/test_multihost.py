@@ -266,7 +266,7 @@ def test_release_run_tag_and_rollback(fleet: RobotFleet, robot: Path, registry: 
     (robot / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
     run_robocore(robot, "release", "--tag", "v1")
     for repo in ("base", "talker", "listener"):
-        assert registry_tags(registry, f"{robot.name}-{repo}") == ["v1"]
+        assert sorted(registry_tags(registry, f"{robot.name}-{repo}")) == ["v1", "v1-amd64"]  # list + arch
     run_robocore(robot, "run", "--tag", "v1", "--quiet")
     assert container_image(fleet, 0, talker) == f"{registry}/{robot.name}-talker:v1"
     assert container_image(fleet, 1, listener) == f"{registry}/{robot.name}-listener:v1"
