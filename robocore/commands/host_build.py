@@ -24,14 +24,14 @@ from robocore.adapters import rsync, ssh
 from robocore.commands.arch_checks import refuse_daemon_arch
 from robocore.commands.colcon_output import colcon_listener
 from robocore.commands.context import DRY_RUN_UNKNOWN
-from robocore.commands.hosts import connect
+from robocore.commands.hosts import connect, lock_refused
 from robocore.commands.reporting import Outcome, Reporter
 from robocore.commands.state import read_build_state, write_build_state
 from robocore.config.model import Component, Host
 from robocore.errors import BuildError, HostError, RobocoreError
 from robocore.plan import arches, colcon, naming
 from robocore.plan import remote_build as plan
-from robocore.plan.sync import LOCK_BUSY, LOCK_FILE
+from robocore.plan.sync import LOCK_FILE
 from robocore.project import Project
 
 if TYPE_CHECKING:
@@ -122,7 +122,8 @@ def build_on_host(project: Project, build: HostBuildPlan, workspace: Path, holde
         emulated = refuse_daemon_arch(host, str(client.info().get("Architecture", "?"))).emulated
         update(name, f"image to {host.name}")
         ensure_images(client, [build.image], registry=project.robot.registry, progress=False, label=host.name)
-        refused = functools.partial(_lock_refused, host)
+        refused = functools.partial(lock_refused, host, busy="a sync or build on this host is in progress",
+                                    again="build", locks="builds and syncs")
         with ssh.hold(host, plan.lock_argv(host, holder, build.where), ready=plan.LOCKED,
                       what="taking the host's lock for a build", refused=refused) as session:
             try:
@@ -203,17 +204,6 @@ def record_host_build(project: Project, build: HostBuildPlan) -> None:
         "packages": build.packages,
         "build": os.urandom(8).hex(),
     })
-
-
-def _lock_refused(host: Host, code: int, stderr: str) -> RobocoreError | None:
-    if code == LOCK_BUSY:
-        holder = stderr.strip().splitlines()[-1] if stderr.strip() else "another robocore"
-        return HostError(f"host {host.name}: a sync or build on this host is in progress: {holder}",
-                         hint="wait for it to finish, then build again")
-    if code == 127:
-        return HostError(f"host {host.name}: flock is not installed there (robocore locks builds and syncs with it)",
-                         hint="install util-linux on the host (apt-get install util-linux)")
-    return None
 
 
 def fetch_install(project: Project, comp: Component, host: Host, report: Reporter) -> None:

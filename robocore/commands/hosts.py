@@ -109,6 +109,21 @@ def for_each_host(hosts: Sequence[Host], work: Callable[[Host], T]) -> tuple[dic
     return results, failures
 
 
+def lock_refused(host: Host, code: int, stderr: str, *, busy: str, again: str, locks: str) -> RobocoreError | None:
+    """What a host's lock script's exit ``code`` means (``ssh.hold``'s ``refused``): the lock held by another
+    robocore (``busy``, with the holder's line from ``stderr``; retry with ``again``), flock missing (it
+    ``locks`` those), or None for any other failure."""
+    from robocore.plan.sync import LOCK_BUSY
+
+    if code == LOCK_BUSY:
+        holder = stderr.strip().splitlines()[-1] if stderr.strip() else "another robocore"
+        return HostError(f"host {host.name}: {busy}: {holder}", hint=f"wait for it to finish, then {again} again")
+    if code == 127:
+        return HostError(f"host {host.name}: flock is not installed there (robocore locks {locks} with it)",
+                         hint="install util-linux on the host (apt-get install util-linux)")
+    return None
+
+
 def lock_holder() -> str:
     """Who holds a host's lock (a sync or a build there), for a developer who finds it taken: user@machine,
     pid and time."""

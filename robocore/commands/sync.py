@@ -26,11 +26,11 @@ from typing import ClassVar
 from robocore.adapters import rsync, ssh
 from robocore.commands.arch_checks import refuse_foreign_install
 from robocore.commands.context import Options
-from robocore.commands.hosts import for_each_host, lock_holder, select_hosts
+from robocore.commands.hosts import for_each_host, lock_holder, lock_refused, select_hosts
 from robocore.commands.reporting import Reporter
 from robocore.commands.state import read_build_state, read_synced, write_synced
 from robocore.config.model import Component, Host, read_only_project_path
-from robocore.errors import GroupError, HostError, RobocoreError, UnsafePath, UsageError
+from robocore.errors import GroupError, HostError, UnsafePath, UsageError
 from robocore.files import make_folder, read_own_file, refuse_links_leaving, remove_tree
 from robocore.plan import gui, layout, remote_build
 from robocore.plan import sync as plan
@@ -204,20 +204,11 @@ def sync_host(project: Project, host: Host, items: list[plan.ComponentSync]) -> 
     host's sync lock and reports each component's state, waits while rsync copies the components
     whose tree may differ (one rsync each), then releases, discards or keeps each copy.
     """
+    refused = functools.partial(lock_refused, host, busy="another sync to this host is in progress", again="sync",
+                                locks="syncs")
     with ssh.hold(host, plan.session_argv(host.deploy_root, lock_holder(), items), ready=plan.LOCKED,
-                  what="taking the sync lock", refused=functools.partial(_lock_refused, host)) as session:
+                  what="taking the sync lock", refused=refused) as session:
         return _sync_locked(project, host, items, session)
-
-
-def _lock_refused(host: Host, code: int, stderr: str) -> RobocoreError | None:
-    if code == plan.LOCK_BUSY:
-        holder = stderr.strip().splitlines()[-1] if stderr.strip() else "another robocore"
-        return HostError(f"host {host.name}: another sync to this host is in progress: {holder}",
-                         hint="wait for it to finish, then sync again")
-    if code == 127:
-        return HostError(f"host {host.name}: flock is not installed there (robocore locks syncs with it)",
-                         hint="install util-linux on the host (apt-get install util-linux)")
-    return None
 
 
 def _sync_locked(project: Project, host: Host, items: list[plan.ComponentSync],
