@@ -9,7 +9,8 @@ arm64 robot's own daemon would run them natively.
   bootstrapped per arch (``robocore/<arch>/debian:bookworm-debian``); ``build`` compiles the talker for arm64 in an
   emulated container: its install tree holds an aarch64 ELF and records ``arm64``;
 - ``sync`` and ``run``: the listener on robot-x86 hears the talker on robot-arm through the master, ``status``
-  lists both nodes, ``uname -m`` in the talker's live container says ``aarch64``; ``doctor`` says robot-arm runs
+  lists both nodes, ``uname -m`` in the talker's live container says ``aarch64`` (and in its dev shell on this
+  machine); ``doctor`` says robot-arm runs
   arm64 emulated and robot-x86 amd64 natively;
 - negative controls: the talker's install tree swapped for the listener's (amd64), and an amd64 ELF put in
   place of the talker binary, are refused by ``sync`` in one line, and the host keeps its release;
@@ -95,7 +96,7 @@ def _talker_elves(root: Path) -> list[Path]:
             and arches.elf_arch(p.read_bytes()[:20]) is not None]
 
 
-def test_every_image_and_tree_is_of_its_hosts_arch(mixed: Any, docker_client: Any) -> None:
+def test_every_image_and_tree_is_of_its_hosts_arch(mixed: Any, docker_client: Any, run_robocore: RobocoreCli) -> None:
     _, root = mixed
     images = {ref: docker_client.images.get(ref).attrs["Architecture"] for ref in (
         "robocore/arm64/debian:bookworm-debian", "robocore/amd64/debian:bookworm-debian",
@@ -115,6 +116,9 @@ def test_every_image_and_tree_is_of_its_hosts_arch(mixed: Any, docker_client: An
     assert (install / "talker" / "install" / arches.INSTALL_ARCH_FILE).read_text().strip() == "arm64"
     assert (install / "listener" / "install" / arches.INSTALL_ARCH_FILE).read_text().strip() == "amd64"
     assert (root / ".robocore" / "ccache" / "arm64").is_dir()
+    # the dev shell of the arm64 talker, on this amd64 machine: its own image, emulated
+    inside = run_robocore(root, "shell", "--component", "talker", "--cmd", "uname -m").stdout
+    assert inside.strip().splitlines()[-1] == "aarch64", inside
 
 
 def test_arm64_talker_heard_by_amd64_listener_through_the_master(mixed: Any, run_robocore: RobocoreCli) -> None:

@@ -1,8 +1,10 @@
 """A robot host that builds its own components (``builds_here: true``): the noetic project on the debian base.
 
-Two Docker-in-Docker hosts over ssh: robot-a builds its own components and runs the roscpp talker; robot-b
-runs the ROS master and the rospy listener, built on this machine. Each host's arch is :data:`ARCHES` (robot-a
-may be arm64: its daemon then runs arm64 containers through the kernel's qemu registration).
+Two Docker-in-Docker hosts over ssh: robot-a (arm64: its daemon runs arm64 containers through the kernel's qemu
+registration, as a Jetson's daemon runs them natively) builds its own components and runs the roscpp talker;
+robot-b (amd64) runs the ROS master and the rospy listener, built on this machine. The project has the name of
+integration/test_arm64.py's, so that the per-arch bases and staged images that module made are reused (content
+hashes: nothing is rebuilt when they are current).
 
 - ``build`` compiles the talker on robot-a: its build container is created on robot-a's daemon and never on
   this machine's (Docker's events of both daemons, negative control), the install tree is on robot-a (an
@@ -39,12 +41,10 @@ if TYPE_CHECKING:
 
 pytestmark = pytest.mark.docker
 
-NAME = "robocore-it-hostbuild"
+NAME = "robocore-it-arm64"  # shares test_arm64.py's images (same project)
 TALKER_TEXT = "hello from talker #"
-#: The arch of each host. The mechanism is arch-independent; CI runs it with two amd64 hosts. With robot-a
-#: "arm64" (its daemon runs arm64 containers through qemu) this module is the arm64 acceptance test of issue 18;
-#: that variant was not run yet: the arm64 root could not be bootstrapped in time on the shared machine.
-ARCHES = {"robot-a": "amd64", "robot-b": "amd64"}
+#: The arch of each host: robot-a builds for arm64 on its own (emulating) daemon, robot-b runs amd64.
+ARCHES = {"robot-a": "arm64", "robot-b": "amd64"}
 #: ELF e_machine of each arch (bytes 18-19 of the header, little-endian).
 ELF_MACHINE = {"amd64": "62 0", "arm64": "183 0"}
 MACHINES = {"amd64": "x86_64", "arm64": "aarch64"}

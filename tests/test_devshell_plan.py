@@ -404,3 +404,13 @@ def test_missing_component_device_is_a_usage_error(project: Project, monkeypatch
     with pytest.raises(UsageError, match="device /dev/robocore-absent-tty does not exist"):
         devshell.run(Options(project_dir=project.root, dry_run=True), component="arm", cmd=None, new=False,
                      devices=None, gpus=None, privileged=False)
+
+
+def test_the_shell_runs_the_image_of_its_components_host_arch(make_project) -> None:
+    amd = Project.load(make_project(ROBOT, folders=["components/arm", "maps"]))
+    arm = Project.load(make_project(ROBOT.replace("    ip: 127.0.0.1\n", "    ip: 127.0.0.1\n    arch: arm64\n"),
+                                    folders=["components/arm", "maps"]))
+    amd_spec, arm_spec = shell(amd), shell(arm)
+    assert amd_spec.container_kwargs()["platform"] == "linux/amd64"
+    assert arm_spec.container_kwargs()["platform"] == "linux/arm64"  # emulated on an amd64 desk, native on arm64
+    assert amd_spec.fingerprint() != arm_spec.fingerprint()  # a shell of the other arch is never reused

@@ -27,6 +27,7 @@ from robocore.adapters import x11
 from robocore.adapters.docker_hosts import local_client
 from robocore.commands.context import Options
 from robocore.commands.host_build import fetch_install
+from robocore.commands.machine import check_emulation, native_arch
 from robocore.commands.reporting import Reporter
 from robocore.errors import DockerError, ToolMissing, UsageError
 from robocore.files import make_folder, remove_tree, write_atomic
@@ -261,6 +262,8 @@ def _create(client: docker.DockerClient, project: Project, spec: plan.ShellSpec,
         hint = (f"pull or build it (component {comp.name} uses image: {spec.image})" if comp.image
                 else f"run `robocore stage --component {comp.name}` first")
         raise UsageError(f"component {comp.name}: image {spec.image} is not on this machine", hint=hint) from None
+    # an image of another arch (an arm64 host's component) runs emulated, or is refused in one line
+    check_emulation(project.robot.host(comp.runs_on).arch.value, native_arch(), f"the shell of component {comp.name}")
     _write_files(project, spec)
     _refresh_cookie(project, spec, report)
     kwargs: dict[str, Any] = spec.container_kwargs()

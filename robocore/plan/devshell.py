@@ -18,7 +18,7 @@ from pathlib import Path, PurePosixPath
 from typing import Any
 
 from robocore.config.model import Component, Robot
-from robocore.plan import naming
+from robocore.plan import arches, naming
 from robocore.plan.containers import Mount
 from robocore.plan.gui import X11_SOCKETS
 from robocore.project import Project
@@ -92,6 +92,7 @@ class ShellSpec:
     privileged: bool = False
     network_mode: str = "host"
     ipc_mode: str = "host"
+    platform: str = ""  # linux/<arch> of the component's host: the image is of that arch (emulated when foreign)
     entrypoint: tuple[str, ...] = ("/bin/sh", f"{CONTAINER_SHELL}/{SETUP_SCRIPT}")
     notes: tuple[str, ...] = field(default=(), compare=False)
 
@@ -115,6 +116,8 @@ class ShellSpec:
             "init": False,
             "privileged": self.privileged,
         }
+        if self.platform:
+            kwargs["platform"] = self.platform
         if self.devices:
             kwargs["devices"] = list(self.devices)
         if self.device_cgroup_rules:
@@ -137,6 +140,7 @@ class ShellSpec:
             "network": self.network_mode,
             "ipc": self.ipc_mode,
             "entrypoint": list(self.entrypoint),
+            "platform": self.platform,
         }
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:16]
 
@@ -320,6 +324,7 @@ def plan_shell(
         device_cgroup_rules=rules,
         gpus=gpus,
         privileged=request.privileged,
+        platform=arches.platform(robot.host(component.runs_on).arch.value),
         notes=tuple(notes),
     )
     labels = {
