@@ -1,0 +1,172 @@
+"""Why a single Fast DDS 2.x discovery server's restart costs ~12 s: the ways out, side by side in one run.
+
+One Docker network, three containers of a Jazzy image (Fast DDS 2.14, the wheels base): a discovery server
+started as robocore starts it (its command, profile and state volume, from :mod:`robocore.plan.discovery.fastdds`),
+a talker (rclpy, 10 Hz) and, for each measurement, a fresh listener, both clients with robocore's client profile.
+For each way of restarting the server (stopped, SIGKILL unless said, and started again at once), a listener
+is started right after the start and the time until it hears the talker is printed ("NOTHING" after
+``--wait`` seconds plus the hold), beside a control listener started before the restart:
+
+- ``same GUID, no hold``: the server comes back at once with its old GUID (its ``-i``);
+- ``BACKUP (-b)``: the server keeps its discovery database in files in its state volume and reloads them on
+  restart (Fast DDS's own remedy for restarts), after a SIGTERM or a SIGKILL stop;
+- ``same GUID, hold N s``: what robocore does: the restarted server stays silent for N s (default 12: its
+  clients' 8 s lease of the server, plus 4 s) so that every client drops the old instance first; and
+  shorter holds, to show where recovery stops.
+
+    python bench/server_restart.py [--image robocore-it-demo-base:latest] [--wait 30] [--hold 12]
+
+The image is any Jazzy wheels base robocore built (the integration suites build ``robocore-it-demo-base``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import docker
+from docker.errors import ImageNotFound, NotFound
+
+from robocore.config.model import Robot
+from robocore.plan.discovery import fastdds
+
+PREFIX = "robocore-it-dsprobe"
+SUBNET, SERVER_IP, TALKER_IP, LISTENER_IP = "172.31.78.0/24", "172.31.78.10", "172.31.78.11", "172.31.78.12"
+ROBOT = Robot.model_validate({"ros_distro": "jazzy", "hosts": [{"name": "main", "ip": SERVER_IP}], "components": []})
+CLIENT_ENV = fastdds.client_environment(ROBOT)
+DDS_DIR = "/robocore/dds"  # where CLIENT_ENV's profile file is (robocore's layout in containers)
+TALKER = """
+import rclpy
+from std_msgs.msg import String
+rclpy.init()
+node = rclpy.create_node("talker")
+pub = node.create_publisher(String, "chatter", 10)
+count = [0]
+def tick():
+    count[0] += 1
+    pub.publish(String(data=f"hello {count[0]}"))
+node.create_timer(0.1, tick)
+rclpy.spin(node)
+"""
+LISTENER = """
+import sys, time
+import rclpy
+from std_msgs.msg import String
+start = time.monotonic()
+rclpy.init()
+node = rclpy.create_node("listener")
+heard = []
+node.create_subscription(String, "chatter", lambda m: heard.append(time.monotonic() - start), 10)
+while not heard and time.monotonic() - start < float(sys.argv[1]):
+    rclpy.spin_once(node, timeout_sec=0.1)
+print(f"HEARD {heard[0]:.2f}" if heard else "NOTHING", flush=True)
+"""
+
+
+@contextlib.contextmanager
+def network(client: Any) -> Iterator[Any]:
+    ipam = docker.types.IPAMConfig(pool_configs=[docker.types.IPAMPool(subnet=SUBNET)])
+    net = client.networks.create(f"{PREFIX}-net", ipam=ipam)
+    try:
+        yield net
+    finally:
+        for container in client.containers.list(all=True, filters={"name": PREFIX}):
+            container.remove(force=True)
+        net.remove()
+        for volume in client.volumes.list(filters={"name": PREFIX}):
+            volume.remove(force=True)
+
+
+def start(client: Any, net: Any, image: str, name: str, ip: str, argv: list[str],
+          env: dict[str, str] | None = None, **kwargs: Any) -> Any:
+    container = client.containers.create(image, argv, name=f"{PREFIX}-{name}", environment=env or {},
+                                         detach=True, **kwargs)
+    client.networks.get("bridge").disconnect(container)
+    net.connect(container, ipv4_address=ip)
+    container.start()
+    return container
+
+
+def client_node(client: Any, net: Any, image: str, name: str, ip: str, argv: list[str], dds: str) -> Any:
+    """A node started as robocore starts components: robocore's client environment and profile."""
+    return start(client, net, image, name, ip, argv, CLIENT_ENV, volumes={dds: {"bind": DDS_DIR, "mode": "ro"}})
+
+
+def listen(client: Any, net: Any, image: str, wait: float, dds: str) -> str:
+    """A new listener's verdict: ``HEARD <s>`` (seconds from its start) or ``NOTHING``."""
+    container = client_node(client, net, image, "listener", LISTENER_IP, ["python3", "-c", LISTENER, str(wait)], dds)
+    try:
+        container.wait(timeout=wait + 60)
+        lines = container.logs(stdout=True, stderr=False).decode(errors="replace").split()
+        return " ".join(lines[-2:]) if "HEARD" in lines else "NOTHING"
+    finally:
+        container.remove(force=True)
+
+
+def scenario(client: Any, image: str, wait: float, dds: str, *, backup: bool, hold: int,
+             stop_timeout: int) -> dict[str, str]:
+    with network(client) as net:
+        process = fastdds.server_process(ROBOT, 0)
+        env = {**process.environment, "ROBOCORE_DS_HOLD": str(hold)}
+        state = {f"{PREFIX}-state": {"bind": process.state_dir, "mode": "rw"}}  # a volume: it outlives a restart
+        argv = [*process.command, *(["-b"] if backup else [])]  # -b: the backup files go to the state volume
+        server = start(client, net, image, "server", SERVER_IP, argv, env, volumes=state, working_dir=process.state_dir)
+        time.sleep(2)
+        client_node(client, net, image, "talker", TALKER_IP, ["python3", "-c", TALKER], dds)
+        time.sleep(4)
+        before = listen(client, net, image, wait, dds)
+        stopping = time.monotonic()
+        server.stop(timeout=stop_timeout)
+        stopped = time.monotonic()
+        server.start()
+        after = listen(client, net, image, wait + hold, dds)
+        server.reload()
+        logs = server.logs().decode(errors="replace")
+        crashed = next((line.strip() for line in logs.splitlines() if "malloc" in line or "corrupt" in line), "")
+        status = f"{server.status}" + (f", {crashed}" if crashed else "")
+        if after.startswith("HEARD"):
+            after = f"HEARD {float(after.split()[1]):.1f} s after its start"
+        after += f" (stop took {stopped - stopping:.1f} s)"
+        return {"before": before, "after": after, "server": status}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--image", default="robocore-it-demo-base:latest")
+    parser.add_argument("--wait", type=float, default=30.0)
+    parser.add_argument("--hold", type=int, default=fastdds.restart_hold_seconds(ROBOT))
+    args = parser.parse_args()
+    client = docker.from_env()
+    try:
+        client.images.get(args.image)
+    except ImageNotFound:
+        raise SystemExit(f"{args.image}: no such image (run the integration suites or pass --image)") from None
+    dds = tempfile.mkdtemp(prefix=f"{PREFIX}-")
+    for name, text in fastdds.profile_files(ROBOT).items():
+        (Path(dds) / name).write_text(text)
+    os.chmod(dds, 0o755)
+    rows = {
+        "same GUID, no hold": dict(backup=False, hold=0, stop_timeout=0),
+        "BACKUP server (-b), SIGTERM stop": dict(backup=True, hold=0, stop_timeout=10),
+        "BACKUP server (-b), SIGKILL stop": dict(backup=True, hold=0, stop_timeout=0),
+        f"same GUID, hold {args.hold} s (robocore)": dict(backup=False, hold=args.hold, stop_timeout=0),
+        f"same GUID, hold {args.hold // 2} s": dict(backup=False, hold=args.hold // 2, stop_timeout=0),
+        f"same GUID, hold {args.hold // 3} s": dict(backup=False, hold=args.hold // 3, stop_timeout=0),
+    }
+    print(f"{'restart':40} {'listener before':16} {'listener after the restart':56} server after")
+    for label, kwargs in rows.items():
+        with contextlib.suppress(NotFound):
+            done = scenario(client, args.image, args.wait, dds, **kwargs)  # type: ignore[arg-type]
+            print(f"{label:40} {done['before']:16} {done['after']:56} {done['server']}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
