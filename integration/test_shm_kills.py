@@ -3,9 +3,10 @@
 The demo project's talker and listener share their host's IPC namespace (the run's host container), so
 Fast DDS moves their data through segments in that host's /dev/shm. A SIGKILLed process cannot remove
 its segments and port files. After every restart the listener must hear the talker again, and what the
-dead processes left in /dev/shm must not pile up (Fast DDS finds files whose owner is gone by their
-lock files and reuses or removes them; the test counts them). The negative control: while the talker
-is dead the listener's count does not rise, so "heard again" is a real change, not old log lines.
+dead processes left in /dev/shm must not pile up (the test counts Fast DDS's files there after every
+cycle; Fast DDS 2.14 reuses or removes a dead process's files when the next participant starts, so
+robocore cleans nothing itself). The negative control: while the talker is dead the listener's count
+does not rise, so "heard again" is a real change, not old log lines.
 """
 
 from __future__ import annotations
