@@ -12,14 +12,17 @@ the test process's node (the probe) counts the talker's sequence numbers. Figure
 4. two servers: host ``main`` power-cut and booted, boot to the talker heard again.
 
 Each figure is the median of ``--repeat`` runs (default 3). The machine is shared: read ratios, not seconds.
-Known limit: a second ``bring_up`` in the same process heard nothing in the runs so far (the second
-scenario and every later repeat come out empty, shown as nan); run one scenario per process until fixed.
+Every run of a scenario is a process of its own (this script again, ``--scenario``, which prints its figures
+as one JSON line): Fast DDS reads its XML profiles once per process, so a second ``bring_up`` in one process
+kept the first robot's discovery servers and heard nothing.
 """
 
 from __future__ import annotations
 
 import argparse
 import itertools
+import json
+import math
 import statistics
 import subprocess
 import sys
@@ -143,37 +146,74 @@ def one_server(robot: Any, probe: Probe, figures: dict[str, list[float]]) -> Non
     figures["late_after_single_restart"].append(probe.late_node_heard(f"r{len(figures['lost_s0'])}") or float("nan"))
 
 
+SCENARIOS: dict[str, tuple[int, Callable[[Any, Probe, dict[str, list[float]]], None]]] = {
+    "two_servers": (2, two_servers), "one_server": (1, one_server)}
+FIGURES = ("lost_s0", "late_during_s0_outage", "lost_s1", "late_during_s1_outage", "late_after_single_restart",
+           "reconnect_to_message", "boot_to_heard")
+GOALS = {"lost_s0": "0 (today 0)", "lost_s1": "0 (today 0)", "late_during_s0_outage": "< 2 s (today 4.8 s)",
+         "late_during_s1_outage": "< 2 s (today 4.8 s)", "late_after_single_restart": "< 5 s (today 12.3 s)",
+         "reconnect_to_message": "< 5 s", "boot_to_heard": "-"}
+#: The line a scenario process prints its figures on.
+MARK = "FAULTS-BENCH-FIGURES "
+
+
+def run_scenario(name: str, project: Path) -> int:
+    """One bring-up of ``project``, one run of scenario ``name``; its figures as one JSON line on stdout."""
+    from robocore.testing import bring_up
+
+    figures: dict[str, list[float]] = {k: [] for k in FIGURES}
+    robot = bring_up(project)
+    try:
+        probe = Probe(robot)
+        if probe.first_after(time.monotonic()) is None:
+            print("the probe never heard the talker", file=sys.stderr)
+        SCENARIOS[name][1](robot, probe, figures)
+    finally:
+        robot.close()
+    print(MARK + json.dumps({k: v for k, v in figures.items() if v}), flush=True)
+    return 0
+
+
+def scenario_process(name: str, project: Path) -> dict[str, list[float]]:
+    """``name`` run by this script in a new process; its figures (none, with its output's tail, if it failed)."""
+    proc = subprocess.run([sys.executable, __file__, "--scenario", name, "--project", str(project)],
+                          capture_output=True, text=True, timeout=900)
+    for line in proc.stdout.splitlines():
+        if line.startswith(MARK):
+            return {k: [float(x) for x in v] for k, v in json.loads(line[len(MARK):]).items()}
+    print(f"scenario {name} failed (exit {proc.returncode}):\n{proc.stdout[-1500:]}\n{proc.stderr[-3000:]}",
+          file=sys.stderr)
+    return {}
+
+
+def show(value: float, unit: str) -> str:
+    return "nan" if math.isnan(value) else f"{value:.1f}" if unit else f"{value:.0f}"
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--project", type=Path, help="a built template project (default: a new one)")
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--scenario", choices=sorted(SCENARIOS), help=argparse.SUPPRESS)  # one run, in this process
     args = parser.parse_args()
-    from robocore.testing import bring_up
+    if args.scenario:
+        return run_scenario(args.scenario, args.project)
 
-    figures: dict[str, list[float]] = {k: [] for k in (
-        "lost_s0", "late_during_s0_outage", "lost_s1", "late_during_s1_outage", "late_after_single_restart",
-        "reconnect_to_message", "boot_to_heard")}
+    figures: dict[str, list[float]] = {k: [] for k in FIGURES}
     with tempfile.TemporaryDirectory(prefix="robocore-bench-faults-") as scratch:
-        projects = {n: make_project(Path(scratch), args.project, s)
-                    for n, s in ((2, ["main", "arm"]), (1, ["main"]))}
+        projects = {name: make_project(Path(scratch), args.project, ["main", "arm"][:count])
+                    for name, (count, _) in SCENARIOS.items()}
         for _ in range(args.repeat):
-            for count, scenario in ((2, two_servers), (1, one_server)):
-                robot = bring_up(projects[count])
-                try:
-                    probe = Probe(robot)
-                    probe.first_after(time.monotonic())
-                    scenario(robot, probe, figures)
-                finally:
-                    robot.close()
-    goals = {"lost_s0": "0 (today 0)", "lost_s1": "0 (today 0)", "late_during_s0_outage": "< 2 s (today 4.8 s)",
-             "late_during_s1_outage": "< 2 s (today 4.8 s)", "late_after_single_restart": "< 5 s (today 12.3 s)",
-             "reconnect_to_message": "< 5 s", "boot_to_heard": "-"}
-    print(f"\n| figure (median of {args.repeat}; shared 2-core machine) | value | runs | goal |")
+            for name in SCENARIOS:
+                for key, values in scenario_process(name, projects[name]).items():
+                    figures[key] += values
+    print(f"\n| figure (median of {args.repeat} runs, one process each; shared 2-core machine) | value | runs | goal |")
     print("|---|---|---|---|")
     for name, values in figures.items():
         unit = "" if name.startswith("lost") else " s"
-        shown = ", ".join(f"{v:.1f}" if unit else f"{v:.0f}" for v in values)
-        print(f"| {name} | {statistics.median(values):.1f}{unit} | {shown} | {goals[name]} |")
+        heard = [v for v in values if not math.isnan(v)]  # nan: not heard within the wait
+        median = show(statistics.median(heard), unit) + unit if heard else "-"
+        print(f"| {name} | {median} | {', '.join(show(v, unit) for v in values)} | {GOALS[name]} |")
     return 0
 
 

@@ -11,6 +11,8 @@
 - a one-line edit of the C++ talker goes through ``build`` and ``run`` and is heard;
 - the project's own ``nox -s validate build unit graph``: gtest and pytest package tests, then the ROS 1 graph tests
   through robocore's pytest plugin;
+- ``robot.faults`` (the pytest plugin's bring-up, two robot hosts): a cut-off host's TCPROS traffic stops and
+  resumes on reconnection;
 - two Docker-in-Docker hosts over ssh: the talker and the master on robot-a, the listener on robot-b;
   robot-b alone hears nothing (no master, no talker), then robot-b hears robot-a's talker; after the
   master stopped, ``run`` restarts it and the nodes of both hosts, and robot-b hears again; after the
@@ -196,6 +198,46 @@ def test_the_noetic_projects_own_nox_sessions_pass(noetic: Path) -> None:
     for session in ("validate", "build", "unit", "graph"):
         assert f"Session {session} was successful" in text, output_tails(proc)
     assert "demo_talker" in text and "demo_listener" in text, output_tails(proc)  # both packages' tests ran
+
+
+def test_faults_on_a_two_host_ros1_robot_cut_off_and_reconnect(noetic: Path, tmp_path: Path) -> None:
+    """``robot.faults`` on ROS 1: the pytest plugin's bring-up of a copy of the noetic project on two robot hosts
+    (talker and master on ``main``, listener on ``arm``). Cutting ``main`` off stops the listener's TCPROS
+    traffic; reconnecting it lets the same connection resume (no new registration: the master is on ``main``
+    too). Control: without the fault the listener hears the talker (2 Hz) all through the same window."""
+    from robocore.testing import bring_up
+
+    root = tmp_path / NAME
+    shutil.copytree(noetic, root, symlinks=True, ignore=shutil.ignore_patterns("compose", "test-runs"))
+    data = yaml.safe_load((root / "robot.yaml").read_text())
+    first = data["hosts"][0]
+    data["hosts"] = [{**first, "name": "main", "ip": "192.0.2.9"}, {**first, "name": "arm", "ip": "192.0.2.10"}]
+    for comp in data["components"]:
+        comp["runs_on"] = "arm" if comp["name"] == "listener" else "main"
+    data["discovery"] = {"servers": [{"host": "main", "port": 11311}]}
+    (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    robot = bring_up(root, graph=False)
+    try:
+        def heard() -> int:
+            return sum(TALKER_TEXT in line for line in robot.logs("listener").splitlines() if HEARD in line)
+
+        assert wait_for(heard, 60, 0.5), "the listener on arm never heard the talker on main"
+        before = heard()
+        time.sleep(3.0)
+        assert heard() - before >= 4, "control: traffic stopped without a fault"
+        robot.faults.cut_off("main")
+        time.sleep(0.5)
+        before = heard()
+        time.sleep(3.0)
+        assert heard() == before, "the listener heard a cut-off host"
+        assert robot.faults.describe() == ["host main cut off from the network"]
+        robot.faults.reconnect("main")
+        reconnected = time.monotonic()
+        assert wait_for(lambda: heard() > before, 30, 0.1), "traffic did not resume after the reconnection"
+        print(f"FIGURE ros1_reconnect_to_heard_s {time.monotonic() - reconnected:.2f}")
+        assert robot.undo_faults() == []
+    finally:
+        robot.close()
 
 
 # --------------------------------------------------------------------------- two hosts
