@@ -220,7 +220,8 @@ def restart_hold_seconds(robot: Robot) -> int:
     restart never matches one started before it (measured with Jazzy's Fast DDS 2.14: no
     recovery in 90 s). Staying silent for longer than the server's lease makes every client drop
     the old proxy and register again from scratch, which takes a few seconds. Fast DDS 3.x
-    servers get a new GUID on every start (no ``-i``) and need no hold.
+    servers get a new GUID on every start (no ``-i``) and need no hold. A BACKUP server (``-b``), Fast
+    DDS's own remedy, aborts when it reloads its files on restart in 2.14 (``bench/server_restart.py``).
     """
     return SERVER_LEASE_SECONDS + 4 if robot.fastdds_line < 3 else 0
 
