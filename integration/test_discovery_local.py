@@ -88,6 +88,19 @@ def deployment(project_copies: Callable[..., Path], docker_client: Any) -> Calla
     return make
 
 
+def test_without_a_discovery_server_nothing_is_heard(robot_run: Any) -> None:
+    """Negative control: the same generated talker, listener and probe, no server running. It runs first, so that
+    the next test's probe is the second of this process: it must use its own robot's servers (Fast DDS reads a
+    process's profile file once, so the probe's file names none)."""
+    robot = robot_run(servers=False)
+    robot.wait_for_log("talker", PUBLISHED, timeout=HEAR_WITHIN)
+    robot.graph.spin(SILENCE)
+    assert "Publishing" in robot.logs("talker").splitlines()[-1], "talker stopped publishing"
+    assert robot.graph.node_names() == set(), "the probe saw nodes without a discovery server"
+    assert HEARD not in robot.logs("listener"), \
+        "listener heard the talker without a discovery server: discovery is not via the server"
+
+
 def test_messages_flow_through_the_discovery_server(robot_run: Any) -> None:
     """The plugin's probe (a super client in the test process, over UDP) sees the graph the server relays."""
     from std_msgs.msg import String
@@ -98,17 +111,6 @@ def test_messages_flow_through_the_discovery_server(robot_run: Any) -> None:
     msg = robot.graph.wait_for_message("/chatter", String, timeout=HEAR_WITHIN)
     assert msg.data.startswith("hello from talker #")
     robot.wait_for_log("listener", "I heard: hello from talker #", timeout=HEAR_WITHIN)
-
-
-def test_without_a_discovery_server_nothing_is_heard(robot_run: Any) -> None:
-    """Negative control: the same generated talker, listener and probe, no server running."""
-    robot = robot_run(servers=False)
-    robot.wait_for_log("talker", PUBLISHED, timeout=HEAR_WITHIN)
-    robot.graph.spin(SILENCE)
-    assert "Publishing" in robot.logs("talker").splitlines()[-1], "talker stopped publishing"
-    assert robot.graph.node_names() == set(), "the probe saw nodes without a discovery server"
-    assert HEARD not in robot.logs("listener"), \
-        "listener heard the talker without a discovery server: discovery is not via the server"
 
 
 def test_same_host_private_ipc_discovers_but_receives_nothing(deployment: Any) -> None:

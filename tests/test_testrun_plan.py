@@ -102,9 +102,11 @@ def test_the_probe_is_a_udp_super_client_with_its_own_profile(project: Project) 
     assert env["ROS_SUPER_CLIENT"] == "TRUE"
     assert env["FASTDDS_BUILTIN_TRANSPORTS"] == "UDPv4"
     assert env["FASTRTPS_DEFAULT_PROFILES_FILE"] == "/tmp/run/probe.xml"
+    assert env["ROS_DISCOVERY_SERVER"] == "172.30.0.2:11811"  # read for each new participant
     xml = testrun.probe_profile(project.robot)
-    assert "<discoveryProtocol>SUPER_CLIENT</discoveryProtocol>" in xml
-    assert "<address>172.30.0.2</address>" in xml and "<type>UDPv4</type>" in xml
+    # nothing of this robot in the file: the process reads it once, and a later robot's node must not use it
+    assert "discoveryProtocol" not in xml and "172.30.0.2" not in xml and "RemoteServer" not in xml
+    assert "<clientAnnouncementPeriod>" in xml
 
 
 def test_names_of_two_runs_never_collide() -> None:

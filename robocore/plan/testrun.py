@@ -108,9 +108,13 @@ def probe_environment(robot: Robot, profile_path: str) -> dict[str, str]:
 
 
 def probe_profile(robot: Robot) -> str:
-    """The one file the test process's observer node reads (empty when the discovery kind gives observers none)."""
+    """The one file the test process's observer node reads (empty when the discovery kind gives observers none).
+
+    It names no server: a test session may bring up several robots, one after the other, and Fast DDS reads
+    a process's profile file only at its first participant; the environment (:func:`probe_environment`),
+    which it reads for each participant, says which servers, and that the node is a super client."""
     kind = probe_discovery(robot)
-    return kind.files()[kind.observer_file] if kind.observer_file else ""
+    return kind.files()[kind.probe_file] if kind.probe_file else ""
 
 
 def host_spec(run: TestRun, project: Project, host: str) -> ContainerSpec:

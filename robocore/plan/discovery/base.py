@@ -163,6 +163,11 @@ class Discovery(ABC):
     kind: ClassVar[str]
     #: The file of :meth:`files` that an observer reads (None: observers read no file).
     observer_file: ClassVar[str | None] = None
+    #: The file of :meth:`files` that an observer living in a long process (the test process, which may bring up
+    #: several robots) reads. Fast DDS reads a process's profile file once, at its first participant, so this file
+    #: holds nothing of one robot (no server list): the servers come from the environment, which Fast DDS reads
+    #: for each new participant. None: such observers read no file.
+    probe_file: ClassVar[str | None] = None
     #: What a stopped server means for the running nodes, said by ``status`` (empty: nothing to add).
     server_down: ClassVar[str] = ""
     #: Nodes register with a server only when they start (ROS 1): ``run`` restarts the nodes of a host

@@ -374,6 +374,7 @@ class FastDds(Discovery):
 
     kind = "fastdds"
     observer_file = SUPER_CLIENT_PROFILE
+    probe_file = CLIENT_PROFILE  # timing and transport only; ROS_SUPER_CLIENT and ROS_DISCOVERY_SERVER do the rest
 
     def servers(self) -> list[FastDdsServer]:
         """Every discovery server, in id order."""
