@@ -22,9 +22,11 @@ hashes: nothing is rebuilt when they are current).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shutil
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -73,12 +75,34 @@ def project(robot_fleets: Callable[..., RobotFleet], run_robocore: RobocoreCli,
     shutil.rmtree(parent, ignore_errors=True)
 
 
-def _build_creations(client: Any, since: float) -> list[str]:
-    """The components whose build containers of this project were created on ``client``'s daemon since ``since``."""
-    events = client.events(since=int(since), until=int(time.time()) + 1, decode=True,
-                           filters={"type": "container", "event": "create",
-                                    "label": [f"dev.robocore.project={NAME}", "dev.robocore.role=build"]})
-    return sorted(e["Actor"]["Attributes"]["dev.robocore.component"] for e in events)
+@contextlib.contextmanager
+def build_creations(*clients: Any) -> Iterator[list[list[str]]]:
+    """The components whose build containers of this project are created on each daemon while the block runs,
+    read from each daemon's live event stream (a daemon keeps only its last few hundred events, which a busy
+    machine overflows in the minutes an emulated build takes, so they are not read back afterwards)."""
+    seen: list[list[str]] = [[] for _ in clients]
+    filters = {"type": "container", "event": "create",
+               "label": [f"dev.robocore.project={NAME}", "dev.robocore.role=build"]}
+    streams = [client.events(decode=True, filters=filters) for client in clients]
+
+    def collect(stream: Any, into: list[str]) -> None:
+        with contextlib.suppress(Exception):  # the stream ends with an error when it is closed
+            for event in stream:
+                into.append(event["Actor"]["Attributes"]["dev.robocore.component"])
+
+    threads = [threading.Thread(target=collect, args=(stream, into), daemon=True)
+               for stream, into in zip(streams, seen, strict=True)]
+    for thread in threads:
+        thread.start()
+    try:
+        yield seen
+    finally:
+        time.sleep(1)  # events of the last moment are on their way
+        for stream in streams:
+            stream.close()
+        for thread, into in zip(threads, seen, strict=True):
+            thread.join(timeout=10)
+            into.sort()
 
 
 def _results(run_robocore: RobocoreCli, root: Path, *args: str) -> list[dict[str, Any]]:
@@ -94,13 +118,12 @@ def test_the_host_builds_its_talker_and_robot_b_hears_it(project: tuple[RobotFle
                                                          docker_client: Any) -> None:
     fleet, root = project
     host = fleet.hosts[0]
-    start = time.time() - 1
-    done = {r["what"]: r for r in _results(run_robocore, root, "build") if r["kind"] == "build"}
+    with build_creations(fleet.client(0), docker_client) as (on_host, here):
+        done = {r["what"]: r for r in _results(run_robocore, root, "build") if r["kind"] == "build"}
     assert done["talker"]["action"] == done["listener"]["action"] == "built", done
     assert done["talker"]["reason"] == "on host robot-a: first build", done
     # the talker's build container ran on robot-a's daemon, the listener's here; never the talker's here
-    assert _build_creations(fleet.client(0), start) == ["talker"]
-    assert _build_creations(docker_client, start) == ["listener"]
+    assert (on_host, here) == (["talker"], ["listener"])
     assert not (root / ".robocore" / "build" / "talker" / "install").exists()  # the tree stayed there
     talker = "/root/robocore/talker/work/install/demo_talker/lib/demo_talker/talker"
     header = host.ssh(fleet, "sh", "-c", 'od -An -tu1 -j18 -N2 "$1"', "sh", talker).split()
@@ -109,11 +132,10 @@ def test_the_host_builds_its_talker_and_robot_b_hears_it(project: tuple[RobotFle
     assert recorded == ARCHES["robot-a"]
 
     # nothing changed: up to date, no container anywhere
-    again = time.time() - 1
-    done = {r["what"]: r["action"] for r in _results(run_robocore, root, "build") if r["kind"] == "build"}
+    with build_creations(fleet.client(0), docker_client) as (on_host, here):
+        done = {r["what"]: r["action"] for r in _results(run_robocore, root, "build") if r["kind"] == "build"}
     assert done == {"talker": "up-to-date", "listener": "up-to-date"}, done
-    time.sleep(1)
-    assert _build_creations(fleet.client(0), again) == [] and _build_creations(docker_client, again) == []
+    assert (on_host, here) == ([], [])
 
     synced = {r["component"]: r for r in _results(run_robocore, root, "sync") if r["kind"] == "sync"}
     assert synced["talker"]["changed"] and synced["talker"]["host"] == "robot-a", synced
@@ -139,11 +161,11 @@ def test_a_one_line_edit_is_rebuilt_on_the_host_incrementally(project: tuple[Rob
     [code] = (root / "components" / "talker").rglob("greeting.h")
     original = code.read_text()
     code.write_text(original.replace(f'"{TALKER_TEXT}"', '"built on robot-a #"'))
-    start = time.time() - 1
-    done = {r["what"]: r for r in _results(run_robocore, root, "build") if r["kind"] == "build"}
+    with build_creations(fleet.client(0), docker_client) as (on_host, here):
+        done = {r["what"]: r for r in _results(run_robocore, root, "build") if r["kind"] == "build"}
     assert done["talker"]["action"] == "built" and done["listener"]["action"] == "up-to-date", done
     assert done["talker"]["packages"] == ["demo_talker"], done  # demo_msgs was not rebuilt
-    assert _build_creations(fleet.client(0), start) == ["talker"] and _build_creations(docker_client, start) == []
+    assert (on_host, here) == (["talker"], [])
     since = time.time()
     run_robocore(root, "sync", "--quiet")
     run_robocore(root, "run", "--quiet")
