@@ -43,6 +43,8 @@ WHEELS_TOOLS: tuple[str, ...] = (
 )
 #: Debian packages the official base adds to ``ros:<distro>-ros-base`` (pytest: ``robocore test``).
 OFFICIAL_APT: tuple[str, ...] = ("procps", "python3-pip", "python3-pytest")
+#: The installer of the wheels base's venv (pinned: its resolver and bytecode are part of the recipe).
+WHEELS_INSTALLER = "uv==0.13.9"
 #: Debian packages the wheels base needs from its root image (installed only if missing).
 WHEELS_APT: tuple[str, ...] = ("python3", "python3-venv", "procps", "ca-certificates")
 #: Debian 12's own ROS 1 (1.15, the noetic generation) for the debian base: the core with roscpp, rospy,
@@ -217,6 +219,24 @@ def _debian_lines(distro: str) -> list[str]:
     ]
 
 
+def _wheels_venv(env: str, pins: str) -> str:
+    """The wheels base's venv made by :data:`WHEELS_INSTALLER`: uv itself is installed into a scratch folder by
+    the pip wheel Debian's python3-venv ships (no pip install into the image first); uv makes the venv with the
+    pip and setuptools wheels ``python3 -m venv`` would have put in it (components' ``pip`` entries use them)
+    and the pinned wheels, downloaded side by side, bytecode compiled as pip does; then the scratch folder
+    (uv, its cache and temporary files) goes. The same packages as ``venv`` + ``pip install``."""
+    scratch = "/tmp/robocore-uv"
+    wheels = "/usr/share/python-wheels"
+    return " \\\n && ".join([
+        f"pip_wheel=$(ls {wheels}/pip-*.whl | head -n 1) && tools_wheel=$(ls {wheels}/setuptools-*.whl | head -n 1)",
+        f'python3 "$pip_wheel/pip" install -q --no-compile --target {scratch} {WHEELS_INSTALLER}',
+        f"python3 -m venv --without-pip {env}",
+        f"TMPDIR={scratch} UV_CACHE_DIR={scratch}/cache {scratch}/bin/uv pip install --no-progress --compile-bytecode "
+        f'--python {env}/bin/python "$pip_wheel" "$tools_wheel" {pins}',
+        f"rm -rf {scratch}",
+    ])
+
+
 def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequence[str],
                     cmake: Sequence[str] = ()) -> str:
     """The base image's Dockerfile. ``common``: names of common packages in the context's ``common/``;
@@ -234,9 +254,8 @@ def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequ
         lines.append(_env_lines([("ROS_DISTRO", distro), ("LANG", "C.UTF-8"),
                                  ("PIP_DISABLE_PIP_VERSION_CHECK", "1"), ("PIP_NO_CACHE_DIR", "1")]))
         probe = "command -v ps >/dev/null && python3 -c 'import ensurepip, venv' 2>/dev/null"
-        lines.append(f"RUN {probe} || ({_apt_install(WHEELS_APT)})")
         pins = " ".join(WHEELS[distro] + WHEELS_TOOLS) if distro in WHEELS else "WHEELS-UNAVAILABLE"
-        lines.append(f"RUN python3 -m venv {env} && {env}/bin/pip install {pins}")
+        lines.append(f"RUN ({probe} || ({_apt_install(WHEELS_APT)})) \\\n && {_wheels_venv(env, pins)}")
         lines.append(_env_lines([("VIRTUAL_ENV", env), ("PATH", f"{env}/bin:$PATH")]))
         lines.append(f"COPY wheels-setup.bash /opt/ros/{distro}/setup.bash")
         lines.append(f"COPY ros2 {env}/bin/ros2")

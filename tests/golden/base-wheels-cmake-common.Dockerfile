@@ -5,8 +5,12 @@ ENV ROS_DISTRO=jazzy \
     LANG=C.UTF-8 \
     PIP_DISABLE_PIP_VERSION_CHECK=1 \
     PIP_NO_CACHE_DIR=1
-RUN command -v ps >/dev/null && python3 -c 'import ensurepip, venv' 2>/dev/null || (apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends python3 python3-venv procps ca-certificates && rm -rf /var/lib/apt/lists/*)
-RUN python3 -m venv /opt/ros/jazzy/venv && /opt/ros/jazzy/venv/bin/pip install ros-rclpy==7.1.6 ros-std-msgs==5.3.6 ros-rmw-fastrtps-cpp==8.4.3 colcon-core colcon-ros colcon-python-setup-py colcon-library-path colcon-bash colcon-package-selection colcon-parallel-executor colcon-output pytest psutil
+RUN (command -v ps >/dev/null && python3 -c 'import ensurepip, venv' 2>/dev/null || (apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends python3 python3-venv procps ca-certificates && rm -rf /var/lib/apt/lists/*)) \
+ && pip_wheel=$(ls /usr/share/python-wheels/pip-*.whl | head -n 1) && tools_wheel=$(ls /usr/share/python-wheels/setuptools-*.whl | head -n 1) \
+ && python3 "$pip_wheel/pip" install -q --no-compile --target /tmp/robocore-uv uv==0.13.9 \
+ && python3 -m venv --without-pip /opt/ros/jazzy/venv \
+ && TMPDIR=/tmp/robocore-uv UV_CACHE_DIR=/tmp/robocore-uv/cache /tmp/robocore-uv/bin/uv pip install --no-progress --compile-bytecode --python /opt/ros/jazzy/venv/bin/python "$pip_wheel" "$tools_wheel" ros-rclpy==7.1.6 ros-std-msgs==5.3.6 ros-rmw-fastrtps-cpp==8.4.3 colcon-core colcon-ros colcon-python-setup-py colcon-library-path colcon-bash colcon-package-selection colcon-parallel-executor colcon-output pytest psutil \
+ && rm -rf /tmp/robocore-uv
 ENV VIRTUAL_ENV=/opt/ros/jazzy/venv \
     PATH=/opt/ros/jazzy/venv/bin:$PATH
 COPY wheels-setup.bash /opt/ros/jazzy/setup.bash
