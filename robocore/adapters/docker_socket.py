@@ -67,3 +67,24 @@ def images_digest(label: str, *, environ: dict[str, str] | None = None) -> str |
     rows = sorted((str(image.get("Id")), sorted(image.get("RepoTags") or [])) for image in found
                   if isinstance(image, dict))
     return hashlib.sha256(json.dumps(rows).encode()).hexdigest()
+
+
+def containers(label: str, *, environ: dict[str, str] | None = None) -> list[dict[str, object]] | None:
+    """The inspect documents (as ``docker inspect`` gives them) of the local containers carrying ``label``,
+    running or not; None when the daemon cannot be asked. One list call, then one inspect per container: what
+    docker-py's ``containers.list(all=True)`` fetches, without its import. Any call that does not answer (a
+    container removed between the two calls included) gives None: the caller asks through docker-py then."""
+    filters = quote(json.dumps({"label": [label]}))
+    listed = get_json(f"/containers/json?all=1&filters={filters}", environ=environ)
+    if not isinstance(listed, list):
+        return None
+    found: list[dict[str, object]] = []
+    for item in listed:
+        ident = item.get("Id") if isinstance(item, dict) else None
+        if not isinstance(ident, str):
+            return None
+        document = get_json(f"/containers/{quote(ident, safe='')}/json", environ=environ)
+        if not isinstance(document, dict):
+            return None
+        found.append(document)
+    return found
