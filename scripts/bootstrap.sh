@@ -51,16 +51,25 @@ PY="${PYTHON:-python3}"
 if [ ! -x "$VENV/bin/python" ]; then
   "$PY" -m venv "$VENV"
 fi
-stamp="$VENV/.robocore-installed"
-if [ ! -f "$stamp" ] || [ "$ROOT/pyproject.toml" -nt "$stamp" ]; then
+# ROBOCORE_EXTRAS: the extras installed with robocore (default dev: the test tools; scripts/demo asks for none,
+# a quarter of the downloads). A venv that has the dev extras serves a demo too.
+extras="${ROBOCORE_EXTRAS-dev}"
+case "$extras" in
+  dev) stamp="$VENV/.robocore-installed" ;;
+  "") stamp="$VENV/.robocore-installed-core" ;;
+  *) stamp="$VENV/.robocore-installed-${extras//[^a-z0-9-]/_}" ;;
+esac
+fresh() { [ -f "$1" ] && ! [ "$ROOT/pyproject.toml" -nt "$1" ]; }
+if ! fresh "$stamp" && ! { [ -z "$extras" ] && fresh "$VENV/.robocore-installed"; }; then
+  spec="$ROOT${extras:+[$extras]}"
   # the same packages, installed by uv (from PyPI: downloads and installs side by side) when it can be had,
   # else by pip as before; ROBOCORE_INSTALLER=pip forces pip
   if [ "${ROBOCORE_INSTALLER:-uv}" = uv ] && "$VENV/bin/python" -m pip install -q --disable-pip-version-check uv \
        >/dev/null 2>&1 && "$VENV/bin/python" -m uv --version >/dev/null 2>&1; then
-    "$VENV/bin/python" -m uv pip install -q --python "$VENV/bin/python" --upgrade pip -e "$ROOT[dev]"  # pip too: tests drive pip with git+file requirements
+    "$VENV/bin/python" -m uv pip install -q --python "$VENV/bin/python" --upgrade pip -e "$spec"  # pip too: tests drive pip with git+file requirements
   else
     "$VENV/bin/python" -m pip install -q --upgrade pip >/dev/null
-    "$VENV/bin/python" -m pip install -q -e "$ROOT[dev]"
+    "$VENV/bin/python" -m pip install -q -e "$spec"
   fi
   touch "$stamp"
 fi
