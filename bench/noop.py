@@ -76,6 +76,9 @@ def main() -> None:
         rows.append(("status", median([py, "-m", "robocore", "status"], project, args.runs), None))
         print(f"no-op tasks on {project} (median of {args.runs}; machine shared, figures are noisy: "
               "compare within this run)")
+        if os.environ.get("PYTHONDONTWRITEBYTECODE"):
+            print("note: PYTHONDONTWRITEBYTECODE is set: modules without a __pycache__ entry are compiled from source "
+                  "on every run (status without bytecode pays ~2x)")
         print(f"{'what':<22}{'ordinary':>10}{'memo':>10}{'x bare':>9}  goal < {GOAL} s; goal <= {GOAL_RATIO}x bare")
         for what, ordinary, memo in rows:
             best = memo if memo is not None else ordinary

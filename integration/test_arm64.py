@@ -130,7 +130,7 @@ def test_arm64_talker_heard_by_amd64_listener_through_the_master(mixed: Any, run
         return [line for line in lines if TALKER_TEXT in line]
 
     assert wait_for(heard, 180, 1), "the listener on robot-x86 never heard the arm64 talker on robot-arm"
-    status = json.loads(run_robocore(root, "status", "--json", check=False).stdout)
+    status = json.loads(run_robocore(root, "status", "--json", "--nodes", check=False).stdout)
     [graph] = [r for r in status["results"] if r["kind"] == "ros_graph"]
     assert {"/talker", "/listener"} <= set(graph["nodes"] or []), graph
     inside = run_robocore(root, "connect", "--component", "talker", "--cmd", "uname -m").stdout

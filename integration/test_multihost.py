@@ -182,7 +182,7 @@ def test_stage_build_sync_run_over_ssh_one_graph_across_hosts(fleet: RobotFleet,
     for index, comp in ((0, "talker"), (1, "listener")):
         assert fleet.client(index).images.get(f"{robot.name}-{comp}:latest")
 
-    status = run_robocore(robot, "status", "--json")
+    status = run_robocore(robot, "status", "--json", "--nodes")
     data = json.loads(status.stdout)
     [graph] = [r for r in data["results"] if r["kind"] == "ros_graph"]
     nodes = " ".join(graph["nodes"] or [])

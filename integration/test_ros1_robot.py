@@ -99,7 +99,7 @@ def _probe(docker_client: Any, tracked: list[Any], master_uri: str, seconds: int
 
 
 def _status(run_robocore: RobocoreCli, root: Path) -> dict[str, Any]:
-    return dict(json.loads(run_robocore(root, "status", "--json", check=False).stdout))
+    return dict(json.loads(run_robocore(root, "status", "--json", "--nodes", check=False).stdout))
 
 
 def _graph(status: dict[str, Any]) -> dict[str, Any]:

@@ -184,15 +184,24 @@ def test_an_empty_never_deployed_host_is_not_contacted(project_copy: Any, docker
 
 
 def test_status_shows_components_and_nodes(running: Path, run_robocore: RobocoreCli) -> None:
-    status = json.loads(run_robocore(running, "status", "--json").stdout)
+    status = json.loads(run_robocore(running, "status", "--json", "--nodes").stdout)
     rows = {row["component"]: row for row in status["results"] if row["kind"] == "container"}
     assert set(rows) == {"discovery-0", "talker", "listener"}
     assert {row["state"] for row in rows.values()} == {"running"}
     assert rows["talker"]["image"].endswith("-talker:latest")
     [graph] = [r for r in status["results"] if r["kind"] == "ros_graph"]
     assert "/talker" in graph["nodes"] and "/listener" in graph["nodes"]
-    table = run_robocore(running, "status").stdout
+    table = run_robocore(running, "status", "--nodes").stdout
     assert "running" in table and "/listener" in table
+    # without --nodes: the same containers (read over the daemon's socket), the graph not asked
+    quick = json.loads(run_robocore(running, "status", "--json").stdout)
+    def containers(data: dict[str, Any]) -> list[dict[str, Any]]:
+        return [{k: v for k, v in r.items() if k != "uptime"} for r in data["results"] if r["kind"] == "container"]
+
+    assert containers(quick) == containers(status)
+    [graph] = [r for r in quick["results"] if r["kind"] == "ros_graph"]
+    assert graph["nodes"] is None and "--nodes" in graph["via"]
+    assert "--nodes" in run_robocore(running, "status").stdout
 
 
 def test_logs_prefix_and_filter(running: Path, run_robocore: RobocoreCli) -> None:

@@ -116,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
         console().rule("[bold]the listener hears the talker through the discovery server")
         for line in lines[-5:]:
             print(f"listener | {line}")
-        observe.status(options)
+        observe.status(options, nodes_too=True)
         if args.down:
             _step("down", lambda: run.down(options, host=None))
         else:

@@ -282,14 +282,15 @@ def down(c: Context, host: str = "", dry_run: bool = False, quiet: bool = False)
     _execute(options, lambda: command.down(options, host=host or None))
 
 
-@task(help={"json": "Machine-readable output.", "dry_run": "Print what would be queried."})
+@task(help={"json": "Machine-readable output.", "dry_run": "Print what would be queried.",
+            "nodes": "Also list the live ROS nodes (listens to the graph for 3 s)."})
 @reported
-def status(c: Context, json: bool = False, dry_run: bool = False) -> None:
-    """Table of components (host, state, uptime, restarts, image) and live ROS nodes."""
+def status(c: Context, json: bool = False, dry_run: bool = False, nodes: bool = False) -> None:
+    """Table of components (host, state, uptime, restarts, image); with --nodes the live ROS nodes too."""
     from robocore.commands import observe
 
     options = _options(c, "status", json=json, dry_run=dry_run)
-    _execute(options, lambda: observe.status(options))
+    _execute(options, lambda: observe.status(options, nodes_too=nodes))
 
 
 @task(help={"component": "Only this component.", "follow": "Keep following.",

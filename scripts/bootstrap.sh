@@ -48,19 +48,62 @@ command -v docker >/dev/null || { echo "error: docker is not installed; robocore
 docker info >/dev/null 2>&1 || { echo "error: cannot reach the Docker daemon (is it running? may this user use it?)" >&2; exit 1; }
 
 PY="${PYTHON:-python3}"
+installer="${ROBOCORE_INSTALLER:-uv}"
 if [ ! -x "$VENV/bin/python" ]; then
-  "$PY" -m venv "$VENV"
+  # with uv, the venv starts without pip (ensurepip costs seconds); uv installs pip into it below
+  if [ "$installer" = uv ]; then "$PY" -m venv --without-pip "$VENV"; else "$PY" -m venv "$VENV"; fi
 fi
-stamp="$VENV/.robocore-installed"
-if [ ! -f "$stamp" ] || [ "$ROOT/pyproject.toml" -nt "$stamp" ]; then
+# The pip wheel the interpreter bundles for ensurepip (Debian keeps it in /usr/share/python-wheels): pip runs
+# from it without being installed, to fetch uv.
+bundled_pip() {
+  "$VENV/bin/python" - <<'PYCODE'
+import glob, os
+places = ["/usr/share/python-wheels"]
+try:
+    import ensurepip
+    places.insert(0, os.path.join(os.path.dirname(ensurepip.__file__), "_bundled"))
+except ImportError:
+    pass
+for place in places:
+    found = sorted(glob.glob(os.path.join(place, "pip-*.whl")))
+    if found:
+        print(found[-1])
+        break
+PYCODE
+}
+# uv itself: the venv's own, else fetched into a scratch folder by the venv's pip or the bundled pip wheel
+find_uv() {
+  if [ -x "$VENV/bin/uv" ]; then echo "$VENV/bin/uv"; return 0; fi
+  rm -rf "$VENV/.robocore-uv"
+  local wheel pip=("$VENV/bin/python" -m pip)
+  if ! "$VENV/bin/python" -m pip --version >/dev/null 2>&1; then
+    wheel="$(bundled_pip)" && [ -n "$wheel" ] || return 1
+    pip=("$VENV/bin/python" "$wheel/pip")
+  fi
+  "${pip[@]}" install -q --disable-pip-version-check --no-compile --target "$VENV/.robocore-uv" uv >/dev/null 2>&1 \
+    && "$VENV/.robocore-uv/bin/uv" --version >/dev/null 2>&1 && echo "$VENV/.robocore-uv/bin/uv"
+}
+# ROBOCORE_EXTRAS: the extras installed with robocore (default dev: the test tools; scripts/demo asks for none,
+# a quarter of the downloads). A venv that has the dev extras serves a demo too.
+extras="${ROBOCORE_EXTRAS-dev}"
+case "$extras" in
+  dev) stamp="$VENV/.robocore-installed" ;;
+  "") stamp="$VENV/.robocore-installed-core" ;;
+  *) stamp="$VENV/.robocore-installed-${extras//[^a-z0-9-]/_}" ;;
+esac
+fresh() { [ -f "$1" ] && ! [ "$ROOT/pyproject.toml" -nt "$1" ]; }
+if ! fresh "$stamp" && ! { [ -z "$extras" ] && fresh "$VENV/.robocore-installed"; }; then
+  spec="$ROOT${extras:+[$extras]}"
   # the same packages, installed by uv (from PyPI: downloads and installs side by side) when it can be had,
   # else by pip as before; ROBOCORE_INSTALLER=pip forces pip
-  if [ "${ROBOCORE_INSTALLER:-uv}" = uv ] && "$VENV/bin/python" -m pip install -q --disable-pip-version-check uv \
-       >/dev/null 2>&1 && "$VENV/bin/python" -m uv --version >/dev/null 2>&1; then
-    "$VENV/bin/python" -m uv pip install -q --python "$VENV/bin/python" --upgrade pip -e "$ROOT[dev]"  # pip too: tests drive pip with git+file requirements
+  if [ "$installer" = uv ] && uv="$(find_uv)"; then
+    # pip too: tests drive pip with git+file requirements; uv too: the next install needs no fetch
+    "$uv" pip install -q --python "$VENV/bin/python" --upgrade pip uv -e "$spec"
+    rm -rf "$VENV/.robocore-uv"
   else
+    "$VENV/bin/python" -m pip --version >/dev/null 2>&1 || "$VENV/bin/python" -m ensurepip -q
     "$VENV/bin/python" -m pip install -q --upgrade pip >/dev/null
-    "$VENV/bin/python" -m pip install -q -e "$ROOT[dev]"
+    "$VENV/bin/python" -m pip install -q -e "$spec"
   fi
   touch "$stamp"
 fi

@@ -306,3 +306,15 @@ def test_an_interface_or_header_edit_always_runs_colcon() -> None:
     copies = {"pkg": {"include/pkg/a.hpp": ["install/pkg/include/pkg/a.hpp"]}}
     assert plan_patches(["pkg"], before, {"pkg": header}, copies) == (
         [], "pkg: code is generated or compiled from include/pkg/a.hpp")
+
+
+def test_the_wheels_base_context_holds_robocores_files_at_their_image_paths(tmp_path: Path) -> None:
+    """The one ``COPY tree/ /`` of the wheels base puts the entrypoint, setup.bash and ros2 where the image
+    uses them (executables stay executable)."""
+    planned = base_image.plan_base(_project(tmp_path), None, "amd64", dry_run=True)
+    files = {f.dest: f for f in planned.files}
+    assert {"tree/robocore/entrypoint.sh", "tree/opt/ros/jazzy/setup.bash", "tree/opt/ros/jazzy/venv/bin/ros2"} <= set(
+        files)
+    assert files["tree/robocore/entrypoint.sh"].executable and files["tree/opt/ros/jazzy/venv/bin/ros2"].executable
+    assert b"@DISTRO@" not in files["tree/opt/ros/jazzy/setup.bash"].data
+    assert not [d for d in files if not d.startswith(("tree/", "common/"))]

@@ -81,10 +81,23 @@ def test_wheels_base_has_entrypoint_setup_and_pins() -> None:
     text = dockerfiles.base_dockerfile(r, root_image="x", has_ca=False, common=[])
     assert 'ENTRYPOINT ["/robocore/entrypoint.sh"]' in text
     assert 'CMD ["bash"]' in text
-    assert "COPY wheels-setup.bash /opt/ros/jazzy/setup.bash" in text
+    assert f"COPY {dockerfiles.WHEELS_TREE}/ /" in text  # robocore's files, each at its path in the image
+    assert dockerfiles.wheels_tree_dest("wheels-setup.bash", "jazzy") == "tree/opt/ros/jazzy/setup.bash"
+    assert dockerfiles.wheels_tree_dest("ros2", "jazzy") == "tree/opt/ros/jazzy/venv/bin/ros2"
+    assert dockerfiles.wheels_tree_dest("entrypoint.sh", "jazzy") == "tree/robocore/entrypoint.sh"
     for pin in dockerfiles.WHEELS["jazzy"]:
         assert pin in text
     assert "host-ca.pem" not in text  # no trust store found -> nothing copied
+
+
+def test_the_wheels_base_commits_nothing_after_its_venv_but_the_label() -> None:
+    """A build step's commit costs in proportion to the image on fuse-overlayfs: the files, settings, entrypoint
+    and command all come before the venv's RUN (one COPY, one ENV), so a plain wheels base ends with it."""
+    r = robot(base={"kind": "wheels"})
+    text = dockerfiles.base_dockerfile(r, root_image="x", has_ca=True, common=[])
+    steps = [line.split()[0] for line in text.splitlines() if line and not line.startswith((" ", "#"))]
+    assert steps == ["FROM", "SHELL", "COPY", "ENV", "ENTRYPOINT", "CMD", "RUN"]
+    assert "PIP_CERT=/etc/robocore/host-ca.pem" in text and "PATH=/opt/ros/jazzy/venv/bin:$PATH" in text
 
 
 def test_official_base_uses_override() -> None:

@@ -205,3 +205,32 @@ def test_missing_mmdebstrap_is_tool_missing_with_a_hint(tmp_path: Path, monkeypa
         rootfs.bootstrap(object(), arches.root_strap(BaseKind.wheels, "arm64", ["python3"]),  # type: ignore[arg-type]
                          target="robocore/arm64/debian:bookworm-wheels", work_dir=tmp_path)
     assert "mmdebstrap" in info.value.message and "apt-get install mmdebstrap" in (info.value.hint or "")
+
+
+def test_the_root_bootstrap_works_in_memory_only_where_there_is_room(tmp_path: Path, monkeypatch: Any) -> None:
+    """/dev/shm (or ROBOCORE_ROOTFS_SCRATCH) when it is a writable, executable folder with 2 GiB free; else none
+    (the project's cache on disk), and an empty setting turns it off."""
+    import os
+
+    from robocore.adapters import rootfs
+
+    monkeypatch.setenv(rootfs.SCRATCH_ENV, str(tmp_path))
+    real = os.statvfs(tmp_path)
+
+    def free(nbytes: int, flag: int = 0) -> Any:
+        fields = list(real)
+        fields[4] = nbytes // real.f_frsize  # f_bavail
+        fields[8] = flag  # f_flag
+        return os.statvfs_result(fields)
+
+    monkeypatch.setattr(rootfs.os, "statvfs", lambda path: free(rootfs.SCRATCH_NEEDS))
+    assert rootfs.scratch_dir() == str(tmp_path)
+    monkeypatch.setattr(rootfs.os, "statvfs", lambda path: free(rootfs.SCRATCH_NEEDS - real.f_frsize))
+    assert rootfs.scratch_dir() is None  # too small: the bootstrap would fail half-way
+    monkeypatch.setattr(rootfs.os, "statvfs", lambda path: free(rootfs.SCRATCH_NEEDS, os.ST_NOEXEC))
+    assert rootfs.scratch_dir() is None  # noexec: the chroot's maintainer scripts could not run
+    monkeypatch.undo()
+    monkeypatch.setenv(rootfs.SCRATCH_ENV, str(tmp_path / "missing"))
+    assert rootfs.scratch_dir() is None
+    monkeypatch.setenv(rootfs.SCRATCH_ENV, "")
+    assert rootfs.scratch_dir() is None

@@ -1,7 +1,8 @@
-"""One read-only Docker Engine API call over the local unix socket, with the standard library only.
+"""Read-only Docker Engine API calls over the local unix socket, with the standard library only.
 
-The no-op memo (:mod:`robocore.commands.noop`) must know whether the local images changed without
-paying for docker-py's import (requests, urllib3: a large part of a no-op task's time). This adapter
+The no-op memo (:mod:`robocore.commands.noop`) must know whether the local images changed, and
+``status`` what the local containers are doing, without paying for docker-py's import (requests,
+urllib3: a large part of a no-op task's time). This adapter
 answers only for a daemon on a unix socket (no ``DOCKER_HOST``, or ``unix://``); for any other
 daemon, or any error, it answers None and the caller takes the ordinary path.
 """
@@ -67,3 +68,24 @@ def images_digest(label: str, *, environ: dict[str, str] | None = None) -> str |
     rows = sorted((str(image.get("Id")), sorted(image.get("RepoTags") or [])) for image in found
                   if isinstance(image, dict))
     return hashlib.sha256(json.dumps(rows).encode()).hexdigest()
+
+
+def containers(label: str, *, environ: dict[str, str] | None = None) -> list[dict[str, object]] | None:
+    """The inspect documents (as ``docker inspect`` gives them) of the local containers carrying ``label``,
+    running or not; None when the daemon cannot be asked. One list call, then one inspect per container: what
+    docker-py's ``containers.list(all=True)`` fetches, without its import. Any call that does not answer (a
+    container removed between the two calls included) gives None: the caller asks through docker-py then."""
+    filters = quote(json.dumps({"label": [label]}))
+    listed = get_json(f"/containers/json?all=1&filters={filters}", environ=environ)
+    if not isinstance(listed, list):
+        return None
+    found: list[dict[str, object]] = []
+    for item in listed:
+        ident = item.get("Id") if isinstance(item, dict) else None
+        if not isinstance(ident, str):
+            return None
+        document = get_json(f"/containers/{quote(ident, safe='')}/json", environ=environ)
+        if not isinstance(document, dict):
+            return None
+        found.append(document)
+    return found

@@ -81,16 +81,22 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
         check_emulation(arch, native, f"{ROBOT_FILE}: hosts of arch {arch}")
     root_ref, root_id = _base_parent(project, client, arch, dry_run=dry_run, say=say)
     ca = find_ca_bundle()
-    entries: list[ContextEntry] = [resource_entry("entrypoint.sh", "entrypoint.sh", executable=True)]
-    if robot.base.kind is BaseKind.wheels:
+    wheels = robot.base.kind is BaseKind.wheels
+
+    def place(name: str) -> str:  # the wheels base copies its files in one step, from a tree of their paths
+        return dockerfiles.wheels_tree_dest(name, robot.ros_distro.value) if wheels else name
+
+    entries: list[ContextEntry] = [resource_entry(place("entrypoint.sh"), "entrypoint.sh", executable=True)]
+    if wheels:
         from robocore import resources
 
         setup = resources.read("wheels-setup.bash").replace(b"@DISTRO@", robot.ros_distro.value.encode())
-        entries += [ContextEntry("wheels-setup.bash", data=setup), resource_entry("ros2", "ros2", executable=True)]
+        entries += [ContextEntry(place("wheels-setup.bash"), data=setup),
+                    resource_entry(place("ros2"), "ros2", executable=True)]
     elif robot.base.kind is BaseKind.debian:
         entries.append(resource_entry("debian-setup.bash", "debian-setup.bash", executable=False))
     if ca is not None:
-        entries.append(ContextEntry("host-ca.pem", data=ca.read_bytes()))
+        entries.append(ContextEntry(place("host-ca.pem"), data=ca.read_bytes()))
     common: list[str] = []
     known = True
     for pkg in robot.common_packages:

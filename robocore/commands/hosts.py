@@ -59,6 +59,35 @@ def managed_containers(client: docker.DockerClient, project: str) -> list[Any]:
     return [c for c in found if c.labels.get(naming.LABEL_ROLE) in MANAGED_ROLES]
 
 
+def local_documents(project: Project, host: Host) -> list[dict[str, Any]] | None:
+    """The inspect documents of the project's managed containers on a local host, read over the daemon's unix
+    socket without docker-py (whose import was most of a status' time); None for other hosts or when the
+    socket does not answer (docker-py is asked then)."""
+    if not host.is_local:
+        return None
+    from robocore.adapters import docker_socket
+
+    found = docker_socket.containers(f"{naming.LABEL_PROJECT}={project.name}")
+    if found is None:
+        return None
+    return [doc for doc in found if document_labels(doc).get(naming.LABEL_ROLE) in MANAGED_ROLES]
+
+
+def document_labels(document: dict[str, Any]) -> dict[str, str]:
+    """The labels of a container's inspect document."""
+    labels = (document.get("Config") or {}).get("Labels") or {}
+    return {str(key): str(value) for key, value in labels.items()}
+
+
+def managed_documents(project: Project, host: Host) -> list[dict[str, Any]]:
+    """The inspect documents of :func:`managed_containers` on ``host``, through docker-py."""
+    client = connect(project, host, timeout=60)
+    try:
+        return [dict(c.attrs) for c in managed_containers(client, project.name)]
+    finally:
+        client.close()
+
+
 def short_error(exc: BaseException) -> str:
     """The first line of what an exception says (docker-py's explanation when it has one)."""
     explanation = getattr(exc, "explanation", None)

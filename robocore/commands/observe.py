@@ -15,7 +15,14 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from robocore.commands.context import Options
 from robocore.commands.hosts import connect as connect_host
-from robocore.commands.hosts import for_each_host, managed_containers, select_hosts
+from robocore.commands.hosts import (
+    document_labels,
+    for_each_host,
+    local_documents,
+    managed_containers,
+    managed_documents,
+    select_hosts,
+)
 from robocore.commands.reporting import Reporter
 from robocore.config.model import DockerAccess, Host
 from robocore.errors import DockerError, GroupError, RobocoreError, UsageError
@@ -30,6 +37,8 @@ if TYPE_CHECKING:
 
 #: Seconds ``status`` lets its super client listen to the graph.
 GRAPH_SPIN_SECONDS = 3.0
+#: Where the ROS nodes were asked when they were not (``status`` without ``--nodes``).
+NOT_ASKED = f"not asked (`status --nodes` lists them, listening to the graph for {GRAPH_SPIN_SECONDS:.0f} s)"
 #: Read timeout of log streams: a quiet component may print nothing for a long time.
 LOG_STREAM_TIMEOUT = 7 * 24 * 3600
 
@@ -80,12 +89,11 @@ def uptime_text(started_at: str, now: datetime | None = None) -> str:
     return f"{minutes}m {secs}s" if minutes else f"{secs}s"
 
 
-def _rows(project: Project, host: Host) -> list[Row]:
-    client = connect_host(project, host, timeout=60)
-    try:
-        found = {c.labels.get(naming.LABEL_COMPONENT, c.name): c for c in managed_containers(client, project.name)}
-    finally:
-        client.close()
+def _rows(project: Project, host: Host, documents: list[dict[str, Any]] | None = None) -> list[Row]:
+    if documents is None:
+        documents = managed_documents(project, host)
+    found = {document_labels(doc).get(naming.LABEL_COMPONENT, str(doc.get("Name", "")).lstrip("/")): doc
+             for doc in documents}
     planned = [discovery_service(s.index) for s in discovery.for_robot(project.robot).servers_on(host.name)]
     planned += [c.name for c in project.robot.components_on(host.name)]
     rows = []
@@ -94,15 +102,15 @@ def _rows(project: Project, host: Host) -> list[Row]:
         if container is None:
             rows.append(Row(name, host.name, "missing", "-", 0, "-"))
             continue
-        state = container.attrs.get("State", {})
+        state = container.get("State") or {}
         running = state.get("Status") == "running"
         rows.append(Row(
             component=name,
             host=host.name,
-            state=str(state.get("Status", container.status)) + ("" if name in planned else " (not planned)"),
+            state=str(state.get("Status", "unknown")) + ("" if name in planned else " (not planned)"),
             uptime=uptime_text(state.get("StartedAt", "")) if running else "-",
-            restarts=int(container.attrs.get("RestartCount", 0)),
-            image=str(container.attrs.get("Config", {}).get("Image", "")),
+            restarts=int(container.get("RestartCount", 0)),
+            image=str((container.get("Config") or {}).get("Image", "")),
             started_at=str(state.get("StartedAt", "")) if running else None,
         ))
     return rows
@@ -178,24 +186,30 @@ class LogLine:
 
 
 def collect_status(project: Project, hosts: list[Host]) -> tuple[list[Row], dict[str, RobocoreError]]:
-    """Status rows of every reachable host (file order) and the failures of the others."""
-    results, failures = for_each_host(hosts, lambda h: _rows(project, h))
+    """Status rows of every reachable host (file order) and the failures of the others. Local hosts are read
+    over the daemon's socket first; the rest (or a local host whose socket did not answer) through docker-py,
+    side by side."""
+    local = {h.name: _rows(project, h, docs) for h in hosts if (docs := local_documents(project, h)) is not None}
+    results, failures = for_each_host([h for h in hosts if h.name not in local], lambda h: _rows(project, h))
+    results.update(local)
     rows = [row for h in hosts for row in results.get(h.name, [])]
     return rows, failures
 
 
-def status(options: Options) -> None:
-    """Print the state of every component and the ROS nodes alive in the graph."""
+def status(options: Options, *, nodes_too: bool = False) -> None:
+    """Print the state of every component and, with ``nodes_too``, the ROS nodes alive in the graph (listening
+    to the graph takes :data:`GRAPH_SPIN_SECONDS`; the containers alone answer at once)."""
     project = options.load()
     report = options.report
     hosts = select_hosts(project, None)
     if options.dry_run:
         for h in hosts:
             report.out(f"would list {project.name} containers on {h.name}")
-        report.out("would run `ros2 node list` as a super client in the discovery server container")
+        if nodes_too:
+            report.out("would run `ros2 node list` as a super client in the discovery server container")
         return
     rows, failures = collect_status(project, hosts)
-    nodes, where = ros_nodes(project)
+    nodes, where = ros_nodes(project) if nodes_too else (None, NOT_ASKED)
     kind = discovery.for_robot(project.robot)
     servers = [discovery_service(s.index) for s in kind.servers()]
     stale = not_registered(rows, servers) if kind.nodes_register_once else []
@@ -227,7 +241,9 @@ def print_status(rows: list[Row], failures: dict[str, RobocoreError], nodes: lis
         table.add_row("-", host, "[red]unreachable[/]", "-", "-", escape(error.lines()[0]))
     report = report or Reporter()
     report.table(table)
-    if nodes is None:
+    if nodes is None and where == NOT_ASKED:
+        report.out(f"ROS nodes: {where}")
+    elif nodes is None:
         report.out(f"ROS nodes: unknown ({where})")
     else:
         report.out(f"ROS nodes ({len(nodes)}, via {where}): " + (", ".join(nodes) if nodes else "none"))

@@ -43,6 +43,10 @@ WHEELS_TOOLS: tuple[str, ...] = (
 )
 #: Debian packages the official base adds to ``ros:<distro>-ros-base`` (pytest: ``robocore test``).
 OFFICIAL_APT: tuple[str, ...] = ("procps", "python3-pip", "python3-pytest")
+#: The folder of the wheels base's build context copied onto ``/`` (its files at their paths in the image).
+WHEELS_TREE = "tree"
+#: The installer of the wheels base's venv (pinned: its resolver and bytecode are part of the recipe).
+WHEELS_INSTALLER = "uv==0.13.9"
 #: Debian packages the wheels base needs from its root image (installed only if missing).
 WHEELS_APT: tuple[str, ...] = ("python3", "python3-venv", "procps", "ca-certificates")
 #: Debian 12's own ROS 1 (1.15, the noetic generation) for the debian base: the core with roscpp, rospy,
@@ -217,6 +221,24 @@ def _debian_lines(distro: str) -> list[str]:
     ]
 
 
+def _wheels_venv(env: str, pins: str) -> str:
+    """The wheels base's venv made by :data:`WHEELS_INSTALLER`: uv itself is installed into a scratch folder by
+    the pip wheel Debian's python3-venv ships (no pip install into the image first); uv makes the venv with the
+    pip and setuptools wheels ``python3 -m venv`` would have put in it (components' ``pip`` entries use them)
+    and the pinned wheels, downloaded side by side, bytecode compiled as pip does; then the scratch folder
+    (uv, its cache and temporary files) goes. The same packages as ``venv`` + ``pip install``."""
+    scratch = "/tmp/robocore-uv"
+    wheels = "/usr/share/python-wheels"
+    return " \\\n && ".join([
+        f"pip_wheel=$(ls {wheels}/pip-*.whl | head -n 1) && tools_wheel=$(ls {wheels}/setuptools-*.whl | head -n 1)",
+        f'python3 "$pip_wheel/pip" install -q --no-compile --target {scratch} {WHEELS_INSTALLER}',
+        f"python3 -m venv --without-pip {env}",
+        f"TMPDIR={scratch} UV_CACHE_DIR={scratch}/cache {scratch}/bin/uv pip install --no-progress --compile-bytecode "
+        f'--python {env}/bin/python "$pip_wheel" "$tools_wheel" {pins}',
+        f"rm -rf {scratch}",
+    ])
+
+
 def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequence[str],
                     cmake: Sequence[str] = ()) -> str:
     """The base image's Dockerfile. ``common``: names of common packages in the context's ``common/``;
@@ -226,26 +248,19 @@ def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequ
     lines = [f"# robocore base image, {robot.generation} {distro} ({robot.base.kind.value}): {GENERATED}"]
     lines.append(f"FROM {root_image}")
     lines.append('SHELL ["/bin/bash", "-o", "pipefail", "-c"]')
-    lines += _ca_lines(has_ca)
+    if wheels:
+        lines += _wheels_lines(distro, has_ca)
+    else:
+        lines += _ca_lines(has_ca)
     if robot.base.kind is BaseKind.debian:
         lines += _debian_lines(distro)
-    elif wheels:
-        env = venv(distro)
-        lines.append(_env_lines([("ROS_DISTRO", distro), ("LANG", "C.UTF-8"),
-                                 ("PIP_DISABLE_PIP_VERSION_CHECK", "1"), ("PIP_NO_CACHE_DIR", "1")]))
-        probe = "command -v ps >/dev/null && python3 -c 'import ensurepip, venv' 2>/dev/null"
-        lines.append(f"RUN {probe} || ({_apt_install(WHEELS_APT)})")
-        pins = " ".join(WHEELS[distro] + WHEELS_TOOLS) if distro in WHEELS else "WHEELS-UNAVAILABLE"
-        lines.append(f"RUN python3 -m venv {env} && {env}/bin/pip install {pins}")
-        lines.append(_env_lines([("VIRTUAL_ENV", env), ("PATH", f"{env}/bin:$PATH")]))
-        lines.append(f"COPY wheels-setup.bash /opt/ros/{distro}/setup.bash")
-        lines.append(f"COPY ros2 {env}/bin/ros2")
-    else:
+    elif not wheels:
         lines.append(_env_lines([("ROS_DISTRO", distro), ("PIP_DISABLE_PIP_VERSION_CHECK", "1"),
                                  ("PIP_NO_CACHE_DIR", "1"), ("PIP_BREAK_SYSTEM_PACKAGES", "1")]))
         apt = OFFICIAL_ROS1_APT if robot.ros_version == 1 else OFFICIAL_APT
         lines.append(f"RUN {_apt_install(apt)} && rosdep update --rosdistro \"$ROS_DISTRO\"")
-    lines.append(f"COPY entrypoint.sh {naming.ENTRYPOINT}")
+    if not wheels:
+        lines.append(f"COPY entrypoint.sh {naming.ENTRYPOINT}")
     if wheels and cmake:
         lines += cmake_packages.toolchain_lines(distro, venv(distro), cmake)
     if common:
@@ -253,9 +268,42 @@ def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequ
         if robot.base.kind is BaseKind.official:  # the others have no rosdep database
             lines.append(_rosdep([f"{STAGING}/common"]))
         lines.append(_colcon_underlay(f"{STAGING}/common", COMMON_PREFIX))
-    lines.append(f'ENTRYPOINT ["{naming.ENTRYPOINT}"]')
-    lines.append('CMD ["bash"]')
+    if not wheels:
+        lines += _entrypoint_lines()
     return "\n".join(lines) + "\n"
+
+
+def _entrypoint_lines() -> list[str]:
+    return [f'ENTRYPOINT ["{naming.ENTRYPOINT}"]', 'CMD ["bash"]']
+
+
+def wheels_tree_dest(name: str, distro: str) -> str:
+    """Where the wheels base's build context holds its file ``name`` (``entrypoint.sh``, ``wheels-setup.bash``,
+    ``ros2``, ``host-ca.pem``): under :data:`WHEELS_TREE` at its path in the image, so one COPY places them all."""
+    paths = {"entrypoint.sh": naming.ENTRYPOINT, "wheels-setup.bash": f"/opt/ros/{distro}/setup.bash",
+             "ros2": f"{venv(distro)}/bin/ros2", "host-ca.pem": CA_IN_IMAGE}
+    return WHEELS_TREE + paths[name]
+
+
+def _wheels_lines(distro: str, has_ca: bool) -> list[str]:
+    """The wheels base up to its venv. Each build step commits a layer, and a commit costs in proportion to the
+    image's size on some storage drivers (fuse-overlayfs diffs the whole tree: ~6 s per step on the 400 MB base
+    here, loaded), so every file comes in one COPY and every setting in one ENV before the venv's RUN, on the
+    small root; after it only the label robocore adds (and the common packages or CMake tool chain when asked)."""
+    env = venv(distro)
+    pins = " ".join(WHEELS[distro] + WHEELS_TOOLS) if distro in WHEELS else "WHEELS-UNAVAILABLE"
+    probe = "command -v ps >/dev/null && python3 -c 'import ensurepip, venv' 2>/dev/null"
+    settings = [(name, CA_IN_IMAGE) for name in CA_ENV] if has_ca else []
+    settings += [("ROS_DISTRO", distro), ("LANG", "C.UTF-8"), ("PIP_DISABLE_PIP_VERSION_CHECK", "1"),
+                 ("PIP_NO_CACHE_DIR", "1"), ("VIRTUAL_ENV", env), ("PATH", f"{env}/bin:$PATH")]
+    return [
+        "# robocore's files at their paths: the entrypoint, setup.bash, the ros2 command"
+        + (", the dev machine's trust store (public CAs plus any proxy CA, for pip/git in builds)" if has_ca else ""),
+        f"COPY {WHEELS_TREE}/ /",
+        _env_lines(settings),
+        *_entrypoint_lines(),
+        f"RUN ({probe} || ({_apt_install(WHEELS_APT)})) \\\n && {_wheels_venv(env, pins)}",
+    ]
 
 
 def repo_folder(repo: Repository) -> str:
