@@ -52,12 +52,23 @@ def timed(project: Path, *args: str) -> tuple[float, int]:
     return time.perf_counter() - started, compiled_objects(project, wall)
 
 
+def lan_address() -> str:
+    """This machine's first non-loopback IPv4 address (the address a robot's other hosts would reach it at)."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.connect(("192.0.2.1", 9))  # no packet is sent: this only picks the outgoing interface
+        return str(probe.getsockname()[0])
+
+
 def make_project(parent: Path, arch: str) -> Path:
     """A noetic project whose talker runs on a host of ``arch`` (the ROS master stays on this machine)."""
     project = parent / f"bench-{arch}"
     robocore(None, "init", str(project), "--defaults", "--distro", "noetic", "--base", "debian")
     if arch != "amd64":
         data = yaml.safe_load((project / "robot.yaml").read_text())
+        # ROS 1 nodes on two hosts need a reachable master: this machine's LAN address, not the template's loopback
+        data["hosts"][0]["ip"] = lan_address()
         data["hosts"].append({"name": "jetson", "ip": "192.0.2.10", "user": "robot", "arch": arch})
         for comp in data["components"]:
             if comp["name"] == "talker":
