@@ -41,7 +41,9 @@ if TYPE_CHECKING:
     from conftest import RobocoreCli
     from robot_host.hosts import RobotFleet
 
-pytestmark = pytest.mark.docker
+# the first run on a machine bootstraps the arm64 root and base under emulation: more than the suite's 25 minutes
+# per test on a busy 2-core machine (CI stops itself at 80 minutes whatever happens)
+pytestmark = [pytest.mark.docker, pytest.mark.timeout(3000)]
 
 NAME = "robocore-it-arm64"
 TALKER_TEXT = "hello from talker #"
