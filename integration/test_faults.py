@@ -3,7 +3,8 @@
 One pytest session (one bring-up) runs ``graph_suites/faults_two_hosts.py`` in a copy of the demo
 project with the talker and discovery server 0 on host ``main``, the listener and discovery server 1
 on host ``arm``: a control window without a fault, then a cut-off and reconnection, a partition,
-a limited link, power cuts of either host and their boots, a SIGKILLed component, and a test that
+a limited link, power cuts of either host and their boots, a SIGKILLed component, each discovery server
+killed in turn (no message lost, a node started during the outage heard), and a test that
 fails on purpose with faults in force (its report lists them; the next test finds them undone).
 """
 
@@ -55,7 +56,7 @@ def figures(proc: subprocess.CompletedProcess[str]) -> dict[str, float]:
 def test_every_fault_is_observed_and_undone_on_a_two_host_robot(project_copies: Callable[..., Path]) -> None:
     proc = run_suite(project_copies, "faults_two_hosts.py", two_hosts_two_servers)
     print(figures(proc), re.findall(r"NOTE [^\n]*", proc.stdout))
-    assert "1 failed, 9 passed" in proc.stdout, output_tails(proc, 12000)
+    assert "1 failed, 10 passed" in proc.stdout, output_tails(proc, 12000)
     failed = proc.stdout.split("test_zz_a_failing_test_with_a_fault_in_force", 1)[1]
     assert "robocore: faults in force" in failed, output_tails(proc)
     assert "host arm cut off from the network" in failed, output_tails(proc)
