@@ -97,9 +97,11 @@ def set_greeting(project: Path, text: str) -> None:
     path.write_text("".join(lines))
 
 
-def wait_heard(client: Any, container: str, needle: str, timeout: float = 120) -> float:
+def wait_heard(client: Any, container: str, needle: str, timeout: float = 120, *, since: float = 0,
+               first_counts: int = 0) -> float:
     """The wall-clock time at which ``container`` logged "I heard: <needle>", read from the Docker log's own
-    timestamp (so how often this polls does not count)."""
+    timestamp (so how often this polls does not count). ``since``: only lines logged from then on;
+    ``first_counts``: only a message numbered at most that (``... #2``), i.e. from a talker that started anew."""
     deadline = time.monotonic() + timeout
     logs = ""
     while time.monotonic() < deadline:
@@ -109,7 +111,10 @@ def wait_heard(client: Any, container: str, needle: str, timeout: float = 120) -
             logs = ""
         for line in logs.splitlines():
             stamp, _, text = line.partition(" ")
-            if text.startswith(f"I heard: {needle}"):
+            if not text.startswith(f"I heard: {needle}") or log_time(stamp) < since:
+                continue
+            count = text.rpartition("#")[2].strip()
+            if not first_counts or (count.isdigit() and int(count) <= first_counts):
                 return log_time(stamp)
         time.sleep(0.2)
     talker = client.containers.get(container.replace("listener", "talker"))
@@ -253,6 +258,34 @@ def naive_path(project: Path, client: Any, fleet: RobotFleet, text: str) -> tupl
     return end - start, moved, steps
 
 
+def floor_path(client: Any) -> tuple[float, int, dict[str, float]]:
+    """The floor no deploy tool can go under with this talker: its container, already holding the edited code,
+    restarted on the host by Docker itself (nothing copied, no image or container made), until the listener
+    hears the new process. Split at the talker's own log: restart call to its first publish (container start,
+    Python and rclpy start, the node's first 0.5 s timer tick) and first publish to heard (discovery)."""
+    talker = client.containers.get(f"{PROJECT}-talker")
+    time.sleep(3)  # the running talker's count is past the first few: a low count heard later is the new process
+    start = time.time()
+    talker.restart(timeout=0)
+    steps = {"docker restart": time.time() - start}
+    end = wait_heard(client, f"{PROJECT}-listener", "", since=start, first_counts=3)
+    published = first_log(talker, "Publishing:", since=start)
+    if published is not None:
+        steps["restart to 1st publish"] = published - start
+        steps["1st publish to heard"] = end - published
+    steps["until heard"] = end - start
+    return end - start, 0, steps
+
+
+def first_log(container: Any, prefix: str, *, since: float) -> float | None:
+    """The Docker log timestamp of the first line of ``container`` starting with ``prefix`` logged after ``since``."""
+    for line in container.logs(timestamps=True, since=int(since)).decode(errors="replace").splitlines():
+        stamp, _, text = line.partition(" ")
+        if text.startswith(prefix) and log_time(stamp) >= since:
+            return log_time(stamp)
+    return None
+
+
 def shape_link(fleet: RobotFleet, mbit: float) -> None:
     """Limit traffic towards the robot host to ``mbit`` (tc tbf on the host-side veth of its eth0); 0: unshaped."""
     host = fleet.hosts[0]
@@ -288,6 +321,9 @@ def main() -> int:
     parser.add_argument("--watch", action="store_true",
                         help="also time the watch mode: `robocore dev --component talker` running, a save until "
                              "heard (its rounds run before the others)")
+    parser.add_argument("--floor-rounds", type=int, default=5,
+                        help="rounds of the floor: the talker's container, edited code already in it, restarted by "
+                             "Docker on the host until heard (0: skip)")
     parser.add_argument("--profile", type=Path, metavar="DIR",
                         help="run each timed robocore command under cProfile and write its profile into DIR "
                              "(slower: for finding where the time goes, not for the figures)")
@@ -301,6 +337,7 @@ def main() -> int:
     parent = Path(tempfile.mkdtemp(prefix="robocore-bench-deploy-"))
     results: dict[float, tuple[list[Result], list[Result]]] = {}
     watched: dict[float, list[Result]] = {}
+    floors: list[Result] = []
     try:
         with RobotFleet(1) as fleet:
             project = make_project(parent, fleet.hosts[0].ip)
@@ -328,6 +365,11 @@ def main() -> int:
                             time.sleep(1)
                     finally:
                         loop.stop()
+                if not mbit and args.floor_rounds:  # nothing crosses the link: once, on the unshaped bridge
+                    for n in range(args.floor_rounds):
+                        floors.append(floor_path(client))
+                        steps = ", ".join(f"{k} {v:.2f}" for k, v in floors[-1][2].items())
+                        print(f"floor, round {n + 1}: restart in place {floors[-1][0]:.2f} s ({steps})", flush=True)
                 for n in range(args.rounds):
                     # robocore first: it starts from the container run created (install tree mounted), with no
                     # ssh connection open, as after a developer's pause (the last run's master has gone)
@@ -377,6 +419,13 @@ def main() -> int:
                         f"median to median (goal >= 10x) -> {'met' if min(ratio, median_ratio) >= 10 else 'NOT met'}; "
                         f"sync moved {best_fast[1]:,} bytes (goal < 50 KB) -> "
                         f"{'met' if best_fast[1] < 50_000 else 'NOT met'}")
+    if floors:
+        best_floor = min(floors, key=lambda r: r[0])
+        floor_median = statistics.median(r[0] for r in floors)
+        detail = ", ".join(f"{k} {v:.2f}s" for k, v in best_floor[2].items())
+        print(f"{describe_link(0):<22} {'floor':<9} {best_floor[0]:>6.2f} {floor_median:>7.2f} {0:>14,}   {detail}")
+        verdicts.append(f"floor (the container restarted in place by Docker, code already there): "
+                        f"{floor_median:.2f} s median of {len(floors)}; no deploy of this talker is heard sooner")
     print()
     print("\n".join(verdicts))
     return 0

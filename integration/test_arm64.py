@@ -123,6 +123,17 @@ def test_every_image_and_tree_is_of_its_hosts_arch(mixed: Any, docker_client: An
     assert inside.strip().splitlines()[-1] == "aarch64", inside
 
 
+def test_roots_are_byte_compiled_once_and_py3compile_is_back(mixed: Any, docker_client: Any) -> None:
+    """The roots are bootstrapped with py3compile diverted and one compileall at the end: the python3 packages'
+    modules load from their bytecode, and py3compile is in place, with no diversion left, for later packages."""
+    for arch in ("arm64", "amd64"):
+        script = ("python3 -B -v -c 'import rospy' 2>&1 | grep -c 'code object from .*rospy/__pycache__/' ; "
+                  "command -v py3compile ; dpkg-divert --list '*py3compile*' | wc -l")
+        out = docker_client.containers.run(f"robocore/{arch}/debian:bookworm-debian", ["sh", "-c", script],
+                                           remove=True, platform=f"linux/{arch}").decode().split()
+        assert int(out[0]) > 3 and out[1:] == ["/usr/bin/py3compile", "0"], (arch, out)
+
+
 def test_arm64_talker_heard_by_amd64_listener_through_the_master(mixed: Any, run_robocore: RobocoreCli) -> None:
     fleet, root = mixed
     run_robocore(root, "run", "--quiet")

@@ -87,6 +87,19 @@ def test_root_strap_content_differs_per_arch_and_argv_has_no_option_from_inputs(
     assert "ros-core-dev" in argv[3] and "g++" in argv[3]
 
 
+def test_root_strap_byte_compiles_once_at_the_end() -> None:
+    strap = arches.root_strap(BaseKind.debian, "arm64", dockerfiles.DEBIAN_APT)
+    argv = strap.argv("/tmp/x/root.tar", "http://deb.debian.org/debian")
+    hooks = [arg for arg in argv if arg.startswith("--") and "-hook=" in arg]
+    # py3compile is diverted away before the python3 packages are set up, and back before the one compile
+    assert hooks[0].startswith("--essential-hook=") and "--add /usr/bin/py3compile" in hooks[0]
+    assert hooks[1].startswith("--customize-hook=") and "--remove /usr/bin/py3compile" in hooks[1]
+    assert hooks[2].startswith("--customize-hook=") and "compileall" in hooks[2]
+    assert all(folder in hooks[2] for folder in arches.PYTHON_MODULE_DIRS)
+    # the hooks are part of the root's content hash: a root made without them is made again
+    assert strap.key() != arches.RootStrap(strap.arch, strap.packages, hooks=()).key()
+
+
 def _elf(machine: int, *, big: bool = False) -> bytes:
     order = ">" if big else "<"
     return b"\x7fELF" + bytes([2, 2 if big else 1, 1]) + bytes(9) + struct.pack(f"{order}HH", 2, machine)

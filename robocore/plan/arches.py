@@ -95,6 +95,25 @@ def upstream_root(robot: Robot) -> str:
     return f"debian:{SUITE}"
 
 
+#: Where Debian's python3 packages' modules are byte-compiled from (``py3compile``'s default folder and the
+#: private ones of the roots' packages: debpython's and catkin's).
+PYTHON_MODULE_DIRS = ("/usr/lib/python3/dist-packages", "/usr/share/python3", "/usr/share/catkin")
+#: Byte-compiling once, at the end: each of Debian's python3 packages runs ``py3compile`` when it is set up,
+#: a Python start per package (measured for the debian base's arm64 root under qemu: 71 packages, 142 s of
+#: its 435 s). Their postinst scripts skip it when ``py3compile`` is not on PATH, so it is diverted away
+#: once the essential packages are in, and put back at the end, where one ``compileall`` run compiles the
+#: same folders (17.6 s under qemu). mmdebstrap runs each hook with the root folder as ``$1``; no value of
+#: robot.yaml is in them.
+COMPILE_LATER_HOOKS = (
+    '--essential-hook=chroot "$1" dpkg-divert --quiet --local --rename --divert /usr/bin/py3compile.later '
+    "--add /usr/bin/py3compile",
+    '--customize-hook=chroot "$1" dpkg-divert --quiet --local --rename --remove /usr/bin/py3compile',
+    '--customize-hook=chroot "$1" sh -c \'[ ! -x /usr/bin/python3 ] || for d in '
+    + " ".join(PYTHON_MODULE_DIRS)
+    + '; do [ ! -d "$d" ] || python3 -m compileall -q "$d" || exit 1; done\'',
+)
+
+
 @dataclass(frozen=True)
 class RootStrap:
     """How a registry-free root is bootstrapped for one arch (the mmdebstrap inputs of its content hash)."""
@@ -103,6 +122,7 @@ class RootStrap:
     packages: tuple[str, ...]
     variant: str = "apt"
     excludes: tuple[str, ...] = ("/usr/share/doc/*", "/usr/share/man/*", "/usr/share/locale/*")
+    hooks: tuple[str, ...] = COMPILE_LATER_HOOKS
 
     def argv(self, tarball: str, mirror: str) -> list[str]:
         """The mmdebstrap command line writing the root to ``tarball`` from ``mirror`` (the caller checks that
@@ -110,11 +130,11 @@ class RootStrap:
         argv = ["mmdebstrap", f"--arch={self.arch}", f"--variant={self.variant}",
                 f"--include={','.join(self.packages)}", '--aptopt=APT::Install-Recommends "false"']
         argv += [f"--dpkgopt=path-exclude={pattern}" for pattern in self.excludes]
-        return [*argv, SUITE, tarball, mirror]
+        return [*argv, *self.hooks, SUITE, tarball, mirror]
 
     def key(self) -> str:
-        """The text its content hash is made from (arch, variant, packages, excludes)."""
-        return "\n".join([SUITE, self.arch, self.variant, *self.packages, "--", *self.excludes])
+        """The text its content hash is made from (arch, variant, packages, excludes, hooks)."""
+        return "\n".join([SUITE, self.arch, self.variant, *self.packages, "--", *self.excludes, "--", *self.hooks])
 
 
 def root_strap(kind: BaseKind, arch: str, packages: Sequence[str]) -> RootStrap:
