@@ -118,6 +118,8 @@ def test_every_image_and_tree_is_of_its_hosts_arch(mixed: Any, docker_client: An
     assert (install / "talker" / "install" / arches.INSTALL_ARCH_FILE).read_text().strip() == "arm64"
     assert (install / "listener" / "install" / arches.INSTALL_ARCH_FILE).read_text().strip() == "amd64"
     assert (root / ".robocore" / "ccache" / "arm64").is_dir()
+    # the debian base's build trees are Ninja's: an incremental build under qemu is one process, not make's many
+    assert (install / "talker" / "build" / "demo_talker" / "build.ninja").is_file()
     # the dev shell of the arm64 talker, on this amd64 machine: its own image, emulated
     inside = run_robocore(root, "shell", "--component", "talker", "--cmd", "uname -m").stdout
     assert inside.strip().splitlines()[-1] == "aarch64", inside

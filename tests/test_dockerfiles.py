@@ -81,10 +81,10 @@ def test_wheels_base_has_entrypoint_setup_and_pins() -> None:
     text = dockerfiles.base_dockerfile(r, root_image="x", has_ca=False, common=[])
     assert 'ENTRYPOINT ["/robocore/entrypoint.sh"]' in text
     assert 'CMD ["bash"]' in text
-    assert f"COPY {dockerfiles.WHEELS_TREE}/ /" in text  # robocore's files, each at its path in the image
-    assert dockerfiles.wheels_tree_dest("wheels-setup.bash", "jazzy") == "tree/opt/ros/jazzy/setup.bash"
-    assert dockerfiles.wheels_tree_dest("ros2", "jazzy") == "tree/opt/ros/jazzy/venv/bin/ros2"
-    assert dockerfiles.wheels_tree_dest("entrypoint.sh", "jazzy") == "tree/robocore/entrypoint.sh"
+    assert f"COPY {dockerfiles.BASE_TREE}/ /" in text  # robocore's files, each at its path in the image
+    assert dockerfiles.base_tree_dest("wheels-setup.bash", "jazzy") == "tree/opt/ros/jazzy/setup.bash"
+    assert dockerfiles.base_tree_dest("ros2", "jazzy") == "tree/opt/ros/jazzy/venv/bin/ros2"
+    assert dockerfiles.base_tree_dest("entrypoint.sh", "jazzy") == "tree/robocore/entrypoint.sh"
     for pin in dockerfiles.WHEELS["jazzy"]:
         assert pin in text
     assert "host-ca.pem" not in text  # no trust store found -> nothing copied

@@ -203,7 +203,8 @@ def debian_base(common: list[str] | None = None) -> str:
 
 
 def run_line(text: str, needle: str) -> str:
-    (line,) = [line for line in text.splitlines() if line.startswith("RUN ") and needle in line]
+    """The RUN instruction holding ``needle``, its continuation lines joined."""
+    (line,) = [line for line in text.replace("\\\n", "").splitlines() if line.startswith("RUN ") and needle in line]
     return line
 
 
@@ -224,6 +225,15 @@ def test_the_debian_base_has_colcon_in_a_venv_that_sees_debians_ros() -> None:
     assert "colcon-ros" in dockerfiles.DEBIAN_TOOLS and "colcon-cmake" in dockerfiles.DEBIAN_TOOLS
 
 
+def test_the_debian_base_makes_ninja_build_trees() -> None:
+    text = debian_base()
+    assert "ninja-build" in dockerfiles.DEBIAN_APT and "ninja-build" in run_line(text, "dpkg -s")
+    assert "    CMAKE_GENERATOR=Ninja" in text.splitlines() or "ENV CMAKE_GENERATOR=Ninja" in text.splitlines()
+    wheels = dockerfiles.base_dockerfile(robot(ros_distro="jazzy", base={"kind": "wheels"}),
+                                         root_image="robocore/debian:bookworm", has_ca=False, common=[])
+    assert "CMAKE_GENERATOR" not in wheels  # control: the other bases keep CMake's default generator
+
+
 def test_the_debian_base_is_labelled_with_the_tool_chain() -> None:
     assert f"LABEL {cmake_packages.LABEL_TOOLCHAIN}={cmake_packages.TOOLCHAIN_CMAKE}" in debian_base().splitlines()
 
@@ -233,9 +243,13 @@ def test_the_debian_base_sets_the_distro_and_its_setup_file() -> None:
     assert text.startswith("# robocore base image, ROS 1 noetic (debian): ")
     assert "FROM robocore/debian:bookworm" in text.splitlines()
     assert "ENV ROS_DISTRO=noetic \\" in text.splitlines()
-    assert "COPY debian-setup.bash /opt/ros/noetic/setup.bash" in text.splitlines()
-    assert "RUN ln -sfn noetic /opt/ros/Debian" in text.splitlines()  # setup.bash sets ROS_DISTRO=Debian
-    assert text.splitlines()[-2:] == ['ENTRYPOINT ["/robocore/entrypoint.sh"]', 'CMD ["bash"]']
+    assert "COPY tree/ /" in text.splitlines()  # debian-setup.bash as /opt/ros/noetic/setup.bash, the entrypoint
+    assert dockerfiles.base_tree_dest("debian-setup.bash", "noetic") == "tree/opt/ros/noetic/setup.bash"
+    assert text.rstrip().endswith("&& ln -sfn noetic /opt/ros/Debian")  # setup.bash sets ROS_DISTRO=Debian
+    assert 'ENTRYPOINT ["/robocore/entrypoint.sh"]' in text.splitlines() and 'CMD ["bash"]' in text.splitlines()
+    # one build step per instruction, each a commit of the ~800 MB root: few of them
+    steps = [line for line in text.splitlines() if line and not line.startswith(("#", " ", "FROM"))]
+    assert len(steps) == 7, steps
     assert "wheels-setup.bash" not in text and "WHEELS-UNAVAILABLE" not in text
 
 

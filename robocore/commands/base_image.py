@@ -82,9 +82,10 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
     root_ref, root_id = _base_parent(project, client, arch, dry_run=dry_run, say=say)
     ca = find_ca_bundle()
     wheels = robot.base.kind is BaseKind.wheels
+    tree = robot.base.kind in (BaseKind.wheels, BaseKind.debian)
 
-    def place(name: str) -> str:  # the wheels base copies its files in one step, from a tree of their paths
-        return dockerfiles.wheels_tree_dest(name, robot.ros_distro.value) if wheels else name
+    def place(name: str) -> str:  # the wheels and debian bases copy their files in one step, from a tree
+        return dockerfiles.base_tree_dest(name, robot.ros_distro.value) if tree else name
 
     entries: list[ContextEntry] = [resource_entry(place("entrypoint.sh"), "entrypoint.sh", executable=True)]
     if wheels:
@@ -94,7 +95,7 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
         entries += [ContextEntry(place("wheels-setup.bash"), data=setup),
                     resource_entry(place("ros2"), "ros2", executable=True)]
     elif robot.base.kind is BaseKind.debian:
-        entries.append(resource_entry("debian-setup.bash", "debian-setup.bash", executable=False))
+        entries.append(resource_entry(place("debian-setup.bash"), "debian-setup.bash", executable=False))
     if ca is not None:
         entries.append(ContextEntry(place("host-ca.pem"), data=ca.read_bytes()))
     common: list[str] = []

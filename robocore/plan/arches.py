@@ -100,14 +100,17 @@ def upstream_root(robot: Robot) -> str:
 PYTHON_MODULE_DIRS = ("/usr/lib/python3/dist-packages", "/usr/share/python3", "/usr/share/catkin")
 #: Byte-compiling once, at the end: each of Debian's python3 packages runs ``py3compile`` when it is set up,
 #: a Python start per package (measured for the debian base's arm64 root under qemu: 71 packages, 142 s of
-#: its 435 s). Their postinst scripts skip it when ``py3compile`` is not on PATH, so it is diverted away
-#: once the essential packages are in, and put back at the end, where one ``compileall`` run compiles the
-#: same folders (17.6 s under qemu). mmdebstrap runs each hook with the root folder as ``$1``; no value of
-#: robot.yaml is in them.
+#: its 435 s). Once the essential packages are in, the real ``py3compile`` is diverted away (python3-minimal
+#: then unpacks it as ``py3compile.later``) and a no-op stands in its place (python3's runtime hooks call it
+#: unconditionally); at the end the no-op goes, the real one is put back, and one ``compileall`` run
+#: compiles the same folders (17.6 s under qemu). mmdebstrap runs each hook with the root folder as ``$1``;
+#: no value of robot.yaml is in them.
 COMPILE_LATER_HOOKS = (
     '--essential-hook=chroot "$1" dpkg-divert --quiet --local --rename --divert /usr/bin/py3compile.later '
-    "--add /usr/bin/py3compile",
-    '--customize-hook=chroot "$1" dpkg-divert --quiet --local --rename --remove /usr/bin/py3compile',
+    "--add /usr/bin/py3compile && printf '#!/bin/sh\\nexit 0\\n' > \"$1/usr/bin/py3compile\" "
+    '&& chmod 755 "$1/usr/bin/py3compile"',
+    '--customize-hook=rm -f "$1/usr/bin/py3compile" '
+    '&& chroot "$1" dpkg-divert --quiet --local --rename --remove /usr/bin/py3compile',
     '--customize-hook=chroot "$1" sh -c \'[ ! -x /usr/bin/python3 ] || for d in '
     + " ".join(PYTHON_MODULE_DIRS)
     + '; do [ ! -d "$d" ] || python3 -m compileall -q "$d" || exit 1; done\'',

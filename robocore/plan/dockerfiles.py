@@ -43,20 +43,27 @@ WHEELS_TOOLS: tuple[str, ...] = (
 )
 #: Debian packages the official base adds to ``ros:<distro>-ros-base`` (pytest: ``robocore test``).
 OFFICIAL_APT: tuple[str, ...] = ("procps", "python3-pip", "python3-pytest")
-#: The folder of the wheels base's build context copied onto ``/`` (its files at their paths in the image).
-WHEELS_TREE = "tree"
+#: The folder of the wheels and debian bases' build context copied onto ``/`` (their files at their paths in the
+#: image, in one build step).
+BASE_TREE = "tree"
 #: The installer of the wheels base's venv (pinned: its resolver and bytecode are part of the recipe).
 WHEELS_INSTALLER = "uv==0.13.9"
 #: Debian packages the wheels base needs from its root image (installed only if missing).
 WHEELS_APT: tuple[str, ...] = ("python3", "python3-venv", "procps", "ca-certificates")
 #: Debian 12's own ROS 1 (1.15, the noetic generation) for the debian base: the core with roscpp, rospy,
-#: catkin and message generation, the command-line tools, a C++ tool chain with ccache, gtest (catkin skips
-#: gtests without it) and pytest.
+#: catkin and message generation, the command-line tools, a C++ tool chain with ccache and Ninja, gtest
+#: (catkin skips gtests without it) and pytest.
 DEBIAN_APT: tuple[str, ...] = (
     "ros-core-dev", "rosbash", "python3-rospy", "python3-roslaunch", "python3-rosnode", "python3-rostopic",
-    "python3-rosservice", "python3-rosmsg", "g++", "cmake", "make", "ccache", "libgtest-dev", "python3-venv",
-    "python3-pip", "python3-pytest", "procps", "ca-certificates",
+    "python3-rosservice", "python3-rosmsg", "g++", "cmake", "make", "ninja-build", "ccache", "libgtest-dev",
+    "python3-venv", "python3-pip", "python3-pytest", "procps", "ca-certificates",
 )
+#: The CMake generator of new build trees in the debian base (``CMAKE_GENERATOR``; a tree keeps the generator
+#: it was made with). Ninja's incremental build is one process that stats the tree; Make's is a recursion of
+#: makes and ``cmake -E`` helpers, each a process start, which qemu makes slow: measured for the template's
+#: roscpp talker on arm64 under qemu (loaded machine), a build with nothing to do took 10.5 s with Make and
+#: 0.24 s with Ninja, and a one-line edit 63 s and 32 s.
+DEBIAN_CMAKE_GENERATOR = "Ninja"
 #: colcon from PyPI for the debian base (Debian has no colcon), in a venv that sees Debian's ROS modules.
 DEBIAN_TOOLS: tuple[str, ...] = (
     "colcon-core", "colcon-ros", "colcon-cmake", "colcon-python-setup-py", "colcon-library-path", "colcon-bash",
@@ -203,21 +210,29 @@ def _rosdep(paths: Sequence[str]) -> str:
             f"{froms} && rm -rf /var/lib/apt/lists/*")
 
 
-def _debian_lines(distro: str) -> list[str]:
-    """The debian base: Debian's ROS 1 packages, colcon in a venv that sees them, a generated setup.bash."""
+def _debian_lines(distro: str, has_ca: bool) -> list[str]:
+    """The debian base: Debian's ROS 1 packages, colcon in a venv that sees them, a generated setup.bash. As in
+    the wheels base (:func:`_wheels_lines`), every file comes in one COPY and every setting in one ENV, and all
+    the work is one RUN: each build step's commit costs seconds on this ~800 MB root (fuse-overlayfs: 6-7 s per
+    step here, metadata steps too), on each arch."""
     env = venv(distro)
+    # nodes run Debian's python3: a component's pip_packages go there, beside Debian's ROS modules
+    settings = [(name, CA_IN_IMAGE) for name in CA_ENV] if has_ca else []
+    settings += [("ROS_DISTRO", distro), ("LANG", "C.UTF-8"), ("PIP_DISABLE_PIP_VERSION_CHECK", "1"),
+                 ("PIP_NO_CACHE_DIR", "1"), ("PIP_BREAK_SYSTEM_PACKAGES", "1"),
+                 ("CMAKE_GENERATOR", DEBIAN_CMAKE_GENERATOR)]
     return [
-        # nodes run Debian's python3: a component's pip_packages go there, beside Debian's ROS modules
-        _env_lines([("ROS_DISTRO", distro), ("LANG", "C.UTF-8"), ("PIP_DISABLE_PIP_VERSION_CHECK", "1"),
-                    ("PIP_NO_CACHE_DIR", "1"), ("PIP_BREAK_SYSTEM_PACKAGES", "1")]),
-        # the root robocore bootstraps has them already (mmdebstrap --include): apt runs only for another root
-        f"RUN dpkg -s {' '.join(DEBIAN_APT)} >/dev/null 2>&1 || ({_apt_install(DEBIAN_APT)})",
-        f"RUN python3 -m venv --system-site-packages {env} && {env}/bin/pip install {' '.join(DEBIAN_TOOLS)} "
-        f"&& ln -sf {env}/bin/colcon /usr/local/bin/colcon",
-        f"COPY debian-setup.bash /opt/ros/{distro}/setup.bash",
-        f"RUN ln -sfn {distro} /opt/ros/Debian",
+        "# robocore's files at their paths: the entrypoint, setup.bash"
+        + (", the dev machine's trust store (public CAs plus any proxy CA, for pip/git in builds)" if has_ca else ""),
+        f"COPY {BASE_TREE}/ /",
+        _env_lines(settings),
         "# the C++ tool chain is in the base: builds use ccache",
         f"LABEL {cmake_packages.LABEL_TOOLCHAIN}={cmake_packages.TOOLCHAIN_CMAKE}",
+        *_entrypoint_lines(),
+        # the root robocore bootstraps has them already (mmdebstrap --include): apt runs only for another root
+        f"RUN (dpkg -s {' '.join(DEBIAN_APT)} >/dev/null 2>&1 || ({_apt_install(DEBIAN_APT)})) \\\n"
+        f" && python3 -m venv --system-site-packages {env} && {env}/bin/pip install {' '.join(DEBIAN_TOOLS)} \\\n"
+        f" && ln -sf {env}/bin/colcon /usr/local/bin/colcon && ln -sfn {distro} /opt/ros/Debian",
     ]
 
 
@@ -248,18 +263,17 @@ def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequ
     lines = [f"# robocore base image, {robot.generation} {distro} ({robot.base.kind.value}): {GENERATED}"]
     lines.append(f"FROM {root_image}")
     lines.append('SHELL ["/bin/bash", "-o", "pipefail", "-c"]')
+    debian = robot.base.kind is BaseKind.debian
     if wheels:
         lines += _wheels_lines(distro, has_ca)
+    elif debian:
+        lines += _debian_lines(distro, has_ca)
     else:
         lines += _ca_lines(has_ca)
-    if robot.base.kind is BaseKind.debian:
-        lines += _debian_lines(distro)
-    elif not wheels:
         lines.append(_env_lines([("ROS_DISTRO", distro), ("PIP_DISABLE_PIP_VERSION_CHECK", "1"),
                                  ("PIP_NO_CACHE_DIR", "1"), ("PIP_BREAK_SYSTEM_PACKAGES", "1")]))
         apt = OFFICIAL_ROS1_APT if robot.ros_version == 1 else OFFICIAL_APT
         lines.append(f"RUN {_apt_install(apt)} && rosdep update --rosdistro \"$ROS_DISTRO\"")
-    if not wheels:
         lines.append(f"COPY entrypoint.sh {naming.ENTRYPOINT}")
     if wheels and cmake:
         lines += cmake_packages.toolchain_lines(distro, venv(distro), cmake)
@@ -268,7 +282,7 @@ def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequ
         if robot.base.kind is BaseKind.official:  # the others have no rosdep database
             lines.append(_rosdep([f"{STAGING}/common"]))
         lines.append(_colcon_underlay(f"{STAGING}/common", COMMON_PREFIX))
-    if not wheels:
+    if not wheels and not debian:
         lines += _entrypoint_lines()
     return "\n".join(lines) + "\n"
 
@@ -277,12 +291,13 @@ def _entrypoint_lines() -> list[str]:
     return [f'ENTRYPOINT ["{naming.ENTRYPOINT}"]', 'CMD ["bash"]']
 
 
-def wheels_tree_dest(name: str, distro: str) -> str:
-    """Where the wheels base's build context holds its file ``name`` (``entrypoint.sh``, ``wheels-setup.bash``,
-    ``ros2``, ``host-ca.pem``): under :data:`WHEELS_TREE` at its path in the image, so one COPY places them all."""
+def base_tree_dest(name: str, distro: str) -> str:
+    """Where the wheels and debian bases' build context holds its file ``name`` (``entrypoint.sh``, ``*-setup.bash``,
+    ``ros2``, ``host-ca.pem``): under :data:`BASE_TREE` at its path in the image, so one COPY places them all."""
     paths = {"entrypoint.sh": naming.ENTRYPOINT, "wheels-setup.bash": f"/opt/ros/{distro}/setup.bash",
-             "ros2": f"{venv(distro)}/bin/ros2", "host-ca.pem": CA_IN_IMAGE}
-    return WHEELS_TREE + paths[name]
+             "debian-setup.bash": f"/opt/ros/{distro}/setup.bash", "ros2": f"{venv(distro)}/bin/ros2",
+             "host-ca.pem": CA_IN_IMAGE}
+    return BASE_TREE + paths[name]
 
 
 def _wheels_lines(distro: str, has_ca: bool) -> list[str]:
@@ -299,7 +314,7 @@ def _wheels_lines(distro: str, has_ca: bool) -> list[str]:
     return [
         "# robocore's files at their paths: the entrypoint, setup.bash, the ros2 command"
         + (", the dev machine's trust store (public CAs plus any proxy CA, for pip/git in builds)" if has_ca else ""),
-        f"COPY {WHEELS_TREE}/ /",
+        f"COPY {BASE_TREE}/ /",
         _env_lines(settings),
         *_entrypoint_lines(),
         f"RUN ({probe} || ({_apt_install(WHEELS_APT)})) \\\n && {_wheels_venv(env, pins)}",
