@@ -275,7 +275,7 @@ def test_build_runs_jobs_on_every_core_and_ccache_where_the_image_has_it(tmp_pat
     env = colcon.build_env(2)
     assert env["CMAKE_BUILD_PARALLEL_LEVEL"] == "2" and env["MAKEFLAGS"] == "-j2" and "CCACHE_DIR" not in env
     cached = colcon.build_env(4, ccache=True)
-    assert cached["CCACHE_DIR"] == colcon.CONTAINER_CCACHE
+    assert cached["CCACHE_DIR"] == colcon.CONTAINER_CCACHE and cached["CCACHE_DEPEND"] == "1"
     assert cached["CMAKE_C_COMPILER_LAUNCHER"] == cached["CMAKE_CXX_COMPILER_LAUNCHER"] == "ccache"
     mounts = colcon.workspace_mounts(tmp_path / "ws", tmp_path / "out", tmp_path / "cc")
     assert mounts[str(tmp_path / "cc")] == colcon.CONTAINER_CCACHE
