@@ -82,7 +82,7 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
     root_ref, root_id = _base_parent(project, client, arch, dry_run=dry_run, say=say)
     ca = find_ca_bundle()
     wheels = robot.base.kind is BaseKind.wheels
-    tree = robot.base.kind in (BaseKind.wheels, BaseKind.debian)
+    tree = robot.base.kind in dockerfiles.TREE_KINDS
 
     def place(name: str) -> str:  # the wheels and debian bases copy their files in one step, from a tree
         return dockerfiles.base_tree_dest(name, robot.ros_distro.value) if tree else name

@@ -217,15 +217,11 @@ def _debian_lines(distro: str, has_ca: bool) -> list[str]:
     step here, metadata steps too), on each arch."""
     env = venv(distro)
     # nodes run Debian's python3: a component's pip_packages go there, beside Debian's ROS modules
-    settings = [(name, CA_IN_IMAGE) for name in CA_ENV] if has_ca else []
-    settings += [("ROS_DISTRO", distro), ("LANG", "C.UTF-8"), ("PIP_DISABLE_PIP_VERSION_CHECK", "1"),
-                 ("PIP_NO_CACHE_DIR", "1"), ("PIP_BREAK_SYSTEM_PACKAGES", "1"),
-                 ("CMAKE_GENERATOR", DEBIAN_CMAKE_GENERATOR)]
+    settings = [("ROS_DISTRO", distro), ("LANG", "C.UTF-8"), ("PIP_DISABLE_PIP_VERSION_CHECK", "1"),
+                ("PIP_NO_CACHE_DIR", "1"), ("PIP_BREAK_SYSTEM_PACKAGES", "1"),
+                ("CMAKE_GENERATOR", DEBIAN_CMAKE_GENERATOR)]
     return [
-        "# robocore's files at their paths: the entrypoint, setup.bash"
-        + (", the dev machine's trust store (public CAs plus any proxy CA, for pip/git in builds)" if has_ca else ""),
-        f"COPY {BASE_TREE}/ /",
-        _env_lines(settings),
+        *_tree_lines("the entrypoint, setup.bash", has_ca, settings),
         "# the C++ tool chain is in the base: builds use ccache",
         f"LABEL {cmake_packages.LABEL_TOOLCHAIN}={cmake_packages.TOOLCHAIN_CMAKE}",
         *_entrypoint_lines(),
@@ -291,6 +287,22 @@ def _entrypoint_lines() -> list[str]:
     return [f'ENTRYPOINT ["{naming.ENTRYPOINT}"]', 'CMD ["bash"]']
 
 
+#: The base kinds whose build context holds robocore's files under :data:`BASE_TREE`, copied in one step.
+TREE_KINDS = frozenset({BaseKind.wheels, BaseKind.debian})
+
+
+def _tree_lines(files: str, has_ca: bool, settings: list[tuple[str, str]]) -> list[str]:
+    """The head of a base of :data:`TREE_KINDS`: robocore's ``files`` (and with ``has_ca`` the dev machine's trust
+    store) in one COPY of the tree, then every setting (the trust store's first) in one ENV."""
+    trust = [(name, CA_IN_IMAGE) for name in CA_ENV] if has_ca else []
+    return [
+        f"# robocore's files at their paths: {files}"
+        + (", the dev machine's trust store (public CAs plus any proxy CA, for pip/git in builds)" if has_ca else ""),
+        f"COPY {BASE_TREE}/ /",
+        _env_lines([*trust, *settings]),
+    ]
+
+
 def base_tree_dest(name: str, distro: str) -> str:
     """Where the wheels and debian bases' build context holds its file ``name`` (``entrypoint.sh``, ``*-setup.bash``,
     ``ros2``, ``host-ca.pem``): under :data:`BASE_TREE` at its path in the image, so one COPY places them all."""
@@ -308,14 +320,10 @@ def _wheels_lines(distro: str, has_ca: bool) -> list[str]:
     env = venv(distro)
     pins = " ".join(WHEELS[distro] + WHEELS_TOOLS) if distro in WHEELS else "WHEELS-UNAVAILABLE"
     probe = "command -v ps >/dev/null && python3 -c 'import ensurepip, venv' 2>/dev/null"
-    settings = [(name, CA_IN_IMAGE) for name in CA_ENV] if has_ca else []
-    settings += [("ROS_DISTRO", distro), ("LANG", "C.UTF-8"), ("PIP_DISABLE_PIP_VERSION_CHECK", "1"),
-                 ("PIP_NO_CACHE_DIR", "1"), ("VIRTUAL_ENV", env), ("PATH", f"{env}/bin:$PATH")]
+    settings = [("ROS_DISTRO", distro), ("LANG", "C.UTF-8"), ("PIP_DISABLE_PIP_VERSION_CHECK", "1"),
+                ("PIP_NO_CACHE_DIR", "1"), ("VIRTUAL_ENV", env), ("PATH", f"{env}/bin:$PATH")]
     return [
-        "# robocore's files at their paths: the entrypoint, setup.bash, the ros2 command"
-        + (", the dev machine's trust store (public CAs plus any proxy CA, for pip/git in builds)" if has_ca else ""),
-        f"COPY {BASE_TREE}/ /",
-        _env_lines(settings),
+        *_tree_lines("the entrypoint, setup.bash, the ros2 command", has_ca, settings),
         *_entrypoint_lines(),
         f"RUN ({probe} || ({_apt_install(WHEELS_APT)})) \\\n && {_wheels_venv(env, pins)}",
     ]
