@@ -44,6 +44,7 @@ from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+import arm64_project
 import pytest
 from deploy_helpers import copy_project, output_tails, remove_project_containers, remove_test_runs
 from robot_host.hosts import RobotFleet
@@ -56,6 +57,52 @@ Env = Mapping[str, "str | None"]
 
 #: Processes started with :func:`start_process` (``background``, ``run_robocore.start``), oldest first.
 _STARTED: list[subprocess.Popen[str]] = []
+
+
+#: Modules that run last, in this order: they need the arm64 images (:mod:`arm64_project`), made meanwhile.
+RUN_LAST = ("test_arm64.py", "test_host_build.py")
+#: The background run of :mod:`arm64_project` this session started, if any.
+_IMAGES_AHEAD: list[subprocess.Popen[bytes]] = []
+
+
+def _last_rank(item: pytest.Item) -> int:
+    name = item.path.name
+    return RUN_LAST.index(name) + 1 if name in RUN_LAST else 0
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The arm64 suites go last (a stable sort: every other order is kept), so that their images are made in
+    the background while the others run."""
+    items.sort(key=_last_rank)
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Starts making the arm64 suites' images in the background when they are to run and nobody is making them
+    (``scripts/test`` starts that before the unit tests)."""
+    if any(_last_rank(item) for item in session.items) and not arm64_project.is_running():
+        _IMAGES_AHEAD.append(arm64_project.start())
+
+
+def pytest_sessionfinish() -> None:
+    """Stops the background image run this session started, if it is still going (an interrupted session)."""
+    for proc in _IMAGES_AHEAD:
+        if proc.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(proc.pid, signal.SIGTERM)
+            try:
+                proc.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+
+
+@pytest.fixture(scope="session")
+def arm64_images() -> None:
+    """Waits until the background run of :mod:`arm64_project` has made the arm64 suites' images; when it failed,
+    says so (the suite's own prepare-base then builds them and fails with the real error if it must)."""
+    failed = arm64_project.wait_for_images()
+    if failed:
+        print(f"the arm64 images were not made ahead of time ({arm64_project.LOG}):\n{failed}")
 
 
 def start_process(argv: list[str], *, env: Mapping[str, str] | None = None, **popen: Any) -> subprocess.Popen[str]:

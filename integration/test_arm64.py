@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import pytest
-import yaml
+from arm64_project import NAME, init_project
 from deploy_helpers import HEARD, log_lines, remove_project_containers, run_nox, wait_for
 
 from robocore.plan import arches
@@ -45,7 +45,6 @@ if TYPE_CHECKING:
 # per test on a busy 2-core machine (CI stops itself at 80 minutes whatever happens)
 pytestmark = [pytest.mark.docker, pytest.mark.timeout(3000)]
 
-NAME = "robocore-it-arm64"
 TALKER_TEXT = "hello from talker #"
 HOSTS = ("robot-x86", "robot-arm")
 
@@ -66,18 +65,13 @@ def test_the_listener_runs_x86_64(robot):
 
 @pytest.fixture(scope="module")
 def mixed(robot_fleets: Callable[..., RobotFleet], docker_client: Any, run_robocore: RobocoreCli,
-          tmp_path_factory: pytest.TempPathFactory) -> Any:
+          tmp_path_factory: pytest.TempPathFactory, arm64_images: None) -> Any:
     """The noetic project with the talker on an arm64 host, after prepare-base, stage, build and sync."""
     fleet = robot_fleets(2)
     root = tmp_path_factory.mktemp("arm64") / NAME
-    run_robocore(None, "init", str(root), "--defaults", "--distro", "noetic", "--base", "debian")
-    data = yaml.safe_load((root / "robot.yaml").read_text())
-    data["hosts"] = [{"name": name, "ip": host.ip, "user": "root", "arch": arch}
-                     for name, host, arch in zip(HOSTS, fleet.hosts, ("amd64", "arm64"), strict=True)]
-    data["discovery"] = {"servers": [{"host": "robot-x86"}]}
-    for comp in data["components"]:
-        comp["runs_on"] = "robot-arm" if comp["name"] == "talker" else "robot-x86"
-    (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    hosts = [{"name": name, "ip": host.ip, "user": "root", "arch": arch}
+             for name, host, arch in zip(HOSTS, fleet.hosts, ("amd64", "arm64"), strict=True)]
+    init_project(root, hosts, talker_host="robot-arm", server_host="robot-x86")
     (root / "tests" / "graph" / "test_arches.py").write_text(GRAPH_ARCH_TESTS)
     timings = {}
     for step in ("prepare-base", "stage", "build", "sync"):

@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 import yaml
+from arm64_project import NAME, init_project
 from deploy_helpers import HEARD, log_lines, remove_project_containers, wait_for
 from local_registry import manifest, serve_registry
 
@@ -43,7 +44,6 @@ if TYPE_CHECKING:
 
 pytestmark = pytest.mark.docker
 
-NAME = "robocore-it-arm64"  # shares test_arm64.py's images (same project)
 TALKER_TEXT = "hello from talker #"
 #: The arch of each host: robot-a builds for arm64 on its own (emulating) daemon, robot-b runs amd64.
 ARCHES = {"robot-a": "arm64", "robot-b": "amd64"}
@@ -54,20 +54,15 @@ MACHINES = {"amd64": "x86_64", "arm64": "aarch64"}
 
 @pytest.fixture(scope="module")
 def project(robot_fleets: Callable[..., RobotFleet], run_robocore: RobocoreCli,
-            docker_client: Any) -> Iterator[tuple[RobotFleet, Path]]:
+            docker_client: Any, arm64_images: None) -> Iterator[tuple[RobotFleet, Path]]:
     """The template's noetic project, staged: the talker on robot-a (builds_here), master and listener on robot-b."""
     fleet = robot_fleets(2)
     parent = Path(tempfile.mkdtemp(prefix="robocore-it-"))
     root = parent / NAME
-    run_robocore(None, "init", str(root), "--defaults", "--distro", "noetic", "--base", "debian")
-    data = yaml.safe_load((root / "robot.yaml").read_text())
-    data["hosts"] = [{"name": "robot-a", "ip": fleet.hosts[0].ip, "user": "root", "arch": ARCHES["robot-a"],
-                      "builds_here": True},
-                     {"name": "robot-b", "ip": fleet.hosts[1].ip, "user": "root", "arch": ARCHES["robot-b"]}]
-    data["discovery"] = {"servers": [{"host": "robot-b"}]}
-    for comp in data["components"]:
-        comp["runs_on"] = "robot-a" if comp["name"] == "talker" else "robot-b"
-    (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    hosts = [{"name": "robot-a", "ip": fleet.hosts[0].ip, "user": "root", "arch": ARCHES["robot-a"],
+              "builds_here": True},
+             {"name": "robot-b", "ip": fleet.hosts[1].ip, "user": "root", "arch": ARCHES["robot-b"]}]
+    init_project(root, hosts, talker_host="robot-a", server_host="robot-b")
     for step in ("prepare-base", "stage"):
         run_robocore(root, step, "--quiet")
     yield fleet, root

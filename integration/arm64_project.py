@@ -1,0 +1,159 @@
+"""The mixed-architecture noetic project of the arm64 suites, and its images made ahead of time.
+
+``test_arm64.py`` and ``test_host_build.py`` share one project name (``robocore-it-arm64``) and so one set of
+images: a Debian root per arch (``robocore/<arch>/debian:bookworm-debian``), a debian base per arch, and the
+talker's (arm64) and listener's (amd64) staged images. Made from nothing they take about ten minutes, most of it
+the arm64 root's bootstrap under qemu, on one core.
+
+Run as a script (``python integration/arm64_project.py``), this module makes those images in a throw-away copy of
+the project (``prepare-base`` and ``stage``, which contact no robot host), holding :data:`LOCK` while it works.
+``scripts/test`` starts it in the background before the lint and unit sessions, and the integration suites'
+conftest starts it when nobody has (a plain ``pytest integration``): the other suites run meanwhile, on the other
+core. The arm64 suites run last and wait for :data:`LOCK` (:func:`wait_for_images`) before their own
+``prepare-base``, which then finds every image current by its content hash and builds nothing. Nothing depends on
+the head start for correctness: if it failed or did not run, the suites build what they need themselves.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+
+import yaml
+
+NAME = "robocore-it-arm64"
+#: Held (flock) by the script while it makes the images.
+LOCK = Path(tempfile.gettempdir()) / f"robocore-it-arm64-images-{os.getuid()}.lock"
+#: The script's output, for the suites to show when it failed.
+LOG = LOCK.with_suffix(".log")
+#: Placeholder addresses (TEST-NET-1) for the images-only copy: prepare-base and stage contact no host.
+NO_HOSTS = ("192.0.2.201", "192.0.2.202")
+
+
+def init_project(root: Path, hosts: Sequence[Mapping[str, object]], *, talker_host: str, server_host: str) -> None:
+    """``robocore init`` the template's noetic project on the debian base at ``root`` (its folder name must be
+    :data:`NAME`), with ``hosts`` as robot.yaml's hosts, the talker on ``talker_host`` and the ROS master and
+    listener on ``server_host``."""
+    subprocess.run([sys.executable, "-m", "robocore", "init", str(root), "--defaults", "--distro", "noetic",
+                    "--base", "debian"], check=True, capture_output=True, text=True)
+    data = yaml.safe_load((root / "robot.yaml").read_text())
+    data["hosts"] = [dict(host) for host in hosts]
+    data["discovery"] = {"servers": [{"host": server_host}]}
+    for comp in data["components"]:
+        comp["runs_on"] = talker_host if comp["name"] == "talker" else server_host
+    (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+
+
+def _holding(path: Path) -> int:
+    fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
+    fcntl.flock(fd, fcntl.LOCK_EX)
+    return fd
+
+
+def is_running() -> bool:
+    """True when a run of this script holds :data:`LOCK` now."""
+    try:
+        fd = os.open(LOCK, os.O_RDWR | os.O_NOFOLLOW)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)
+    return False
+
+
+def start() -> subprocess.Popen[bytes]:
+    """This script started in the background (a process group of its own); returns
+    once it holds :data:`LOCK` (or has ended), so that a :func:`wait_for_images` right after it waits."""
+    proc = subprocess.Popen([sys.executable, __file__], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.monotonic() + 30
+    while proc.poll() is None and not is_running() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return proc
+
+
+def wait_for_images(timeout: float = 3600) -> str | None:
+    """Wait until no run of this script holds :data:`LOCK` (``timeout`` seconds at most); return the end of
+    its log when it failed (its last line is not ``done``), else None."""
+    deadline = time.monotonic() + timeout
+    while is_running() and time.monotonic() < deadline:
+        time.sleep(2)
+    try:
+        lines = LOG.read_text(errors="replace").strip().splitlines()
+    except OSError:
+        return None
+    if lines and lines[-1].startswith("done"):
+        return None
+    return "\n".join(lines[-20:]) or None
+
+
+def make_images(steps: Iterable[str] = ("prepare-base", "stage")) -> None:
+    """prepare-base and stage a throw-away copy of the project (placeholder hosts), printing each step's time."""
+    with tempfile.TemporaryDirectory(prefix="robocore-it-images-") as parent:
+        root = Path(parent) / NAME
+        hosts = [{"name": "robot-x86", "ip": NO_HOSTS[0], "user": "root", "arch": "amd64"},
+                 {"name": "robot-arm", "ip": NO_HOSTS[1], "user": "root", "arch": "arm64"}]
+        init_project(root, hosts, talker_host="robot-arm", server_host="robot-x86")
+        for step in steps:
+            started = time.monotonic()
+            argv = [sys.executable, "-m", "robocore", "-p", str(root), step, "--quiet"]
+            proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, start_new_session=True)
+            try:
+                code = proc.wait()
+            except BaseException:  # stopped: stop the step and what it started (mmdebstrap, docker build)
+                _stop(proc)
+                raise
+            if code != 0:
+                raise subprocess.CalledProcessError(code, argv)
+            print(f"{step}: {time.monotonic() - started:.1f} s", flush=True)
+
+
+def _stop(proc: subprocess.Popen[bytes]) -> None:
+    for sig in (signal.SIGINT, signal.SIGKILL):
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, sig)
+        try:
+            proc.wait(timeout=30)
+            return
+        except subprocess.TimeoutExpired:
+            continue
+
+
+def _interrupted(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
+def main() -> int:
+    """Make the images holding :data:`LOCK`, with this process's output going to :data:`LOG`."""
+    signal.signal(signal.SIGTERM, _interrupted)  # scripts/test stops it with SIGTERM (its SIGINT is ignored)
+    fd = _holding(LOCK)
+    log = os.open(LOG, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o600)
+    for stream in (1, 2):
+        os.dup2(log, stream)
+    os.close(log)
+    try:
+        started = time.monotonic()
+        make_images()
+        print(f"done in {time.monotonic() - started:.1f} s", flush=True)
+        return 0
+    except subprocess.CalledProcessError as exc:
+        print(f"failed: {exc}", flush=True)
+        return 1
+    finally:
+        os.close(fd)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
