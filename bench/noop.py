@@ -5,7 +5,8 @@ loaded machine, where bare start-up itself is slow, the same goal as a ratio: <=
 - bare ``python -c pass`` (the floor) and ``python -c "import robocore.cli"``;
 - each task by its ordinary path (``ROBOCORE_NO_MEMO=1``: configuration loaded, images asked for,
   sources hashed) and by the no-op memo (``.robocore/noop``: one stat pass, one raw Docker API call);
-- ``status`` (not memoised: it asks the daemon for the live containers every time).
+  ``status`` asks the daemon for the live containers every time, its memo holds only robot.yaml's plan
+  (:mod:`robocore.commands.status_memo`: the project's hosts must all be this machine).
 
 Usage: python bench/noop.py [PROJECT] [--runs N]
 PROJECT is a project after prepare-base, stage and build (default: a new template project in a temporary
@@ -27,7 +28,7 @@ GOAL = 0.3
 #: The goal as a ratio to bare start-up, for a loaded machine: on the clean machine of issue 21 the ordinary
 #: no-op stage took 0.50 s, three times bare Python's start-up, so 0.3 s is 1.8 times it.
 GOAL_RATIO = 1.8
-TASKS = ("validate", "stage", "build")
+TASKS = ("validate", "stage", "build", "status")
 
 
 def timed(argv: list[str], cwd: Path, env: dict[str, str]) -> float:
@@ -73,7 +74,6 @@ def main() -> None:
             ordinary = median(argv, project, args.runs, ROBOCORE_NO_MEMO="1")
             memo = median(argv, project, args.runs)
             rows.append((task, ordinary, memo))
-        rows.append(("status", median([py, "-m", "robocore", "status"], project, args.runs), None))
         print(f"no-op tasks on {project} (median of {args.runs}; machine shared, figures are noisy: "
               "compare within this run)")
         if os.environ.get("PYTHONDONTWRITEBYTECODE"):

@@ -204,6 +204,36 @@ def test_status_shows_components_and_nodes(running: Path, run_robocore: Robocore
     assert "--nodes" in run_robocore(running, "status").stdout
 
 
+def table_rows(stdout: str) -> list[tuple[str, ...]]:
+    """The status table's rows, without the uptime column (it changes between two runs)."""
+    rows = [tuple(cell.strip() for cell in line.strip("│").split("│")) for line in stdout.splitlines()
+            if line.startswith("│")]
+    return [row[:3] + row[4:] for row in rows]
+
+
+def test_plain_status_of_an_unchanged_project_answers_from_its_memo(running: Path,
+                                                                   run_robocore: RobocoreCli) -> None:
+    """The second plain status prints the ordinary table from the plan the first recorded (without loading
+    robot.yaml's model); a plan edited in the memo shows that it is read, and a touched robot.yaml (same
+    content) takes the ordinary path again (negative control)."""
+    from robocore.commands import noop
+
+    time.sleep(noop.RACY_SECONDS + 0.1)  # nothing the run wrote is too recent to trust
+    ordinary = run_robocore(running, "status", env={"ROBOCORE_NO_MEMO": "1"}).stdout
+    run_robocore(running, "status")  # records the plan (or answers from a plan an earlier test recorded)
+    [memo] = (running / ".robocore" / "noop").glob("status-*.json")
+    fast = run_robocore(running, "status").stdout
+    assert table_rows(fast) == table_rows(ordinary) and len(table_rows(fast)) == 3
+    assert {row[2] for row in table_rows(fast)} == {"running"}
+    assert fast.splitlines()[-1] == ordinary.splitlines()[-1]
+    document = json.loads(memo.read_text())
+    document["hosts"][0][1].append("ghost")
+    memo.write_text(json.dumps(document))
+    assert ("ghost", "devmachine", "missing", "0", "-") in table_rows(run_robocore(running, "status").stdout)
+    (running / "robot.yaml").touch()
+    assert not any(row[0] == "ghost" for row in table_rows(run_robocore(running, "status").stdout))
+
+
 def test_logs_prefix_and_filter(running: Path, run_robocore: RobocoreCli) -> None:
     lines = run_robocore(running, "logs", "--tail", "5").stdout.splitlines()
     prefixes = {line.split("|", 1)[0].strip() for line in lines if "|" in line}

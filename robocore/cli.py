@@ -236,6 +236,11 @@ def main(argv: Sequence[str] | None = None) -> None:
         memo = noop.for_command(args)
         if memo is not None and memo.replay(sys.stdout, sys.stderr):
             return
+    if argv is None and "status" in args[:4]:  # an unchanged all-local project's status answers from its memo
+        from robocore.commands import status_memo
+
+        if status_memo.answer(args):
+            return
     if argv is None:  # a real command line: start the robot hosts' ssh handshakes while the rest loads
         from robocore.commands.warmup import warm_recorded
 

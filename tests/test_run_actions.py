@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from datetime import datetime, timezone
 
-from robocore.commands.observe import Row, not_registered
-from robocore.plan.actions import Action, Existing, docker_time, servers_started, with_node_restarts
+from robocore.commands.status_table import Row, not_registered
+from robocore.plan.actions import Action, Existing, servers_started, with_node_restarts
 from robocore.plan.containers import ROLE_COMPONENT, ROLE_DISCOVERY, ContainerSpec
+from robocore.plan.starts import docker_time
 
 
 def spec(name: str, role: str) -> ContainerSpec:

@@ -13,10 +13,10 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from robocore.adapters.docker_hosts import is_connection_error
+from robocore.commands.status_table import MANAGED_ROLES, managed
 from robocore.config.model import Host
 from robocore.errors import HostError, RobocoreError
 from robocore.plan import naming
-from robocore.plan.containers import ROLE_COMPONENT, ROLE_DISCOVERY
 from robocore.project import Project
 
 if TYPE_CHECKING:
@@ -29,8 +29,6 @@ R = TypeVar("R")
 HOST_CONNECT_TIMEOUT = 8
 #: Seconds each Docker API call to a host may take.
 CONNECT_API_TIMEOUT = 300
-#: Roles of the containers ``run`` and ``down`` manage (dev shells and build containers are left alone).
-MANAGED_ROLES = (ROLE_COMPONENT, ROLE_DISCOVERY)
 
 
 def select_hosts(project: Project, host: str | None) -> list[Host]:
@@ -70,13 +68,7 @@ def local_documents(project: Project, host: Host) -> list[dict[str, Any]] | None
     found = docker_socket.containers(f"{naming.LABEL_PROJECT}={project.name}")
     if found is None:
         return None
-    return [doc for doc in found if document_labels(doc).get(naming.LABEL_ROLE) in MANAGED_ROLES]
-
-
-def document_labels(document: dict[str, Any]) -> dict[str, str]:
-    """The labels of a container's inspect document."""
-    labels = (document.get("Config") or {}).get("Labels") or {}
-    return {str(key): str(value) for key, value in labels.items()}
+    return managed(found)
 
 
 def managed_documents(project: Project, host: Host) -> list[dict[str, Any]]:

@@ -28,7 +28,7 @@ import os
 import stat
 import sys
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TextIO
@@ -137,29 +137,31 @@ def snapshot(project: Path, *, images: bool, environ: dict[str, str] | None = No
     return Snapshot(digest=digest.hexdigest(), newest=newest)
 
 
-def command(args: Sequence[str], cwd: Path) -> tuple[Path, str, list[str]] | None:
-    """``(project folder, task, the task's arguments)`` of a memoisable command line, else None."""
+def command(args: Sequence[str], cwd: Path, tasks: Collection[str] = tuple(TASKS),
+            flags: Mapping[str, bool] = PLAIN_FLAGS) -> tuple[Path, str, list[str]] | None:
+    """``(project folder, task, the task's arguments)`` of a memoisable command line (one of ``tasks``, with only
+    ``flags``: each says whether it takes a value), else None."""
     rest = list(args)
     project = cwd
     if rest[:1] in (["-p"], ["--project"]) and len(rest) >= 3:
         project, rest = Path(rest[1]), rest[2:]
     elif rest and rest[0].startswith("--project="):
         project, rest = Path(rest[0].split("=", 1)[1]), rest[1:]
-    elif len(rest) >= 2 and rest[0] not in TASKS and rest[1] in TASKS:
+    elif len(rest) >= 2 and rest[0] not in tasks and rest[1] in tasks:
         project, rest = Path(rest[0]), rest[1:]
-    if not rest or rest[0] not in TASKS:
+    if not rest or rest[0] not in tasks:
         return None
-    task, flags = rest[0], rest[1:]
+    task, given = rest[0], rest[1:]
     i = 0
-    while i < len(flags):
-        flag = flags[i]
-        if flag.startswith("--component="):
+    while i < len(given):
+        flag = given[i]
+        if flag.startswith("--") and "=" in flag and flags.get(flag.split("=", 1)[0]):
             i += 1
-        elif flag in PLAIN_FLAGS:
-            i += 2 if PLAIN_FLAGS[flag] else 1
+        elif flag in flags:
+            i += 2 if flags[flag] else 1
         else:
             return None
-    if i != len(flags):
+    if i != len(given):
         return None
     project = (cwd / project).absolute()
     try:
@@ -167,7 +169,7 @@ def command(args: Sequence[str], cwd: Path) -> tuple[Path, str, list[str]] | Non
             return None
     except (OSError, ValueError):  # a name too long, a NUL: the ordinary path says what is wrong
         return None
-    return project, task, flags
+    return project, task, given
 
 
 class Memo:
@@ -191,19 +193,31 @@ class Memo:
         """A snapshot of what this task depends on; None when one cannot be taken (a file vanished or is
         unreadable while listed: the ordinary path then runs, and reports what it finds)."""
         try:
-            return snapshot(self.project, images=TASKS[self.task])
+            return snapshot(self.project, images=TASKS.get(self.task, False))
         except (OSError, ValueError):
             return None
+
+    def current(self) -> dict[str, object] | None:
+        """The recorded document when nothing changed since it was recorded, else None; either way the snapshot
+        taken is kept (the ordinary run's "before")."""
+        try:
+            text = self.path.read_text(encoding="utf-8")
+        except OSError:
+            text = None
+        self.before = self.take()
+        try:
+            recorded = json.loads(text) if text is not None else None
+        except ValueError:
+            return None
+        if self.before is None or not isinstance(recorded, dict) or recorded.get("snapshot") != self.before.digest:
+            return None
+        return recorded
 
     def replay(self, out: TextIO, err: TextIO) -> bool:
         """Print the recorded output and return True when nothing changed since it was recorded; otherwise
         keep the snapshot taken (the ordinary run's "before") and return False."""
-        self.before = self.take()
-        try:
-            recorded = json.loads(self.path.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            return False
-        if self.before is None or not isinstance(recorded, dict) or recorded.get("snapshot") != self.before.digest:
+        recorded = self.current()
+        if recorded is None:
             return False
         out.write(str(recorded.get("stdout", "")))
         err.write(str(recorded.get("stderr", "")))
@@ -212,6 +226,10 @@ class Memo:
     def record(self, stdout: str, stderr: str) -> bool:
         """After a successful ordinary run: write the memo when the run changed nothing (the snapshot after
         equals the one before) and no file is too recent to trust. True when written."""
+        return self.keep({"stdout": stdout, "stderr": stderr})
+
+    def keep(self, content: dict[str, object]) -> bool:
+        """:meth:`record` with any JSON ``content``: written beside the snapshot under the same conditions."""
         after = self.take()
         if self.before is None or after is None or after.digest != self.before.digest:
             return False
@@ -219,18 +237,20 @@ class Memo:
             return False
         from robocore.files import write_atomic
 
-        document = {"snapshot": after.digest, "stdout": stdout, "stderr": stderr}
+        document = {"snapshot": after.digest, **content}
         write_atomic(self.path, json.dumps(document))
         return True
 
 
-def for_command(args: Sequence[str], environ: dict[str, str] | None = None) -> Memo | None:
-    """The memo of this command line, or None when it is not memoisable (or the memo is disabled)."""
+def for_command(args: Sequence[str], environ: Mapping[str, str] | None = None, *,
+                tasks: Collection[str] = tuple(TASKS), flags: Mapping[str, bool] = PLAIN_FLAGS) -> Memo | None:
+    """The memo of this command line, or None when it is not memoisable (``tasks`` and ``flags`` as
+    :func:`command` takes them) or the memo is disabled."""
     env = os.environ if environ is None else environ
     if env.get(DISABLE):
         return None
     cwd = Path.cwd()
-    found = command(args, cwd)
+    found = command(args, cwd, tasks, flags)
     return Memo(*found, line=[str(cwd), *args]) if found is not None else None
 
 

@@ -8,15 +8,14 @@ import shlex
 import subprocess
 import sys
 import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
 from typing import TYPE_CHECKING, Any, ClassVar
 
+from robocore.commands import status_memo
 from robocore.commands.context import Options
 from robocore.commands.hosts import connect as connect_host
 from robocore.commands.hosts import (
-    document_labels,
     for_each_host,
     local_documents,
     managed_containers,
@@ -24,6 +23,15 @@ from robocore.commands.hosts import (
     select_hosts,
 )
 from robocore.commands.reporting import Reporter
+from robocore.commands.status_table import (
+    GRAPH_SPIN_SECONDS,
+    NOT_ASKED,
+    Row,
+    host_rows,
+    not_registered,
+    print_status,
+    stale_line,
+)
 from robocore.config.model import DockerAccess, Host
 from robocore.errors import DockerError, GroupError, RobocoreError, UsageError
 from robocore.plan import discovery, naming
@@ -35,10 +43,6 @@ from robocore.ui import clean
 if TYPE_CHECKING:
     import docker
 
-#: Seconds ``status`` lets its super client listen to the graph.
-GRAPH_SPIN_SECONDS = 3.0
-#: Where the ROS nodes were asked when they were not (``status`` without ``--nodes``).
-NOT_ASKED = f"not asked (`status --nodes` lists them, listening to the graph for {GRAPH_SPIN_SECONDS:.0f} s)"
 #: Read timeout of log streams: a quiet component may print nothing for a long time.
 LOG_STREAM_TIMEOUT = 7 * 24 * 3600
 
@@ -46,74 +50,16 @@ LOG_STREAM_TIMEOUT = 7 * 24 * 3600
 # --------------------------------------------------------------------------- status
 
 
-@dataclass(frozen=True)
-class Row:
-    """One line of the status table: a container of the robot on its host."""
-
-    kind: ClassVar[str] = "container"
-    component: str
-    host: str
-    state: str
-    uptime: str
-    restarts: int
-    image: str
-    #: When the container last started (Docker's RFC 3339 ``State.StartedAt``), None when it is not running.
-    started_at: str | None = None
-
-
-def not_registered(rows: Sequence[Row], servers: Sequence[str]) -> list[str]:
-    """The running components that started before the running discovery servers' last start (``servers``:
-    their component names): a server whose nodes register only when they start does not know them."""
-    from robocore.plan.actions import started_before_servers
-
-    stale = started_before_servers({r.component: r.started_at or "" for r in rows}, servers)
-    return [r.component for r in rows if r.component in stale]
-
-
-def uptime_text(started_at: str, now: datetime | None = None) -> str:
-    """``3d 2h``, ``5m 10s``... from Docker's ``State.StartedAt`` (RFC 3339, nanoseconds)."""
-    from robocore.plan.actions import docker_time
-
-    stamp = docker_time(started_at)  # whole seconds are enough
-    stamp = stamp.replace(microsecond=0) if stamp is not None else None
-    if stamp is None or stamp.year < 2000:
-        return "-"
-    seconds = int(((now or datetime.now(timezone.utc)) - stamp).total_seconds())
-    days, rest = divmod(max(seconds, 0), 86400)
-    hours, rest = divmod(rest, 3600)
-    minutes, secs = divmod(rest, 60)
-    if days:
-        return f"{days}d {hours}h"
-    if hours:
-        return f"{hours}h {minutes}m"
-    return f"{minutes}m {secs}s" if minutes else f"{secs}s"
-
-
 def _rows(project: Project, host: Host, documents: list[dict[str, Any]] | None = None) -> list[Row]:
     if documents is None:
         documents = managed_documents(project, host)
-    found = {document_labels(doc).get(naming.LABEL_COMPONENT, str(doc.get("Name", "")).lstrip("/")): doc
-             for doc in documents}
+    return host_rows(host.name, planned_on(project, host), documents)
+
+
+def planned_on(project: Project, host: Host) -> list[str]:
+    """The names status lists for ``host`` whether they run or not: its discovery servers, then its components."""
     planned = [discovery_service(s.index) for s in discovery.for_robot(project.robot).servers_on(host.name)]
-    planned += [c.name for c in project.robot.components_on(host.name)]
-    rows = []
-    for name in planned + sorted(set(found) - set(planned)):
-        container = found.get(name)
-        if container is None:
-            rows.append(Row(name, host.name, "missing", "-", 0, "-"))
-            continue
-        state = container.get("State") or {}
-        running = state.get("Status") == "running"
-        rows.append(Row(
-            component=name,
-            host=host.name,
-            state=str(state.get("Status", "unknown")) + ("" if name in planned else " (not planned)"),
-            uptime=uptime_text(state.get("StartedAt", "")) if running else "-",
-            restarts=int(container.get("RestartCount", 0)),
-            image=str((container.get("Config") or {}).get("Image", "")),
-            started_at=str(state.get("StartedAt", "")) if running else None,
-        ))
-    return rows
+    return planned + [c.name for c in project.robot.components_on(host.name)]
 
 
 def super_client_exec_env(project: Project, host: str | None = None) -> dict[str, str]:
@@ -199,6 +145,9 @@ def collect_status(project: Project, hosts: list[Host]) -> tuple[list[Row], dict
 def status(options: Options, *, nodes_too: bool = False) -> None:
     """Print the state of every component and, with ``nodes_too``, the ROS nodes alive in the graph (listening
     to the graph takes :data:`GRAPH_SPIN_SECONDS`; the containers alone answer at once)."""
+    memo = status_memo.memo_for(options.argv)
+    if memo is not None:
+        memo.current()  # the snapshot before robot.yaml is read: the plan is kept only if nothing changed since
     project = options.load()
     report = options.report
     hosts = select_hosts(project, None)
@@ -217,36 +166,13 @@ def status(options: Options, *, nodes_too: bool = False) -> None:
     if not options.json:
         print_status(rows, failures, nodes, where, report=report)
         if stale:
-            report.out(f"not registered with the ROS master, which started again after them: {', '.join(stale)} "
-                       "(`robocore run` restarts them)")
+            report.out(stale_line(stale))
     if failures:
         raise GroupError(failures, sorted({r.host for r in rows}))
-
-
-def print_status(rows: list[Row], failures: dict[str, RobocoreError], nodes: list[str] | None, where: str, *,
-                 report: Reporter | None = None) -> None:
-    """The status table, then the ROS nodes line."""
-    from rich.markup import escape
-    from rich.table import Table
-
-    table = Table(title="robot status", title_justify="left")
-    for column in ("component", "host", "state", "uptime", "restarts", "image"):
-        table.add_column(column, no_wrap=column in {"component", "image"})
-    colors = {"running": "green", "missing": "red"}
-    for row in rows:  # what the hosts said is text, never rich markup
-        color = colors.get(row.state.split()[0] if row.state.split() else "", "yellow")
-        table.add_row(escape(row.component), row.host, f"[{color}]{escape(row.state)}[/]", escape(row.uptime),
-                      str(row.restarts), escape(row.image))
-    for host, error in sorted(failures.items()):
-        table.add_row("-", host, "[red]unreachable[/]", "-", "-", escape(error.lines()[0]))
-    report = report or Reporter()
-    report.table(table)
-    if nodes is None and where == NOT_ASKED:
-        report.out(f"ROS nodes: {where}")
-    elif nodes is None:
-        report.out(f"ROS nodes: unknown ({where})")
-    else:
-        report.out(f"ROS nodes ({len(nodes)}, via {where}): " + (", ".join(nodes) if nodes else "none"))
+    if memo is not None and memo.project.resolve() == project.root and all(h.is_local for h in hosts):
+        status_memo.record(memo, status_memo.plan_document(
+            project.name, [(h.name, planned_on(project, h)) for h in hosts], servers,
+            register_once=kind.nodes_register_once))
 
 
 # --------------------------------------------------------------------------- logs

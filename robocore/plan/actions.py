@@ -7,12 +7,12 @@ kind whose nodes register only when they start (the ROS 1 master) needs after it
 
 from __future__ import annotations
 
-import re
-from collections.abc import Collection, Iterable, Mapping, Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import datetime
 
 from robocore.plan.containers import ROLE_DISCOVERY, ContainerSpec
+from robocore.plan.starts import started_before_servers
 
 
 @dataclass(frozen=True)
@@ -69,40 +69,6 @@ STARTS = frozenset({"create", "replace", "start"})
 def servers_started(actions: Sequence[Action], servers: Collection[str]) -> bool:
     """Whether ``actions`` (re)start one of the discovery server containers named in ``servers``."""
     return any(a.name in servers and a.verb in STARTS for a in actions)
-
-
-_FRACTION = re.compile(r"\.(\d+)")
-
-
-def docker_time(text: str) -> datetime | None:
-    """A Docker timestamp (RFC 3339, up to nanoseconds, ``Z``) as an aware datetime; None when empty or unreadable
-    (Docker's ``0001-01-01T00:00:00Z`` of a container that never started is read as it is)."""
-    micro = _FRACTION.sub(lambda m: "." + (m[1] + "000000")[:6], text.strip(), count=1)
-    try:
-        stamp = datetime.fromisoformat(micro.replace("Z", "+00:00"))
-    except ValueError:
-        return None
-    return stamp if stamp.tzinfo is not None else stamp.replace(tzinfo=timezone.utc)
-
-
-def latest_start(times: Iterable[str]) -> datetime | None:
-    """The latest of Docker start times ``times`` that can be read, None when there is none."""
-    known = [t for t in map(docker_time, times) if t is not None]
-    return max(known) if known else None
-
-
-def started_before_servers(started: Mapping[str, str], servers: Collection[str],
-                           elsewhere: datetime | None = None) -> set[str]:
-    """The containers of ``started`` (name -> Docker start time, "" when not running) that started before the
-    last start of the running ``servers`` among them, or of a server ``elsewhere`` (another host): a server
-    whose nodes register only when they start does not know them."""
-    last = latest_start([started[name] for name in servers if started.get(name)])
-    starts = [t for t in (last, elsewhere) if t is not None]
-    if not starts:
-        return set()
-    newest = max(starts)
-    return {name for name, text in started.items() if name not in servers and text
-            and (when := docker_time(text)) is not None and when < newest}
 
 
 def with_node_restarts(actions: Sequence[Action], specs: Sequence[ContainerSpec], *, register_once: bool,

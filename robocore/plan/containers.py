@@ -23,8 +23,8 @@ from robocore.plan.addresses import extra_hosts, reachable_from_container
 from robocore.plan.layout import host_paths
 from robocore.project import Project
 
-ROLE_COMPONENT = "component"
-ROLE_DISCOVERY = "discovery"
+ROLE_COMPONENT = naming.ROLE_COMPONENT
+ROLE_DISCOVERY = naming.ROLE_DISCOVERY
 DEFAULT_TAG = "latest"
 #: Command of a component that has no entrypoint: stay up so that ``connect`` can enter it.
 IDLE_COMMAND = ("sleep", "infinity")

@@ -6,14 +6,19 @@ One place, so that stage, run, shell and status agree without passing names arou
 from __future__ import annotations
 
 import re
+from typing import TYPE_CHECKING
 
-from robocore.config.model import Robot
+if TYPE_CHECKING:  # annotations only: status reads the labels without loading the configuration model
+    from robocore.config.model import Robot
 
 LABEL_PROJECT = "dev.robocore.project"
 LABEL_COMPONENT = "dev.robocore.component"
 LABEL_ROLE = "dev.robocore.role"  # component | discovery | shell | build
 LABEL_INPUTS = "dev.robocore.inputs"  # content hash of what the image/container was made from
 LABEL_SPEC = "dev.robocore.spec"  # hash of the container spec (run recreates only on change)
+#: Values of :data:`LABEL_ROLE` on the containers ``run`` manages: a component, a discovery server.
+ROLE_COMPONENT = "component"
+ROLE_DISCOVERY = "discovery"
 
 #: Where things live inside robocore's containers.
 CONTAINER_WS = "/robocore/ws"  # the component's workspace (source), build and shell

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from robocore import ui
-from robocore.commands import observe
+from robocore.commands import observe, status_table
 from robocore.commands.reporting import Reporter
 from robocore.errors import HostError
 
@@ -41,10 +41,10 @@ def test_logs_print_the_containers_colours_but_escape_the_rest(capsys: pytest.Ca
 
 
 def test_the_status_table_escapes_what_hosts_report(capsys: pytest.CaptureFixture[str]) -> None:
-    rows = [observe.Row(component=f"[/bold]x{TITLE}", host="rpi", state=f"running{CLEAR}", uptime="1s", restarts=0,
+    rows = [status_table.Row(component=f"[/bold]x{TITLE}", host="rpi", state=f"running{CLEAR}", uptime="1s", restarts=0,
                         image="[red]img")]
     failures = {"other": HostError(f"host other: {TITLE}[/]")}
-    observe.print_status(rows, failures, [f"/node{TITLE}", "/[/x]"], f"via {TITLE}")  # rich markup would raise
+    status_table.print_status(rows, failures, [f"/node{TITLE}", "/[/x]"], f"via {TITLE}")  # rich markup would raise
     out = capsys.readouterr().out
     assert "\x1b" not in out and "\x07" not in out
     assert "[/bold]x\\x1b]0;pwned\\x07" in out and "[red]img" in out and "/[/x]" in out
