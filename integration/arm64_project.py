@@ -138,6 +138,7 @@ def _interrupted(signum: int, frame: object) -> None:
 def main() -> int:
     """Make the images holding :data:`LOCK`, with this process's output going to :data:`LOG`."""
     signal.signal(signal.SIGTERM, _interrupted)  # scripts/test stops it with SIGTERM (its SIGINT is ignored)
+    os.nice(19)  # the suites running meanwhile come first; the roots' bootstraps (mmdebstrap, qemu) inherit this
     fd = _holding(LOCK)
     log = os.open(LOG, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o600)
     for stream in (1, 2):

@@ -382,13 +382,19 @@ class FakeNode:
         self.timers: list[tuple[float, Callable[[], None]]] = []
         self.published: list[tuple[str, str]] = []
         self.subscriptions: list[tuple[str, Callable[[Any], None]]] = []
+        self.listeners = 0  # what the publishers' get_subscription_count() says
 
     def create_publisher(self, msg_type: type, topic: str, qos: int) -> Any:
         node = self
-        return types.SimpleNamespace(publish=lambda msg: node.published.append((topic, msg.data)))
+        return types.SimpleNamespace(publish=lambda msg: node.published.append((topic, msg.data)),
+                                     get_subscription_count=lambda: node.listeners)
 
-    def create_timer(self, period: float, callback: Callable[[], None]) -> None:
+    def create_timer(self, period: float, callback: Callable[[], None]) -> tuple[float, Callable[[], None]]:
         self.timers.append((period, callback))
+        return self.timers[-1]
+
+    def destroy_timer(self, timer: tuple[float, Callable[[], None]]) -> None:
+        self.timers.remove(timer)
 
     def create_subscription(self, msg_type: type, topic: str, callback: Callable[[Any], None], qos: int) -> None:
         self.subscriptions.append((topic, callback))
@@ -426,14 +432,31 @@ def load_node_module(project: Path, component: str) -> Any:
 def test_talker_publishes_a_counting_greeting_every_half_second(project: Path, fake_ros: None) -> None:
     talker = load_node_module(project, "talker").Talker()
     assert talker.name == "talker"
-    [(period, tick)] = talker.timers
-    assert period == 0.5
+    [(look, first)] = talker.timers
+    assert look < 0.05
+    first()
+    first()
+    assert talker.published == [] and len(talker.timers) == 1  # nobody listens yet: it looks again
+    talker.listeners = 1
     out = io.StringIO()
     with redirect_stdout(out):
-        for _ in range(3):
-            tick()
+        first()  # the first greeting as soon as someone listens
+        [(period, tick)] = talker.timers
+        assert period == 0.5
+        tick()
+        tick()
     assert talker.published == [("chatter", f"hello from talker #{n}") for n in (1, 2, 3)]
     assert out.getvalue().splitlines() == [f"Publishing: hello from talker #{n}" for n in (1, 2, 3)]
+
+
+def test_a_talker_nobody_listens_to_starts_after_one_period(project: Path, fake_ros: None) -> None:
+    talker = load_node_module(project, "talker").Talker()
+    [(look, first)] = talker.timers
+    with redirect_stdout(io.StringIO()):
+        for _ in range(round(0.5 / look)):
+            first()
+    assert talker.published == [("chatter", "hello from talker #1")]
+    assert [period for period, _ in talker.timers] == [0.5]
 
 
 def test_listener_prints_what_it_hears(project: Path, fake_ros: None) -> None:

@@ -1,9 +1,15 @@
-"""Publish "hello from talker #N" on /chatter every 0.5 s."""
+"""Publish "hello from talker #N" on /chatter every 0.5 s, the first as soon as someone listens."""
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from std_msgs.msg import String
+
+#: Seconds between two greetings.
+PERIOD = 0.5
+#: Seconds between two looks for a listener before the first greeting: a greeting sent before anyone listens is
+#: lost, and one sent a whole period after start comes later than it needs to (a restarted talker is heard sooner).
+FIRST_LOOK = 0.02
 
 
 def greeting(count: int) -> str:
@@ -18,7 +24,17 @@ class Talker(Node):
         super().__init__("talker")
         self.publisher = self.create_publisher(String, "chatter", 10)
         self.count = 0
-        self.timer = self.create_timer(0.5, self.tick)
+        self.looks = 0
+        self.timer = self.create_timer(FIRST_LOOK, self.first)
+
+    def first(self) -> None:
+        """Until a listener is there (at most one period): look again; then greet, and every period after."""
+        self.looks += 1
+        if self.publisher.get_subscription_count() == 0 and self.looks * FIRST_LOOK < PERIOD:
+            return
+        self.destroy_timer(self.timer)
+        self.tick()
+        self.timer = self.create_timer(PERIOD, self.tick)
 
     def tick(self) -> None:
         """Publish the next greeting."""
