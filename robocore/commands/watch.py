@@ -28,8 +28,10 @@ from robocore.ui import clean
 
 #: Seconds between two looks at the watched files.
 POLL = 0.05
-#: Seconds the watched files must stay unchanged before a deploy starts (quick saves coalesce).
-SETTLE = 0.15
+#: Seconds the watched files must stay unchanged before a deploy starts (quick saves coalesce). An editor's save,
+#: a "save all" or a formatter run on save writes its files within milliseconds of each other; 50 ms is also
+#: watchexec's default debounce.
+SETTLE = 0.05
 
 
 def watched(options: Options, component: str | None) -> list[Path]:
