@@ -17,6 +17,8 @@ Docker, projects and robot hosts
 - ``robot_run`` (function): a project brought up by the pytest plugin's machinery; closed afterwards.
 - ``robot_fleets`` (module) and ``fleet`` (module): Docker-in-Docker robot hosts reached over ssh://
   (robot_host/); removed after the module's last test.
+- ``arm64_images`` (session): waits for the arm64 suites' images, made in the background
+  (:mod:`arm64_project`) while the other suites run; those suites (``RUN_LAST``) run last.
 
 What a test creates is removed by a fixture, pass or fail
 - ``tracked_containers``: containers a test starts itself;
