@@ -24,7 +24,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import yaml
@@ -99,33 +99,34 @@ def wait_for_images(timeout: float = 3600) -> str | None:
     return "\n".join(lines[-20:]) or None
 
 
-def make_images(steps: Iterable[str] = ("prepare-base", "stage")) -> None:
+def make_images() -> None:
     """prepare-base and stage a throw-away copy of the project (placeholder hosts), printing each step's time."""
     with tempfile.TemporaryDirectory(prefix="robocore-it-images-") as parent:
         root = Path(parent) / NAME
         hosts = [{"name": "robot-x86", "ip": NO_HOSTS[0], "user": "root", "arch": "amd64"},
                  {"name": "robot-arm", "ip": NO_HOSTS[1], "user": "root", "arch": "arm64"}]
         init_project(root, hosts, talker_host="robot-arm", server_host="robot-x86")
-        for step in steps:
+        for step in ("prepare-base", "stage"):
             started = time.monotonic()
             argv = [sys.executable, "-m", "robocore", "-p", str(root), step, "--quiet"]
             proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, start_new_session=True)
             try:
                 code = proc.wait()
             except BaseException:  # stopped: stop the step and what it started (mmdebstrap, docker build)
-                _stop(proc)
+                stop(proc, signal.SIGINT, 30)
                 raise
             if code != 0:
                 raise subprocess.CalledProcessError(code, argv)
             print(f"{step}: {time.monotonic() - started:.1f} s", flush=True)
 
 
-def _stop(proc: subprocess.Popen[bytes]) -> None:
-    for sig in (signal.SIGINT, signal.SIGKILL):
+def stop(proc: subprocess.Popen[bytes], first: signal.Signals, grace: float) -> None:
+    """Send ``first`` to ``proc``'s process group, give it ``grace`` seconds, then SIGKILL; wait for it."""
+    for sig, wait in ((first, grace), (signal.SIGKILL, None)):
         with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, sig)
         try:
-            proc.wait(timeout=30)
+            proc.wait(timeout=wait)
             return
         except subprocess.TimeoutExpired:
             continue

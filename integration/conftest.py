@@ -89,13 +89,7 @@ def pytest_sessionfinish() -> None:
     """Stops the background image run this session started, if it is still going (an interrupted session)."""
     for proc in _IMAGES_AHEAD:
         if proc.poll() is None:
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(proc.pid, signal.SIGTERM)
-            try:
-                proc.wait(timeout=60)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
+            arm64_project.stop(proc, signal.SIGTERM, 60)  # the script then stops its own step
 
 
 @pytest.fixture(scope="session")

@@ -6,7 +6,8 @@ from datetime import datetime, timezone
 
 from robocore.commands.status_table import Row, not_registered
 from robocore.plan.actions import Action, Existing, servers_started, with_node_restarts
-from robocore.plan.containers import ROLE_COMPONENT, ROLE_DISCOVERY, ContainerSpec
+from robocore.plan.containers import ContainerSpec
+from robocore.plan.naming import ROLE_COMPONENT, ROLE_DISCOVERY
 from robocore.plan.starts import docker_time
 
 

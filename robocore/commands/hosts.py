@@ -13,7 +13,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from robocore.adapters.docker_hosts import is_connection_error
-from robocore.commands.status_table import MANAGED_ROLES, managed
+from robocore.commands.status_table import managed
 from robocore.config.model import Host
 from robocore.errors import HostError, RobocoreError
 from robocore.plan import naming
@@ -54,7 +54,7 @@ def prefetch_connections(project: Project) -> None:
 def managed_containers(client: docker.DockerClient, project: str) -> list[Any]:
     """This project's component and discovery containers on a host (running or not)."""
     found = client.containers.list(all=True, filters={"label": f"{naming.LABEL_PROJECT}={project}"})
-    return [c for c in found if c.labels.get(naming.LABEL_ROLE) in MANAGED_ROLES]
+    return [c for c in found if c.labels.get(naming.LABEL_ROLE) in naming.MANAGED_ROLES]
 
 
 def local_documents(project: Project, host: Host) -> list[dict[str, Any]] | None:

@@ -197,6 +197,10 @@ class Memo:
         except (OSError, ValueError):
             return None
 
+    def begin(self) -> None:
+        """Take the snapshot before the ordinary run (its "before"), which :meth:`keep` compares with the one after."""
+        self.before = self.take()
+
     def current(self) -> dict[str, object] | None:
         """The recorded document when nothing changed since it was recorded, else None; either way the snapshot
         taken is kept (the ordinary run's "before")."""
@@ -204,7 +208,7 @@ class Memo:
             text = self.path.read_text(encoding="utf-8")
         except OSError:
             text = None
-        self.before = self.take()
+        self.begin()
         try:
             recorded = json.loads(text) if text is not None else None
         except ValueError:

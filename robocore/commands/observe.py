@@ -147,7 +147,7 @@ def status(options: Options, *, nodes_too: bool = False) -> None:
     to the graph takes :data:`GRAPH_SPIN_SECONDS`; the containers alone answer at once)."""
     memo = status_memo.memo_for(options.argv)
     if memo is not None:
-        memo.current()  # the snapshot before robot.yaml is read: the plan is kept only if nothing changed since
+        memo.begin()  # the snapshot before robot.yaml is read: the plan is kept only if nothing changed since
     project = options.load()
     report = options.report
     hosts = select_hosts(project, None)

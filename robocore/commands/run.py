@@ -27,7 +27,8 @@ from robocore.config.model import Host
 from robocore.errors import DockerError, GroupError, RobocoreError, UsageError
 from robocore.plan import discovery, naming
 from robocore.plan.actions import Action, Existing, decide, servers_started, with_node_restarts
-from robocore.plan.containers import ROLE_DISCOVERY, ContainerSpec, host_specs, state_volumes
+from robocore.plan.containers import ContainerSpec, host_specs, state_volumes
+from robocore.plan.naming import ROLE_DISCOVERY
 from robocore.plan.release import is_released
 from robocore.plan.starts import latest_start
 from robocore.project import Project

@@ -23,7 +23,8 @@ from typing import Any
 
 from robocore.config.model import Host
 from robocore.files import read_own_file, write_atomic
-from robocore.plan.containers import ROLE_COMPONENT, ContainerSpec
+from robocore.plan.containers import ContainerSpec
+from robocore.plan.naming import ROLE_COMPONENT
 from robocore.project import Project
 
 #: Label of a local component's container: the state of the build it runs (see :func:`with_local_build`).

@@ -16,9 +16,6 @@ from robocore.errors import RobocoreError
 from robocore.plan import naming
 from robocore.plan.starts import docker_time, started_before_servers
 
-#: Roles of the containers ``run`` and ``down`` manage and status lists (dev shells and build containers are left
-#: alone).
-MANAGED_ROLES = (naming.ROLE_COMPONENT, naming.ROLE_DISCOVERY)
 #: Seconds ``status`` lets its super client listen to the graph.
 GRAPH_SPIN_SECONDS = 3.0
 #: Where the ROS nodes were asked when they were not (``status`` without ``--nodes``).
@@ -72,7 +69,7 @@ def document_labels(document: dict[str, Any]) -> dict[str, str]:
 
 def managed(documents: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """The documents of containers ``run`` manages (a component or a discovery server)."""
-    return [doc for doc in documents if document_labels(doc).get(naming.LABEL_ROLE) in MANAGED_ROLES]
+    return [doc for doc in documents if document_labels(doc).get(naming.LABEL_ROLE) in naming.MANAGED_ROLES]
 
 
 def host_rows(host: str, planned: Sequence[str], documents: Sequence[dict[str, Any]]) -> list[Row]:

@@ -11,7 +11,8 @@ from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 
-from robocore.plan.containers import ROLE_DISCOVERY, ContainerSpec
+from robocore.plan.containers import ContainerSpec
+from robocore.plan.naming import ROLE_DISCOVERY
 from robocore.plan.starts import started_before_servers
 
 

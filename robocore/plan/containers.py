@@ -23,8 +23,6 @@ from robocore.plan.addresses import extra_hosts, reachable_from_container
 from robocore.plan.layout import host_paths
 from robocore.project import Project
 
-ROLE_COMPONENT = naming.ROLE_COMPONENT
-ROLE_DISCOVERY = naming.ROLE_DISCOVERY
 DEFAULT_TAG = "latest"
 #: Command of a component that has no entrypoint: stay up so that ``connect`` can enter it.
 IDLE_COMMAND = ("sleep", "infinity")
@@ -61,7 +59,7 @@ class ContainerSpec:
     name: str  # container name
     service: str  # compose service name
     host: str
-    role: str  # ROLE_COMPONENT | ROLE_DISCOVERY
+    role: str  # naming.ROLE_COMPONENT | naming.ROLE_DISCOVERY
     project: str
     image: str  # repository:tag
     entrypoint: tuple[str, ...] | None  # None: the image's own
@@ -116,7 +114,7 @@ class ContainerSpec:
             "network_mode": self.network_mode,
             "restart_policy": {"Name": "" if self.restart == "no" else self.restart},
             "privileged": self.privileged,
-            "init": self.role == ROLE_COMPONENT,
+            "init": self.role == naming.ROLE_COMPONENT,
         }
         if self.entrypoint is not None:
             kwargs["entrypoint"] = list(self.entrypoint)
@@ -158,7 +156,7 @@ class ContainerSpec:
         service["network_mode"] = self.network_mode
         if self.ipc_mode:
             service["ipc"] = self.ipc_mode
-        if self.role == ROLE_COMPONENT:
+        if self.role == naming.ROLE_COMPONENT:
             service["init"] = True
         if self.depends_on:
             service["depends_on"] = list(self.depends_on)
@@ -291,7 +289,7 @@ def component_spec(project: Project, component: Component, *, tag: str | None = 
         name=naming.container_name(project.name, component.name),
         service=component.name,
         host=host.name,
-        role=ROLE_COMPONENT,
+        role=naming.ROLE_COMPONENT,
         project=project.name,
         image=image,
         entrypoint=entrypoint,
@@ -333,7 +331,7 @@ def discovery_spec(project: Project, index: int, *, tag: str | None = None) -> C
         name=naming.discovery_container_name(project.name, index),
         service=discovery_service(index),
         host=endpoint.host,
-        role=ROLE_DISCOVERY,
+        role=naming.ROLE_DISCOVERY,
         project=project.name,
         image=image_ref(project, naming.base_image(robot, project.name), tag),
         entrypoint=(naming.ENTRYPOINT,),

@@ -19,6 +19,9 @@ LABEL_SPEC = "dev.robocore.spec"  # hash of the container spec (run recreates on
 #: Values of :data:`LABEL_ROLE` on the containers ``run`` manages: a component, a discovery server.
 ROLE_COMPONENT = "component"
 ROLE_DISCOVERY = "discovery"
+#: Roles of the containers ``run`` and ``down`` manage and ``status`` lists (dev shells and build containers are
+#: left alone).
+MANAGED_ROLES = (ROLE_COMPONENT, ROLE_DISCOVERY)
 
 #: Where things live inside robocore's containers.
 CONTAINER_WS = "/robocore/ws"  # the component's workspace (source), build and shell

@@ -188,5 +188,5 @@ def boot_services(project: Project) -> dict[str, tuple[str, str, str]]:
         spec = containers.discovery_spec(project, server.index)
         out[spec.service] = (spec.host, spec.role, spec.restart)
     for component in project.robot.components:
-        out[component.name] = (component.runs_on, containers.ROLE_COMPONENT, component.restart)
+        out[component.name] = (component.runs_on, naming.ROLE_COMPONENT, component.restart)
     return out
