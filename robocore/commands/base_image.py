@@ -87,7 +87,8 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
     def place(name: str) -> str:  # the wheels and debian bases copy their files in one step, from a tree
         return dockerfiles.base_tree_dest(name, robot.ros_distro.value) if tree else name
 
-    entries: list[ContextEntry] = [resource_entry(place("entrypoint.sh"), "entrypoint.sh", executable=True)]
+    entries: list[ContextEntry] = [resource_entry(place("entrypoint.sh"), "entrypoint.sh", executable=True),
+                                   resource_entry(place("setup-python"), "setup-python", executable=True)]
     if wheels:
         from robocore import resources
 

@@ -270,7 +270,7 @@ def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequ
                                  ("PIP_NO_CACHE_DIR", "1"), ("PIP_BREAK_SYSTEM_PACKAGES", "1")]))
         apt = OFFICIAL_ROS1_APT if robot.ros_version == 1 else OFFICIAL_APT
         lines.append(f"RUN {_apt_install(apt)} && rosdep update --rosdistro \"$ROS_DISTRO\"")
-        lines.append(f"COPY entrypoint.sh {naming.ENTRYPOINT}")
+        lines.append(f"COPY entrypoint.sh setup-python {PurePosixPath(naming.ENTRYPOINT).parent}/")
     if wheels and cmake:
         lines += cmake_packages.toolchain_lines(distro, venv(distro), cmake)
     if common:
@@ -304,9 +304,11 @@ def _tree_lines(files: str, has_ca: bool, settings: list[tuple[str, str]]) -> li
 
 
 def base_tree_dest(name: str, distro: str) -> str:
-    """Where the wheels and debian bases' build context holds its file ``name`` (``entrypoint.sh``, ``*-setup.bash``,
-    ``ros2``, ``host-ca.pem``): under :data:`BASE_TREE` at its path in the image, so one COPY places them all."""
-    paths = {"entrypoint.sh": naming.ENTRYPOINT, "wheels-setup.bash": f"/opt/ros/{distro}/setup.bash",
+    """Where the wheels and debian bases' build context holds its file ``name`` (``entrypoint.sh``,
+    ``setup-python``, ``*-setup.bash``, ``ros2``, ``host-ca.pem``): under :data:`BASE_TREE` at its path in the
+    image, so one COPY places them all."""
+    paths = {"entrypoint.sh": naming.ENTRYPOINT, "setup-python": naming.SETUP_PYTHON,
+             "wheels-setup.bash": f"/opt/ros/{distro}/setup.bash",
              "debian-setup.bash": f"/opt/ros/{distro}/setup.bash", "ros2": f"{venv(distro)}/bin/ros2",
              "host-ca.pem": CA_IN_IMAGE}
     return BASE_TREE + paths[name]

@@ -28,6 +28,8 @@ CONTAINER_WS = "/robocore/ws"  # the component's workspace (source), build and s
 CONTAINER_INSTALL = "/robocore/install"  # the component's colcon install tree
 CONTAINER_DDS = "/robocore/dds"  # generated DDS profiles
 ENTRYPOINT = "/robocore/entrypoint.sh"  # sources ROS and the install tree, then execs
+#: The interpreter the entrypoint gives colcon's setup scripts for their helper (isolated, without site).
+SETUP_PYTHON = "/robocore/setup-python"
 
 
 #: A Docker image tag: a letter, digit or '_', then up to 127 letters, digits, '_', '.' or '-'.

@@ -6,6 +6,6 @@ ENV ROS_DISTRO=melodic \
     PIP_NO_CACHE_DIR=1 \
     PIP_BREAK_SYSTEM_PACKAGES=1
 RUN apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends procps python3-pip python3-pytest python3-colcon-common-extensions && rm -rf /var/lib/apt/lists/* && rosdep update --rosdistro "$ROS_DISTRO"
-COPY entrypoint.sh /robocore/entrypoint.sh
+COPY entrypoint.sh setup-python /robocore/
 ENTRYPOINT ["/robocore/entrypoint.sh"]
 CMD ["bash"]
