@@ -109,3 +109,20 @@ def test_a_dry_run_plans_one_deploy_and_watches_nothing(tmp_path: Path, monkeypa
     watch.dev(Options(project_dir=tmp_path, dry_run=True), component="talker", say=lambda line: None)
     assert seen == [("build", True), ("sync", True), ("run", True)]
 
+
+
+def test_a_small_workspace_is_looked_at_every_poll() -> None:
+    assert watch.poll_pause(0.0005) == watch.POLL
+    assert watch.poll_pause(0.0005, 0.02) == 0.02
+
+
+def test_a_costly_look_waits_in_proportion_so_watching_stays_a_fraction_of_a_core() -> None:
+    look = 0.02
+    pause = watch.poll_pause(look)
+    assert pause == look * watch.POLL_COST_RATIO
+    assert look / (look + pause) <= 0.1
+
+
+def test_the_pause_has_a_ceiling() -> None:
+    assert watch.poll_pause(10.0) == watch.POLL_MAX
+    assert watch.poll_pause(10.0, 2.0) == 2.0  # a longer least pause asked for is kept

@@ -26,8 +26,13 @@ from robocore.commands.workspace import selected_components
 from robocore.errors import RobocoreError
 from robocore.ui import clean
 
-#: Seconds between two looks at the watched files.
-POLL = 0.05
+#: Seconds between two looks at the watched files, at least: a save is noticed within this, on average within half.
+POLL = 0.01
+#: A look at the watched files stats every file under them: the pause after a look is this many times what it took,
+#: so that watching a large workspace costs about a tenth of a core, not a whole one.
+POLL_COST_RATIO = 9
+#: Seconds between two looks, at most (a workspace so large that one look takes 50 ms).
+POLL_MAX = 0.5
 #: Seconds the watched files must stay unchanged before a deploy starts (quick saves coalesce). An editor's save,
 #: a "save all" or a formatter run on save writes its files within milliseconds of each other; 50 ms is also
 #: watchexec's default debounce.
@@ -71,6 +76,12 @@ def deploy(project_dir: Path, components: Sequence[str], *, quiet: bool,
     return {name: later - at for (name, at), (_, later) in itertools.pairwise(marks)}
 
 
+def poll_pause(look: float, least: float = POLL) -> float:
+    """Seconds to wait before the next look at the watched files, when the last one took ``look`` seconds: ``least``
+    for a small workspace, longer for one whose look is costly (:data:`POLL_COST_RATIO`), :data:`POLL_MAX` at most."""
+    return min(max(least, look * POLL_COST_RATIO), max(least, POLL_MAX))
+
+
 def dev(options: Options, *, component: str | None, say: Callable[[str], None] = print,
         rounds: int | None = None, poll: float = POLL, settle: float = SETTLE) -> None:
     """Deploy, then deploy again after each (coalesced) save, until interrupted (or after ``rounds`` deploys
@@ -84,9 +95,12 @@ def dev(options: Options, *, component: str | None, say: Callable[[str], None] =
     deploy(options.project_dir, selected, quiet=options.quiet, say=say)
     say("dev: watching " + ", ".join(str(p) for p in paths) + " (Ctrl-C stops)")
     done = 0
+    pause = poll
     while rounds is None or done < rounds:
-        time.sleep(poll)
+        time.sleep(pause)
+        looked = time.monotonic()
         seen = noop.folders_digest(paths)
+        pause = poll_pause(time.monotonic() - looked, poll)
         if seen == current:
             continue
         while True:  # coalesce: wait until the files stay the same for `settle` seconds
