@@ -4,9 +4,9 @@ The demo project's talker and listener share their host's IPC namespace (the run
 Fast DDS moves their data through segments in that host's /dev/shm. A SIGKILLed process cannot remove
 its segments and port files. After every restart the listener must hear the talker again, and what the
 dead processes left in /dev/shm must not pile up (the test counts Fast DDS's files there after every
-cycle; Fast DDS 2.14 reuses or removes a dead process's files when the next participant starts, so
-robocore cleans nothing itself). The negative control: while the talker is dead the listener's count
-does not rise, so "heard again" is a real change, not old log lines.
+cycle; Fast DDS 2.14 removes a dead process's files later, so robocore cleans nothing itself). The
+negative control: while the talker is dead the listener's count does not rise, so "heard again" is a
+real change, not old log lines.
 """
 
 from __future__ import annotations
@@ -89,5 +89,10 @@ def test_a_talker_sigkilled_20_times_is_heard_again_after_every_restart(
     print(f"FIGURE heard_again {len(seconds)}/{CYCLES}; start to heard s: median {statistics.median(seconds):.2f}, "
           f"max {max(seconds):.2f}; Fast DDS files in /dev/shm: {len(files_at_start)} at start, "
           f"after each cycle {files}; at the end, not there at start: {sorted(set(left) - set(files_at_start))}")
-    # what the 21 dead talkers left behind does not pile up: no more than two processes' worth of files
-    assert len(left) <= len(files_at_start) + 6, (files_at_start, left)
+    # what the 21 dead talkers left behind does not pile up. Fast DDS removes a dead process's files later (the
+    # count after each cycle rises and falls), so how many are left at one moment depends on the cycles' pace:
+    # 23-25 when a restart was heard after 1.75 s, 23-31 at 0.7 s. Kept files would add 2 per cycle (61 at the end);
+    # the bound is six dead processes' worth, at every cycle and at the end.
+    bound = len(files_at_start) + 12
+    assert max(files) <= bound, (files_at_start, files)
+    assert len(left) <= bound, (files_at_start, left)
