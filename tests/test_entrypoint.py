@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import os
 import subprocess
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 from robocore import resources
+from robocore.plan import naming
 
 #: What the fake install tree's local_setup.bash records: the interpreter colcon would run its helper with,
 #: and that interpreter's own flags (isolated, no site) when it runs.
@@ -68,3 +69,9 @@ def test_the_setup_python_is_a_shell_script_that_passes_its_arguments() -> None:
     text = resources.read("setup-python").decode()
     assert text.startswith("#!/bin/sh\n")
     assert text.rstrip().endswith('exec python3 -I -S "$@"')
+
+
+def test_the_entrypoint_names_the_setup_python_the_images_get_beside_it() -> None:
+    # the official base copies both files into the entrypoint's folder in one COPY; the entrypoint names the path
+    assert PurePosixPath(naming.SETUP_PYTHON).parent == PurePosixPath(naming.ENTRYPOINT).parent
+    assert f"-x {naming.SETUP_PYTHON} ]" in resources.read("entrypoint.sh").decode()

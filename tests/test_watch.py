@@ -110,7 +110,6 @@ def test_a_dry_run_plans_one_deploy_and_watches_nothing(tmp_path: Path, monkeypa
     assert seen == [("build", True), ("sync", True), ("run", True)]
 
 
-
 def test_a_small_workspace_is_looked_at_every_poll() -> None:
     assert watch.poll_pause(0.0005) == watch.POLL
     assert watch.poll_pause(0.0005, 0.02) == 0.02
