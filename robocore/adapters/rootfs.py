@@ -5,15 +5,12 @@ bootstrapped with the current inputs, or one pulled before); else the upstream r
 ``ros:<distro>-ros-base`` or ``base.image``) when present locally with that arch, or pulled with that platform,
 then tagged with the per-arch name; else, for the wheels and debian bases, a root file system made with
 ``mmdebstrap --arch`` from a Debian mirror (the air-gapped path), in memory when ``/dev/shm`` has room, and
-turned into an image of that arch: ``docker import`` for the daemon's own arch, else a ``FROM scratch`` +
-``ADD root.tar /`` build with its platform (``docker import`` labels every import with the daemon's own arch
-on Docker 20.10).
+loaded as the one layer of an image archive that names that arch (see :mod:`robocore.adapters.image_archive`).
 """
 
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import shutil
 import subprocess
@@ -22,6 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from robocore.adapters import image_archive
 from robocore.adapters.image_builder import ImageState, image_state
 from robocore.errors import BuildError, DockerError, ToolMissing, UsageError
 from robocore.files import make_folder
@@ -170,43 +168,19 @@ def _native() -> str:
 
 def image_from_tarball(client: docker.DockerClient, tarball: Path, strap: RootStrap, *, target: str) -> str:
     """An image of ``strap.arch`` tagged ``target`` made from the root tarball, labelled with the strap's hash;
-    its ID. The daemon's own arch is imported (``docker import``: one pass over the tarball); another arch is a
-    ``FROM scratch`` + ``ADD root.tar /`` build with that platform (20.10 labels an import with its own arch)."""
+    its ID. The tarball is loaded as the one layer of an archive that names its arch (one read after hashing,
+    for any arch: ``docker import`` would label it with the daemon's own arch on Docker 20.10)."""
     from docker.errors import DockerException
 
     labels = {naming.LABEL_ROLE: ROLE_ROOT, naming.LABEL_INPUTS: strap_hash(strap)}
-    if strap.arch == _daemon_arch(client):
-        repository, tag = arches.split_reference(target)
-        changes = [f"LABEL {key}={json.dumps(value)}" for key, value in sorted(labels.items())]
-        try:
-            client.api.import_image_from_file(str(tarball), repository=repository, tag=tag,
-                                              changes=[*changes, 'CMD ["bash"]'])
-        except DockerException as exc:
-            raise DockerError(f"image {target}: the Docker daemon refused the root file system: {exc}") from None
-        return _made(client, target, strap.arch)
-    with tempfile.TemporaryDirectory(dir=tarball.parent, prefix="context-") as context:
-        os.replace(tarball, Path(context) / "root.tar")
-        Path(context, "Dockerfile").write_text("FROM scratch\nADD root.tar /\nCMD [\"bash\"]\n")
-        try:
-            stream = client.api.build(path=context, tag=target, platform=arches.platform(strap.arch), labels=labels,
-                                      rm=True, forcerm=True, pull=False, decode=True)
-            for chunk in stream:
-                if "error" in chunk:
-                    raise DockerError(f"image {target}: building the root file system failed: {chunk['error']}")
-        except DockerException as exc:
-            raise DockerError(f"image {target}: the Docker daemon refused the root file system: {exc}") from None
-    return _made(client, target, strap.arch)
-
-
-def _daemon_arch(client: docker.DockerClient) -> str:
-    from docker.errors import DockerException
-
-    from robocore.config.model import docker_arch
-
+    repository, tag = arches.split_reference(target)
+    archive = image_archive.LoadArchive(tarball, reference=f"{repository}:{tag}", arch=strap.arch, labels=labels,
+                                        comment=f"robocore: mmdebstrap --arch={strap.arch} {arches.SUITE}")
     try:
-        return docker_arch(str(client.version().get("Arch", "")))
-    except (DockerException, ValueError):
-        return ""
+        client.images.load(archive)  # raises on an error reported in the load's progress stream
+    except DockerException as exc:
+        raise DockerError(f"image {target}: the Docker daemon refused the root file system: {exc}") from None
+    return _made(client, target, strap.arch)
 
 
 def _made(client: docker.DockerClient, target: str, arch: str) -> str:
