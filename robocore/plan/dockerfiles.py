@@ -227,7 +227,10 @@ def _debian_lines(distro: str, has_ca: bool) -> list[str]:
         *_entrypoint_lines(),
         # the root robocore bootstraps has them already (mmdebstrap --include): apt runs only for another root
         f"RUN (dpkg -s {' '.join(DEBIAN_APT)} >/dev/null 2>&1 || ({_apt_install(DEBIAN_APT)})) \\\n"
-        f" && python3 -m venv --system-site-packages {env} && {env}/bin/pip install {' '.join(DEBIAN_TOOLS)} \\\n"
+        # no pip of its own (ensurepip installs and compiles pip and setuptools: 30 s of the 70 under qemu): the
+        # venv sees Debian's pip, which installs into the venv it runs in
+        f" && python3 -m venv --without-pip --system-site-packages {env}"
+        f" && {env}/bin/python -m pip install {' '.join(DEBIAN_TOOLS)} \\\n"
         f" && ln -sf {env}/bin/colcon /usr/local/bin/colcon && ln -sfn {distro} /opt/ros/Debian",
     ]
 

@@ -14,7 +14,7 @@ LABEL dev.robocore.toolchain=cmake
 ENTRYPOINT ["/robocore/entrypoint.sh"]
 CMD ["bash"]
 RUN (dpkg -s ros-core-dev rosbash python3-rospy python3-roslaunch python3-rosnode python3-rostopic python3-rosservice python3-rosmsg g++ cmake make ninja-build ccache libgtest-dev python3-venv python3-pip python3-pytest procps ca-certificates >/dev/null 2>&1 || (apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends ros-core-dev rosbash python3-rospy python3-roslaunch python3-rosnode python3-rostopic python3-rosservice python3-rosmsg g++ cmake make ninja-build ccache libgtest-dev python3-venv python3-pip python3-pytest procps ca-certificates && rm -rf /var/lib/apt/lists/*)) \
- && python3 -m venv --system-site-packages /opt/ros/noetic/venv && /opt/ros/noetic/venv/bin/pip install colcon-core colcon-ros colcon-cmake colcon-python-setup-py colcon-library-path colcon-bash colcon-package-selection colcon-parallel-executor colcon-output \
+ && python3 -m venv --without-pip --system-site-packages /opt/ros/noetic/venv && /opt/ros/noetic/venv/bin/python -m pip install colcon-core colcon-ros colcon-cmake colcon-python-setup-py colcon-library-path colcon-bash colcon-package-selection colcon-parallel-executor colcon-output \
  && ln -sf /opt/ros/noetic/venv/bin/colcon /usr/local/bin/colcon && ln -sfn noetic /opt/ros/Debian
 COPY common /tmp/robocore/common
 RUN /robocore/entrypoint.sh colcon --log-base /dev/null build --merge-install --base-paths /tmp/robocore/common --build-base /tmp/robocore/colcon-build --install-base /opt/robocore/common --event-handlers console_start_end+ console_direct+ && rm -rf /tmp/robocore
