@@ -219,8 +219,10 @@ def test_the_debian_base_installs_debians_ros1_packages() -> None:
 def test_the_debian_base_has_colcon_in_a_venv_that_sees_debians_ros() -> None:
     text = debian_base()
     line = run_line(text, "python3 -m venv")
-    assert "python3 -m venv --system-site-packages /opt/ros/noetic/venv" in line
-    assert f"/opt/ros/noetic/venv/bin/pip install {' '.join(dockerfiles.DEBIAN_TOOLS)}" in line
+    # no pip of its own: Debian's pip, seen through the system site packages, installs into the venv it runs in
+    assert "python3 -m venv --without-pip --system-site-packages /opt/ros/noetic/venv" in line
+    assert f"/opt/ros/noetic/venv/bin/python -m pip install {' '.join(dockerfiles.DEBIAN_TOOLS)}" in line
+    assert "python3-pip" in dockerfiles.DEBIAN_APT
     assert "ln -sf /opt/ros/noetic/venv/bin/colcon /usr/local/bin/colcon" in line
     assert "colcon-ros" in dockerfiles.DEBIAN_TOOLS and "colcon-cmake" in dockerfiles.DEBIAN_TOOLS
 

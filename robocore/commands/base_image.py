@@ -122,24 +122,57 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
 
 
 def prepare_base(options: Options, *, force: bool) -> None:
-    """Build the base image (per arch) when its inputs changed."""
+    """Build the base image (per arch) when its inputs changed.
+
+    The roots of all arches are made side by side, and each arch's base is built as soon as its root is there:
+    an emulated bootstrap keeps one core busy for minutes, during which the native root and base are made on the
+    other (a mixed robot from nothing is ready when the emulated arch is, not after both one by one)."""
     project = options.load()
     report = options.report
     refuse_config_problems(project)
-    client = None if options.dry_run else local_docker()  # a dry run contacts no daemon
+    if options.dry_run:
+        _show_bases(project, options, force=force)
+        return
+    from concurrent.futures import ThreadPoolExecutor, as_completed
+
     from robocore.adapters.image_builder import image_state
 
+    wanted = arches(project)
+    native = native_arch()
+    for arch in wanted:  # before any bootstrap starts
+        check_emulation(arch, native, f"{ROBOT_FILE}: hosts of arch {arch}")
+    outcomes: list[Outcome] = []
+    with ThreadPoolExecutor(max_workers=len(wanted), thread_name_prefix="robocore-root") as pool:
+        roots = {pool.submit(_make_root, project, arch, report.info): arch for arch in wanted}
+        client = local_docker()
+        try:
+            for done in as_completed(roots):
+                done.result()  # the root's error, if it could not be had
+                base = plan_base(project, client, roots[done], refresh_sources=force, say=report.info)
+                work: list[tuple[Planned, str]] = []
+                triage(base, decide(image_state(client, base.plan.ref), base, force=force), False, outcomes, work)
+                outcomes += run_builds(report, work, parallel=False)
+        finally:
+            client.close()
+    report_outcomes(report, outcomes)
+
+
+def _make_root(project: Project, arch: str, say: Callable[[str], None]) -> None:
+    """Have ``arch``'s root image (kept, pulled or bootstrapped), with a Docker client of this thread's own."""
+    client = local_docker()
+    try:
+        _base_parent(project, client, arch, dry_run=False, say=say)
+    finally:
+        client.close()
+
+
+def _show_bases(project: Project, options: Options, *, force: bool) -> None:
+    """A dry run's plans: no daemon is contacted, nothing is pulled, bootstrapped or built."""
     outcomes: list[Outcome] = []
     work: list[tuple[Planned, str]] = []
-    try:
-        for arch in arches(project):
-            base = plan_base(project, client, arch, dry_run=options.dry_run, refresh_sources=force, say=report.info)
-            reason = decide(image_state(client, base.plan.ref) if client else None, base, force=force)
-            if options.dry_run:
-                show_plan(report, base, reason)
-            triage(base, reason, options.dry_run, outcomes, work)
-    finally:
-        if client is not None:
-            client.close()
-    outcomes += run_builds(report, work, parallel=False)
-    report_outcomes(report, outcomes)
+    for arch in arches(project):
+        base = plan_base(project, None, arch, dry_run=True, refresh_sources=force, say=options.report.info)
+        reason = decide(None, base, force=force)
+        show_plan(options.report, base, reason)
+        triage(base, reason, True, outcomes, work)
+    report_outcomes(options.report, outcomes)
