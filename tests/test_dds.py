@@ -136,6 +136,26 @@ def test_profiles_shorten_discovery_through_the_server(distro: str) -> None:
     assert server.findtext("clientAnnouncementPeriod/nanosec") == str(dds.SERVER_ANNOUNCEMENT_MS * 1_000_000)
 
 
+@pytest.mark.parametrize("distro", ["humble", "jazzy", "kilted"])
+@pytest.mark.parametrize("transport", ["shm", "udp"])
+def test_clients_take_discovery_traffic_over_udp_at_their_usual_port(distro: str, transport: str) -> None:
+    """Whatever carries the data, what servers and peers send a client for discovery arrives over UDP (a
+    replaced node's shared-memory port may still be held by the server), at Fast DDS's own address and port."""
+    r = robot(distro, transport=transport)
+    for xml in (dds.client_xml(r), dds.super_client_xml(r)):
+        builtin = parse(xml).find(".//participant/rtps/builtin")
+        assert builtin is not None
+        locators = builtin.findall("metatrafficUnicastLocatorList/locator")
+        assert len(locators) == 1
+        assert [child.tag for child in locators[0]] == ["udpv4"]
+        udp = locators[0].find("udpv4")
+        assert udp is not None and len(udp) == 0  # no address, no port: Fast DDS fills them in
+        # data locators stay Fast DDS's own (shared memory on one host when the transport allows it)
+        assert parse(xml).find(".//defaultUnicastLocatorList") is None
+    # the server listens where its clients are told it is: its own profile is untouched
+    assert parse(dds.server_profile_xml(r)).find(".//metatrafficUnicastLocatorList") is None
+
+
 # ------------------------------------------------------------------ server argv
 
 
