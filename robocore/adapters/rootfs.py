@@ -85,10 +85,10 @@ def ensure_root_image(
 ) -> tuple[str, str]:
     """The root image ``target`` (reference, image ID) of ``arch``: kept, taken from ``upstream`` (local or
     pulled with its platform) or, when ``strap`` is given, bootstrapped; DockerError when none can be had."""
-    if _usable(image_state(client, target), arch, strap):
-        state = image_state(client, target)
-        assert state is not None
-        return target, state.id
+    kept = image_state(client, target)
+    if _usable(kept, arch, strap):
+        assert kept is not None
+        return target, kept.id
     found = image_state(client, upstream)
     if found is None or found.arch != arch:
         status(f"pulling {upstream} for {arches.platform(arch)}")

@@ -73,12 +73,11 @@ def _base_parent(project: Project, client: docker.DockerClient | None, arch: str
 
 def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *, dry_run: bool = False,
               refresh_sources: bool = False, say: Callable[[str], None] = lambda _: None) -> Planned:
-    """The base image plan for ``arch`` (resolves the root image and fetches common packages)."""
+    """The base image plan for ``arch`` (resolves the root image and fetches common packages). Whether this
+    machine can run ``arch`` is :func:`prepare_base`'s check, made for every arch before any root is made."""
     robot = project.robot
     refuse_config_problems(project)
     native = native_arch()
-    if not dry_run:
-        check_emulation(arch, native, f"{ROBOT_FILE}: hosts of arch {arch}")
     root_ref, root_id = _base_parent(project, client, arch, dry_run=dry_run, say=say)
     ca = find_ca_bundle()
     wheels = robot.base.kind is BaseKind.wheels
