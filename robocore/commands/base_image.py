@@ -116,7 +116,8 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
     dockerfile = dockerfiles.base_dockerfile(robot, root_image=root_ref, has_ca=ca is not None, common=common,
                                              cmake=cmake)
     plan = ImagePlan(role="base", name=naming.base_image(robot, project.name), tag=dockerfiles.base_tag(arch, native),
-                     arch=arch, dockerfile=dockerfile, parent=root_ref, context=tuple(entries))
+                     arch=arch, dockerfile=dockerfile, parent=root_ref, context=tuple(entries),
+                     labels=dockerfiles.base_labels(robot))
     return planned(project, plan, root_id, known=known)
 
 

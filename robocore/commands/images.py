@@ -101,10 +101,12 @@ def planned(project: Project, plan: ImagePlan, parent_id: str, *, known: bool = 
     from robocore.adapters.image_builder import expand
 
     files = tuple(expand(plan.context))
-    digest = inputs_hash(plan.dockerfile, [f.digest() for f in files], parent=parent_id, platform=plan.platform)
+    digest = inputs_hash(plan.dockerfile, [f.digest() for f in files], parent=parent_id, platform=plan.platform,
+                         extra={f"label {key}": value for key, value in plan.labels.items()})
     if not known or parent_id == DRY_RUN_UNKNOWN:
         digest = DRY_RUN_UNKNOWN
-    labels = {naming.LABEL_PROJECT: project.name, naming.LABEL_ROLE: plan.role, naming.LABEL_INPUTS: digest}
+    labels = {**plan.labels, naming.LABEL_PROJECT: project.name, naming.LABEL_ROLE: plan.role,
+              naming.LABEL_INPUTS: digest}
     if plan.component:
         labels[naming.LABEL_COMPONENT] = plan.component
     return Planned(plan=plan, files=files, parent_id=parent_id, inputs=digest, labels=labels)

@@ -103,6 +103,7 @@ class ImagePlan:
     parent: str  # the FROM reference
     context: tuple[ContextEntry, ...] = ()
     component: str | None = None
+    #: labels the build sets beside robocore's own (they are not in the Dockerfile; the inputs hash has them)
     labels: Mapping[str, str] = field(default_factory=dict)
 
     @property
@@ -222,8 +223,6 @@ def _debian_lines(distro: str, has_ca: bool) -> list[str]:
                 ("CMAKE_GENERATOR", DEBIAN_CMAKE_GENERATOR)]
     return [
         *_tree_lines("the entrypoint, setup.bash", has_ca, settings),
-        "# the C++ tool chain is in the base: builds use ccache",
-        f"LABEL {cmake_packages.LABEL_TOOLCHAIN}={cmake_packages.TOOLCHAIN_CMAKE}",
         *_entrypoint_lines(),
         # the root robocore bootstraps has them already (mmdebstrap --include): apt runs only for another root
         f"RUN (dpkg -s {' '.join(DEBIAN_APT)} >/dev/null 2>&1 || ({_apt_install(DEBIAN_APT)})) \\\n"
@@ -251,6 +250,15 @@ def _wheels_venv(env: str, pins: str) -> str:
         f'--python {env}/bin/python "$pip_wheel" "$tools_wheel" {pins}',
         f"rm -rf {scratch}",
     ])
+
+
+def base_labels(robot: Robot) -> dict[str, str]:
+    """Labels of the base image that its Dockerfile does not write: they join the one LABEL step the build appends
+    (each step of its own costs seconds on fuse-overlayfs). The debian base has the C++ tool chain, so ``build``
+    turns ccache on for its images."""
+    if robot.base.kind is BaseKind.debian:
+        return {cmake_packages.LABEL_TOOLCHAIN: cmake_packages.TOOLCHAIN_CMAKE}
+    return {}
 
 
 def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequence[str],

@@ -9,8 +9,6 @@ ENV ROS_DISTRO=noetic \
     PIP_NO_CACHE_DIR=1 \
     PIP_BREAK_SYSTEM_PACKAGES=1 \
     CMAKE_GENERATOR=Ninja
-# the C++ tool chain is in the base: builds use ccache
-LABEL dev.robocore.toolchain=cmake
 ENTRYPOINT ["/robocore/entrypoint.sh"]
 CMD ["bash"]
 RUN (dpkg -s ros-core-dev rosbash python3-rospy python3-roslaunch python3-rosnode python3-rostopic python3-rosservice python3-rosmsg g++ cmake make ninja-build ccache libgtest-dev python3-venv python3-pip python3-pytest procps ca-certificates >/dev/null 2>&1 || (apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends ros-core-dev rosbash python3-rospy python3-roslaunch python3-rosnode python3-rostopic python3-rosservice python3-rosmsg g++ cmake make ninja-build ccache libgtest-dev python3-venv python3-pip python3-pytest procps ca-certificates && rm -rf /var/lib/apt/lists/*)) \
