@@ -10,6 +10,10 @@ PERIOD = 0.5
 #: Seconds between two looks for a listener before the first greeting: a greeting sent before anyone listens is
 #: lost, and one sent a whole period after start comes later than it needs to (a restarted talker is heard sooner).
 FIRST_LOOK = 0.02
+#: Seconds the first greeting waits for a listener at most. Discovery usually takes 0.1-0.3 s, on a busy machine
+#: up to a second; a greeting sent on a shorter wait goes to nobody, and the listener hears the next one a whole
+#: period later.
+FIRST_WAIT = 2.0
 
 
 def greeting(count: int) -> str:
@@ -28,9 +32,9 @@ class Talker(Node):
         self.timer = self.create_timer(FIRST_LOOK, self.first)
 
     def first(self) -> None:
-        """Until a listener is there (at most one period): look again; then greet, and every period after."""
+        """Until a listener is there (at most FIRST_WAIT): look again; then greet, and every period after."""
         self.looks += 1
-        if self.publisher.get_subscription_count() == 0 and self.looks * FIRST_LOOK < PERIOD:
+        if self.publisher.get_subscription_count() == 0 and self.looks * FIRST_LOOK < FIRST_WAIT:
             return
         self.destroy_timer(self.timer)
         self.tick()
