@@ -229,3 +229,33 @@ def test_restart_hold_outlasts_the_lease_on_2x_only() -> None:
     assert dds.restart_hold_seconds(robot("jazzy")) > dds.SERVER_LEASE_SECONDS
     assert dds.restart_hold_seconds(robot("humble")) > dds.SERVER_LEASE_SECONDS
     assert dds.restart_hold_seconds(robot("kilted")) == 0  # 3.x servers get a new GUID on each start
+
+
+# ------------------------------------------------------------------ replacements
+
+
+@pytest.mark.parametrize("distro", ["humble", "jazzy", "kilted"])
+def test_a_replacements_profile_is_the_client_profile_with_other_user_ports(distro: str) -> None:
+    files = dds.profile_files(robot(distro))
+    successor = files[dds.SUCCESSOR_PROFILE]
+    port = f"        <port><offsetd3>{dds.SUCCESSOR_USER_PORT_OFFSET}</offsetd3></port>\n"
+    assert successor.replace(port, "") == files[dds.CLIENT_PROFILE]  # nothing else differs
+    offset = parse(successor).find(".//{*}rtps/{*}port/{*}offsetd3")
+    assert offset is not None and offset.text == "111"
+    assert dds.SUCCESSOR_USER_PORT_OFFSET % 2 == 1  # discovery ports are even (10 + 2 x id): never met
+
+
+@pytest.mark.parametrize("distro", ["jazzy", "kilted"])
+def test_replacements_alternate_between_the_client_profile_and_the_successors(distro: str) -> None:
+    planned = dds.client_environment(robot(distro))
+    first = dds.successor_environment(planned, planned)  # replaces a node that had the client profile
+    names = [n for n in dds.PROFILE_VARIABLES if n in planned]
+    assert names and all(first[n].endswith("/" + dds.SUCCESSOR_PROFILE) for n in names)
+    assert {k: v for k, v in first.items() if k not in names} == {k: v for k, v in planned.items() if k not in names}
+    assert dds.successor_environment(first, planned) == planned  # and the next one goes back
+    assert dds.successor_environment({}, planned) == planned  # a predecessor without a profile: as planned
+
+
+def test_a_super_client_is_never_given_the_successor_profile() -> None:
+    planned = dds.client_environment(robot(), super_client=True)
+    assert dds.successor_environment(planned, planned) == planned

@@ -2,20 +2,24 @@
 
 from __future__ import annotations
 
+import types
 from pathlib import Path
 from typing import Any
 
 import pytest
 import yaml
 
+from robocore.commands import run
 from robocore.commands.composefiles import write_dds_profiles
 from robocore.commands.observe import super_client_exec_env
+from robocore.commands.reporting import Reporter
 from robocore.commands.run import wait_server_ready
 from robocore.config.loader import parse_robot_text
 from robocore.config.model import Robot
 from robocore.errors import ConfigError, DockerError
 from robocore.files import WRITTEN_RECORD
 from robocore.plan import compose, containers, discovery, naming, testrun
+from robocore.plan.actions import Action
 from robocore.plan.discovery import (
     IN_CONTAINERS,
     Discovery,
@@ -170,7 +174,8 @@ def test_a_registered_kind_writes_its_files_and_drops_the_previous_kinds(master:
     before = Project(root=tmp_path, robot=robot())
     write_dds_profiles(before)
     folder = tmp_path / ".robocore" / "dds"
-    assert sorted(p.name for p in folder.iterdir()) == [WRITTEN_RECORD, "client.xml", "super_client.xml"]
+    assert sorted(p.name for p in folder.iterdir()) == [WRITTEN_RECORD, "client-successor.xml", "client.xml",
+                                                         "super_client.xml"]
     (folder / ".client.xml.123.tmp").write_text("another writer's temp file")
     after = Project(root=tmp_path, robot=with_kind(robot(), "master"))
     written = write_dds_profiles(after)
@@ -329,3 +334,38 @@ def test_node_listing_keeps_named_nodes_and_drops_hidden_ones() -> None:
     assert kind.node_list_argv(3.0)[1:] == ["ros2", "node", "list", "--no-daemon", "--spin-time", "3.0"]
     output = "/talker\n/ns/listener\n/_ros2cli_1234\nWARNING: something\n/talker\n"
     assert kind.nodes_from_output(output) == ["/ns/listener", "/talker"]
+
+
+# ------------------------------------------------------------------ replacing a node
+
+
+class FakeClient:
+    """What ``run`` asks of a docker-py client when it replaces a container: create, and what it made."""
+
+    def __init__(self) -> None:
+        self.created: list[dict[str, Any]] = []
+        self.containers = self
+
+    def create(self, **kwargs: Any) -> Any:
+        self.created.append(kwargs)
+        return types.SimpleNamespace(start=lambda: None)
+
+
+@pytest.mark.parametrize("old_profile", ["client.xml", "client-successor.xml"])
+def test_a_replaced_node_gets_the_other_profile_than_its_predecessor_and_the_same_spec_hash(
+        old_profile: str) -> None:
+    project = Project(root=Path("/srv/r"), robot=robot())
+    kind = discovery.for_robot(project.robot)
+    specs = containers.host_specs(project, project.robot.hosts[0].name)
+    spec = next(s for s in specs if s.role != naming.ROLE_DISCOVERY)
+    old_env = {**spec.env, **{n: f"/robocore/dds/{old_profile}" for n in fastdds.PROFILE_VARIABLES}}
+    old = types.SimpleNamespace(attrs={"Config": {"Env": [f"{k}={v}" for k, v in old_env.items()]}},
+                                removed=False)
+    old.remove = lambda force: setattr(old, "removed", force)
+    client = FakeClient()
+    run._apply(client, Action("replace", spec.name, "new image"), spec, old,  # type: ignore[arg-type]
+               project.robot.hosts[0], report=Reporter(quiet=True), kind=kind)
+    [made] = client.created
+    other = "client-successor.xml" if old_profile == "client.xml" else "client.xml"
+    assert old.removed and made["environment"]["FASTDDS_DEFAULT_PROFILES_FILE"] == f"/robocore/dds/{other}"
+    assert made["labels"] == spec.labels  # a later run compares the spec's hash: it keeps this container

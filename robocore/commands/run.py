@@ -173,10 +173,9 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
         if dry_run:
             return outcome
         by_name = {s.name: s for s in specs}
-        ready = kind.readiness
         for action in actions:
             _apply(client, action, by_name.get(action.name), containers.get(action.name), host, report=report,
-                   ready=ready)
+                   kind=kind)
     finally:
         client.close()
         if local is not None:
@@ -216,7 +215,7 @@ def _check_name_conflicts(client: docker.DockerClient, specs: Sequence[Container
 
 
 def _apply(client: docker.DockerClient, action: Action, spec: ContainerSpec | None, container: Any, host: Host, *,
-           report: Reporter, ready: discovery.ReadinessCheck) -> None:
+           report: Reporter, kind: discovery.Discovery) -> None:
     from docker.errors import APIError
     from rich.markup import escape
 
@@ -234,12 +233,15 @@ def _apply(client: docker.DockerClient, action: Action, spec: ContainerSpec | No
             say(f"started {action.name}")
         else:
             assert spec is not None
+            kwargs = spec.docker_kwargs()
             if action.verb == "replace":
+                if spec.role != ROLE_DISCOVERY:  # the hash label stays the spec's: a later run keeps it
+                    kwargs["environment"] = kind.successor_environment(environment_of(container), spec.env)
                 container.remove(force=True)
-            created = client.containers.create(**spec.docker_kwargs())
+            created = client.containers.create(**kwargs)
             created.start()
             if spec.role == ROLE_DISCOVERY:
-                wait_server_ready(created, spec, host, ready)
+                wait_server_ready(created, spec, host, kind.readiness)
             say(f"{'recreated' if action.verb == 'replace' else 'created'} {action.name}"
                 + (f" ({action.reason})" if action.reason else ""))
     except APIError as exc:
@@ -248,6 +250,12 @@ def _apply(client: docker.DockerClient, action: Action, spec: ContainerSpec | No
         if "bind source path does not exist" in text:
             hint = "run `robocore sync` first" if not host.is_local else "run `robocore build` first"
         raise DockerError(f"host {host.name}: {action.verb} {action.name} failed: {text}", hint=hint) from None
+
+
+def environment_of(container: Any) -> dict[str, str]:
+    """A container's environment as Docker reports it (``NAME=value`` lines), as a mapping."""
+    lines = (container.attrs.get("Config") or {}).get("Env") or []
+    return dict(line.partition("=")[::2] for line in lines if isinstance(line, str))
 
 
 SERVER_READY_TIMEOUT = 20.0

@@ -205,6 +205,12 @@ class Discovery(ABC):
         ``host`` is the robot host it runs on, None off the robot (the developer's machine).
         """
 
+    def successor_environment(self, previous: Mapping[str, str], planned: Mapping[str, str]) -> dict[str, str]:
+        """The environment of a node container replacing one whose environment was ``previous`` (``planned`` by
+        default; a kind whose replacements would inherit their predecessor's state through the host changes it)."""
+        del previous
+        return dict(planned)
+
     @abstractmethod
     def files(self) -> dict[str, str]:
         """The files nodes and tools read: file name -> text (written to ``.robocore/dds/``)."""
