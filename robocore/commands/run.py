@@ -236,7 +236,8 @@ def _apply(client: docker.DockerClient, action: Action, spec: ContainerSpec | No
             kwargs = spec.docker_kwargs()
             if action.verb == "replace":
                 if spec.role != ROLE_DISCOVERY:  # the hash label stays the spec's: a later run keeps it
-                    kwargs["environment"] = kind.successor_environment(environment_of(container), spec.env)
+                    kwargs["environment"] = kind.successor_environment(environment_of(container),
+                                                                         kwargs["environment"])
                 container.remove(force=True)
             created = client.containers.create(**kwargs)
             created.start()
