@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import functools
 import json
+import re
 import subprocess
 import sys
 from typing import Any
@@ -21,6 +22,7 @@ from test_config_property import VALID_DOCS, _get, _paths, mutated_documents
 
 from robocore.config.model import Robot
 from robocore.config.schema import SCHEMA_ID, robot_schema
+from robocore.config.values import SHELL_WORDS, schema_pattern, shell_words
 
 
 @pytest.fixture(scope="module")
@@ -134,3 +136,23 @@ def test_what_the_schema_accepts_the_model_accepts(doc: Any) -> None:
 @functools.cache
 def _shared_validator() -> jsonschema.Draft202012Validator:
     return _validator(robot_schema())
+
+
+@settings(max_examples=500)
+@given(st.text(alphabet=st.sampled_from(list("ab '\"\\#$é\x01")), max_size=12))
+def test_the_schemas_shell_words_pattern_agrees_with_the_models_check(text: str) -> None:
+    """An entrypoint the schema accepts splits as a shell would, and one that does not is refused by both."""
+    try:
+        shell_words(text)
+        model_accepts = True
+    except ValueError:
+        model_accepts = False
+    assert (re.search(schema_pattern(SHELL_WORDS), text) is not None) == model_accepts
+
+
+@pytest.mark.parametrize(("entrypoint", "valid"), [("\\", False), ("say 'a", False), ('say "a\\"', False),
+                                                   ("say 'a b' \\ c", True), ('say "a \\" b"', True)])
+def test_the_schema_refuses_an_entrypoint_no_shell_can_split(entrypoint: str, valid: bool) -> None:
+    doc = copy.deepcopy(VALID_DOCS[0])
+    doc["components"][0]["entrypoint"] = entrypoint
+    assert _shared_validator().is_valid(doc) is valid

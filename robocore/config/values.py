@@ -380,8 +380,19 @@ def shell_words(value: str) -> str:
     return value
 
 
+_CHAR = r"[^\x00-\x1f\x7f-\x9f"  # one-line characters, each use below closes the class
+#: One line of shell words in :func:`shlex.split`'s (POSIX) quoting: plain characters, a backslash and the
+#: character it escapes, '...' (no escapes inside), "..." (backslash escapes inside). Each alternative starts
+#: with a character of its own, so matching is linear; quotes are not escaped (ECMA's unicode mode refuses that).
+SHELL_WORDS = "(?:" + "|".join([
+    _CHAR + "'\"\\\\]",  # a plain character
+    r"\\" + _CHAR + "]",  # an escaped one
+    "'" + _CHAR + "']*'",
+    '"(?:' + _CHAR + '"\\\\]|\\\\' + _CHAR + ']' + ')*"',
+]) + ")*"
+
 #: A command line written as text (entrypoint, launch arguments): split into words with shell quoting rules.
-ShellWords = Annotated[str, AfterValidator(shell_words), pattern_field(ONE_LINE)]
+ShellWords = Annotated[str, AfterValidator(shell_words), pattern_field(SHELL_WORDS)]
 #: A whole number that YAML wrote as a number: ``true``/``false`` (YAML booleans) are not 1 and 0.
 Number = Annotated[int, Strict()]
 MultiLine = Annotated[str, AfterValidator(multi_line), pattern_field(MULTI_LINE)]
