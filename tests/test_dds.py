@@ -237,23 +237,37 @@ def test_restart_hold_outlasts_the_lease_on_2x_only() -> None:
 @pytest.mark.parametrize("distro", ["humble", "jazzy", "kilted"])
 def test_a_replacements_profile_is_the_client_profile_with_other_user_ports(distro: str) -> None:
     files = dds.profile_files(robot(distro))
-    successor = files[dds.SUCCESSOR_PROFILE]
-    port = f"        <port><offsetd3>{dds.SUCCESSOR_USER_PORT_OFFSET}</offsetd3></port>\n"
-    assert successor.replace(port, "") == files[dds.CLIENT_PROFILE]  # nothing else differs
-    offset = parse(successor).find(".//{*}rtps/{*}port/{*}offsetd3")
-    assert offset is not None and offset.text == "111"
-    assert dds.SUCCESSOR_USER_PORT_OFFSET % 2 == 1  # discovery ports are even (10 + 2 x id): never met
+    first, *others = dds.CLIENT_ROTATION
+    assert first == dds.CLIENT_PROFILE and len(others) >= 3
+    offsets = [11]  # Fast DDS's own, where the client profile leaves it
+    for name in others:
+        offset = parse(files[name]).find(".//{*}rtps/{*}port/{*}offsetd3")
+        assert offset is not None and offset.text is not None
+        port = f"        <port><offsetd3>{offset.text}</offsetd3></port>\n"
+        assert files[name].replace(port, "") == files[dds.CLIENT_PROFILE]  # nothing else differs
+        offsets.append(int(offset.text))
+    assert parse(files[dds.CLIENT_PROFILE]).find(".//{*}rtps/{*}port") is None
+    assert all(o % 2 == 1 for o in offsets)  # discovery ports are even (10 + 2 x id): never met
+    # participants 0-49 of one rotation step never take another step's port
+    ports = [{o + 2 * pid for pid in range(50)} for o in offsets]
+    assert all(not (a & b) for i, a in enumerate(ports) for b in ports[i + 1:])
 
 
 @pytest.mark.parametrize("distro", ["jazzy", "kilted"])
-def test_replacements_alternate_between_the_client_profile_and_the_successors(distro: str) -> None:
+def test_replacements_go_round_the_client_profiles(distro: str) -> None:
     planned = dds.client_environment(robot(distro))
-    first = dds.successor_environment(planned, planned)  # replaces a node that had the client profile
     names = [n for n in dds.PROFILE_VARIABLES if n in planned]
-    assert names and all(first[n].endswith("/" + dds.SUCCESSOR_PROFILE) for n in names)
-    assert {k: v for k, v in first.items() if k not in names} == {k: v for k, v in planned.items() if k not in names}
-    assert dds.successor_environment(first, planned) == planned  # and the next one goes back
+    assert names
+    env, seen = planned, []
+    for _ in range(len(dds.CLIENT_ROTATION)):
+        env = dds.successor_environment(env, planned)
+        assert {k: v for k, v in env.items() if k not in names} == {k: v for k, v in planned.items() if k not in names}
+        [file] = {env[n] for n in names}
+        seen.append(file.rpartition("/")[2])
+    assert seen == [*list(dds.CLIENT_ROTATION)[1:], dds.CLIENT_PROFILE]  # each once, then back to the start
     assert dds.successor_environment({}, planned) == planned  # a predecessor without a profile: as planned
+    elsewhere = {n: "/elsewhere/client-1.xml" for n in names}  # another folder's file: not one of ours
+    assert dds.successor_environment(elsewhere, planned) == planned
 
 
 def test_a_super_client_is_never_given_the_successor_profile() -> None:

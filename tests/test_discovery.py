@@ -174,8 +174,8 @@ def test_a_registered_kind_writes_its_files_and_drops_the_previous_kinds(master:
     before = Project(root=tmp_path, robot=robot())
     write_dds_profiles(before)
     folder = tmp_path / ".robocore" / "dds"
-    assert sorted(p.name for p in folder.iterdir()) == [WRITTEN_RECORD, "client-successor.xml", "client.xml",
-                                                         "super_client.xml"]
+    assert sorted(p.name for p in folder.iterdir()) == [WRITTEN_RECORD, "client-1.xml", "client-2.xml",
+                                                         "client-3.xml", "client.xml", "super_client.xml"]
     (folder / ".client.xml.123.tmp").write_text("another writer's temp file")
     after = Project(root=tmp_path, robot=with_kind(robot(), "master"))
     written = write_dds_profiles(after)
@@ -351,9 +351,10 @@ class FakeClient:
         return types.SimpleNamespace(start=lambda: None)
 
 
-@pytest.mark.parametrize("old_profile", ["client.xml", "client-successor.xml"])
-def test_a_replaced_node_gets_the_other_profile_than_its_predecessor_and_the_same_spec_hash(
-        old_profile: str) -> None:
+@pytest.mark.parametrize(("old_profile", "new_profile"), [("client.xml", "client-1.xml"), ("client-1.xml", "client-2.xml"),
+                                                         ("client-3.xml", "client.xml")])
+def test_a_replaced_node_gets_the_next_profile_after_its_predecessors_and_the_same_spec_hash(
+        old_profile: str, new_profile: str) -> None:
     project = Project(root=Path("/srv/r"), robot=robot())
     kind = discovery.for_robot(project.robot)
     specs = containers.host_specs(project, project.robot.hosts[0].name)
@@ -366,6 +367,5 @@ def test_a_replaced_node_gets_the_other_profile_than_its_predecessor_and_the_sam
     run._apply(client, Action("replace", spec.name, "new image"), spec, old,  # type: ignore[arg-type]
                project.robot.hosts[0], report=Reporter(quiet=True), kind=kind)
     [made] = client.created
-    other = "client-successor.xml" if old_profile == "client.xml" else "client.xml"
-    assert old.removed and made["environment"]["FASTDDS_DEFAULT_PROFILES_FILE"] == f"/robocore/dds/{other}"
+    assert old.removed and made["environment"]["FASTDDS_DEFAULT_PROFILES_FILE"] == f"/robocore/dds/{new_profile}"
     assert made["labels"] == spec.labels  # a later run compares the spec's hash: it keeps this container

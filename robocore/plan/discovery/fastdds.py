@@ -41,7 +41,7 @@ from robocore.plan.discovery.base import (
     last_error_line,
     plain_text,
 )
-from robocore.plan.discovery.replacements import alternate_profile
+from robocore.plan.discovery.replacements import rotate_profile
 from robocore.plan.naming import ENTRYPOINT
 
 RMW = "rmw_fastrtps_cpp"
@@ -49,13 +49,13 @@ RMW = "rmw_fastrtps_cpp"
 #: Profile files robocore writes to ``.robocore/dds/`` (mounted at ``naming.CONTAINER_DDS``).
 SUPER_CLIENT_PROFILE = "super_client.xml"
 CLIENT_PROFILE = "client.xml"
-#: The client profile of a node that replaces another on its host: its user traffic at another port offset
-#: (``offsetd3``, default 11). A replacement gets its predecessor's participant id and ports, and its peers kept
-#: writing into the dead one's shared memory: a greeting the listener had to ask again for came 2.3-2.8 s late
-#: (0.08 s over UDP; `bench/deploy.py --watch`). 111 is odd, as 11 is, so it never meets a discovery port (10 +
-#: 2 x id), nor another's user port below 50 participants of a domain on one host (past that, Fast DDS moves on).
-SUCCESSOR_PROFILE = "client-successor.xml"
-SUCCESSOR_USER_PORT_OFFSET = 111
+#: The client profiles a node's successive replacements on a host go round: file -> user port offset (``offsetd3``;
+#: None: Fast DDS's 11). With its predecessor's ports (same participant id), peers wrote into the dead one's shared
+#: memory until Fast DDS noticed (1-3 s): a greeting asked for again came 2.3-2.9 s late (0.08 s over UDP; bench/
+#: deploy.py --watch). Four, as `dev` can replace a node twice in that time (its first deploy, then a save). Odd
+#: offsets 100 apart never meet a discovery port (10 + 2 x id), nor each other below 50 participants on a host.
+CLIENT_ROTATION: dict[str, int | None] = {CLIENT_PROFILE: None, "client-1.xml": 111, "client-2.xml": 211,
+                                          "client-3.xml": 311}
 #: The variables that name a process's profile file.
 PROFILE_VARIABLES = ("FASTDDS_DEFAULT_PROFILES_FILE", "FASTRTPS_DEFAULT_PROFILES_FILE")
 
@@ -269,16 +269,16 @@ def server_profile_xml(robot: Robot) -> str:
 
 def profile_files(robot: Robot, *, transport: Transport | None = None) -> dict[str, str]:
     """The XML profiles to write to ``.robocore/dds/``: file name -> XML text."""
-    return {SUPER_CLIENT_PROFILE: super_client_xml(robot, transport=transport),
-            CLIENT_PROFILE: client_xml(robot, transport=transport),
-            SUCCESSOR_PROFILE: client_xml(robot, transport=transport, successor=True)}
+    files = {SUPER_CLIENT_PROFILE: super_client_xml(robot, transport=transport)}
+    files.update({name: client_xml(robot, transport=transport, user_port_offset=offset)
+                  for name, offset in CLIENT_ROTATION.items()})
+    return files
 
 
 def successor_environment(previous: Mapping[str, str], planned: Mapping[str, str]) -> dict[str, str]:
-    """A replacement node's environment: the client profile swapped for :data:`SUCCESSOR_PROFILE` when its
-    predecessor had the client profile (and back), so that successive replacements alternate their ports."""
-    return alternate_profile(previous, planned, variables=PROFILE_VARIABLES, primary=CLIENT_PROFILE,
-                             alternate=SUCCESSOR_PROFILE)
+    """A replacement node's environment: its client profile the one after its predecessor's in
+    :data:`CLIENT_ROTATION`, so that replacements in quick succession never share ports."""
+    return rotate_profile(previous, planned, variables=PROFILE_VARIABLES, rotation=list(CLIENT_ROTATION))
 
 
 def _locator(address: str, port: int, indent: str) -> str:
@@ -336,12 +336,12 @@ def super_client_xml(robot: Robot, *, transport: Transport | None = None) -> str
     return _document(robot, settings.descriptors, participant)
 
 
-def client_xml(robot: Robot, *, transport: Transport | None = None, successor: bool = False) -> str:
+def client_xml(robot: Robot, *, transport: Transport | None = None, user_port_offset: int | None = None) -> str:
     """The plain client profile: discovery timing (and UDP only when asked); the servers still come
-    from ``ROS_DISCOVERY_SERVER``, because the profile leaves the discovery protocol alone. ``successor``: the
-    profile of a replacement, its user traffic at :data:`SUCCESSOR_USER_PORT_OFFSET`."""
+    from ``ROS_DISCOVERY_SERVER``, because the profile leaves the discovery protocol alone. ``user_port_offset``:
+    Fast DDS's ``offsetd3`` (see :data:`CLIENT_ROTATION`)."""
     settings = _transport(robot, transport)
-    ports = f"        <port><offsetd3>{SUCCESSOR_USER_PORT_OFFSET}</offsetd3></port>\n" if successor else ""
+    ports = "" if user_port_offset is None else f"        <port><offsetd3>{user_port_offset}</offsetd3></port>\n"
     participant = (
         '    <participant profile_name="robocore_client" is_default_profile="true">\n'
         "      <rtps>\n"

@@ -2,8 +2,8 @@
 
 A process started after its predecessor was killed can inherit what the predecessor left on the host: Fast DDS
 gives it the same participant id, so the same ports, and its peers may still write into the dead one's shared
-memory for seconds. A kind avoids that by alternating a replacement's profile file between two that differ only
-in their ports (:func:`alternate_profile`).
+memory for seconds. A kind avoids that by rotating a replacement's profile file through a few that differ only
+in their ports (:func:`rotate_profile`).
 """
 
 from __future__ import annotations
@@ -12,16 +12,21 @@ from collections.abc import Mapping, Sequence
 from pathlib import PurePosixPath
 
 
-def alternate_profile(previous: Mapping[str, str], planned: Mapping[str, str], *, variables: Sequence[str],
-                      primary: str, alternate: str) -> dict[str, str]:
-    """``planned``, where each of ``variables`` names a file called ``primary`` that the predecessor
-    (``previous``) named too, pointed at ``alternate`` in the same folder; so successive replacements alternate
-    between the two. Anything else (another file, a variable the plan does not set) stays as planned."""
+def rotate_profile(previous: Mapping[str, str], planned: Mapping[str, str], *, variables: Sequence[str],
+                   rotation: Sequence[str]) -> dict[str, str]:
+    """``planned``, where each of ``variables`` names a file called ``rotation[0]`` and the predecessor
+    (``previous``) named ``rotation[i]`` in the same folder, pointed at ``rotation[i + 1]`` (after the last, back to
+    the first): successive replacements go round the rotation, so a port comes back only every
+    ``len(rotation)`` replacements. Anything else (another file, a variable the plan does not set) stays as planned."""
     env = dict(planned)
     for name in variables:
         path = env.get(name)
-        if path is None or PurePosixPath(path).name != primary:
+        if path is None or PurePosixPath(path).name != rotation[0]:
             continue
-        if previous.get(name) == path:
-            env[name] = str(PurePosixPath(path).with_name(alternate))
+        before = previous.get(name)
+        if before is None or PurePosixPath(before).parent != PurePosixPath(path).parent:
+            continue
+        was = PurePosixPath(before).name
+        if was in rotation:
+            env[name] = str(PurePosixPath(path).with_name(rotation[(rotation.index(was) + 1) % len(rotation)]))
     return env
