@@ -351,8 +351,9 @@ class FakeClient:
         return types.SimpleNamespace(start=lambda: None)
 
 
-@pytest.mark.parametrize(("old_profile", "new_profile"), [("client.xml", "client-1.xml"), ("client-1.xml", "client-2.xml"),
-                                                         ("client-3.xml", "client.xml")])
+@pytest.mark.parametrize(("old_profile", "new_profile"),
+                         [("client.xml", "client-1.xml"), ("client-1.xml", "client-2.xml"),
+                          ("client-3.xml", "client.xml")])
 def test_a_replaced_node_gets_the_next_profile_after_its_predecessors_and_the_same_spec_hash(
         old_profile: str, new_profile: str) -> None:
     project = Project(root=Path("/srv/r"), robot=robot())
