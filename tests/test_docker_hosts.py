@@ -160,3 +160,46 @@ def test_a_prefetched_connection_is_taken_once_with_its_error(monkeypatch: pytes
     docker_hosts.client_for(up, 300, connect_timeout=8)
     docker_hosts.client_for(up, 60, connect_timeout=8)
     assert [name for name, _, _ in calls[2:]] == ["MainThread", "MainThread"]
+
+
+class _Images:
+    """A daemon's images by name and ID, counting how often one is looked up."""
+
+    def __init__(self, known: dict[str, str]) -> None:
+        self.known = known
+        self.asked: list[str] = []
+        self.images = self
+
+    def get(self, ref: str) -> object:
+        from docker.errors import ImageNotFound
+
+        self.asked.append(ref)
+        if ref not in self.known:
+            raise ImageNotFound(ref)
+        return type("Image", (), {"id": self.known[ref]})()
+
+
+def test_a_delivered_image_id_is_not_asked_for_again() -> None:
+    from robocore.adapters.image_delivery import ensure_images
+    from robocore.commands import run
+    from robocore.config.model import Robot
+    from robocore.plan.containers import host_specs
+    from robocore.project import Project
+
+    local = _Images({"demo-talker:latest": "sha256:aa"})
+    remote = _Images({"demo-talker:latest": "sha256:aa"})
+    delivered = ensure_images(remote, ["demo-talker"], registry=None, source=local)  # type: ignore[arg-type]
+    assert delivered["demo-talker"].action == "present" and delivered["demo-talker"].image_id == "sha256:aa"
+    robot = Robot.model_validate({
+        "ros_distro": "jazzy", "hosts": [{"name": "pi", "ip": "192.168.1.20", "user": "pi"}],
+        "components": [{"name": "cam", "runs_on": "pi", "folder": "components/cam"}],
+    })
+    project = Project(root=Path("/srv/r"), robot=robot)
+    host = project.robot.hosts[0]
+    specs = host_specs(project, host.name)
+    known = {s.image: "sha256:aa" for s in specs}
+    assert len(known) >= 2  # the component's image and the discovery server's
+    remote.asked.clear()
+    local.asked.clear()
+    ids = run._image_ids(remote, local, specs, project, host, dry_run=False, known=known)  # type: ignore[arg-type]
+    assert ids == known and remote.asked == [] and local.asked == []

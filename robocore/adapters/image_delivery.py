@@ -35,6 +35,7 @@ class Delivery:
     image: str
     action: str  # present | tagged | loaded | pulled
     bytes: int = 0
+    image_id: str = ""  # the ID the host has the image under now ("" when not known here)
 
     def __str__(self) -> str:
         return f"{self.image}: {self.action}" + (f" ({human_size(self.bytes)})" if self.bytes else "")
@@ -70,13 +71,13 @@ def ensure_images(client: docker.DockerClient, images: list[str], *, registry: s
         try:
             remote_image = _get(client, name)
             if remote_image is not None and remote_image.id == local_image.id:
-                results[image] = Delivery(image, "present")
+                results[image] = Delivery(image, "present", image_id=str(local_image.id))
                 continue
             same_id = _get(client, str(local_image.id))
             if same_id is not None:
                 repo, tag = name.rsplit(":", 1)
                 same_id.tag(repo, tag)
-                results[image] = Delivery(image, "tagged")
+                results[image] = Delivery(image, "tagged", image_id=str(local_image.id))
                 continue
             if registry:
                 results[image] = _via_registry(local, client, local_image, name, registry)

@@ -108,10 +108,11 @@ def _image_id(client: docker.DockerClient, ref: str) -> str | None:
 
 def _image_ids(
     client: docker.DockerClient, local: docker.DockerClient | None, specs: Sequence[ContainerSpec], project: Project,
-    host: Host, *, dry_run: bool,
+    host: Host, *, dry_run: bool, known: dict[str, str] | None = None,
 ) -> dict[str, str]:
-    """Image reference -> ID the host must run; robocore images must exist (on this machine for remote hosts)."""
-    ids: dict[str, str] = {}
+    """Image reference -> ID the host must run; robocore images must exist (on this machine for remote hosts).
+    ``known``: the IDs a delivery just read, which are not asked for again."""
+    ids: dict[str, str] = dict(known or {})
     ours = set(_robocore_images(specs, project))
     for spec in specs:
         if spec.image in ids:
@@ -154,6 +155,7 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
     specs = with_local_build(project, host, specs)
     client = connect(project, host)
     local = None
+    known: dict[str, str] = {}
     try:
         refuse_daemon_arch(host, str(client.info().get("Architecture", "?")))
         if not host.is_local:
@@ -161,8 +163,8 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
 
             local = local_client(timeout=600)  # also streams images (docker save) to the host
             if not dry_run:
-                _deliver(client, local, specs, project, host, outcome, report=report)
-        image_ids = _image_ids(client, local, specs, project, host, dry_run=dry_run)
+                known = _deliver(client, local, specs, project, host, outcome, report=report)
+        image_ids = _image_ids(client, local, specs, project, host, dry_run=dry_run, known=known)
         containers = {c.name: c for c in managed_containers(client, project.name)}
         _check_name_conflicts(client, specs, containers, host)
         kind = discovery.for_robot(project.robot)
@@ -184,9 +186,10 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
 
 
 def _deliver(client: docker.DockerClient, local: docker.DockerClient, specs: Sequence[ContainerSpec], project: Project,
-             host: Host, outcome: HostOutcome, *, report: Reporter) -> None:
+             host: Host, outcome: HostOutcome, *, report: Reporter) -> dict[str, str]:
     """Put robocore's images on a remote host (pulled from the registry, or streamed from this machine); a
-    release's images (``run --tag``) are pulled by the host for its own arch."""
+    release's images (``run --tag``) are pulled by the host for its own arch. Returns the image IDs the
+    delivery read on the way (reference -> ID), so that they are not asked for again."""
     images = _robocore_images(specs, project)
     from robocore.adapters.image_delivery import ensure_images, pull_for_arch
 
@@ -195,6 +198,7 @@ def _deliver(client: docker.DockerClient, local: docker.DockerClient, specs: Seq
     released = sorted({s.image for s in specs if is_released(project.robot.registry, s.image)})
     deliveries.update(pull_for_arch(client, released, arch=host.arch.value, label=host.name))
     outcome.notes += [str(d) for d in deliveries.values() if getattr(d, "action", "present") != "present"]
+    return {ref: d.image_id for ref, d in deliveries.items() if getattr(d, "image_id", "")}
 
 
 def _check_name_conflicts(client: docker.DockerClient, specs: Sequence[ContainerSpec], ours: dict[str, Any],
