@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import statistics
 import subprocess
@@ -47,6 +48,9 @@ from robocore.adapters.ssh import MULTIPLEX_SECONDS  # noqa: E402
 PROJECT = "robocore-it-demo"  # shares the cached images of the integration suites
 
 
+#: BENCH_TRACE=1: each `dev` round also prints its wall-clock marks (save, deployed, the talker container's start,
+#: its first publish, heard) on stderr, to line them up with a packet capture of the robot host.
+TRACE = bool(os.environ.get("BENCH_TRACE"))
 #: ``--profile DIR``: each timed robocore command runs under cProfile, its profile written there.
 PROFILE: dict[str, Any] = {"dir": None, "count": 0}
 
@@ -203,6 +207,13 @@ def dev_path(project: Path, client: Any, loop: DevLoop, text: str) -> tuple[floa
         steps.update(loop.steps[count])
         steps["deployed to heard"] = end - loop.deployed[count]
     steps["until heard"] = end - start
+    if TRACE:
+        talker = client.containers.get(f"{PROJECT}-talker")
+        published = first_log(talker, "Publishing:", since=start)
+        started = log_time(talker.attrs["State"]["StartedAt"].replace("Z", "").rstrip("0") + "Z")
+        dep = loop.deployed[count] if len(loop.deployed) > count else 0
+        print(f"TRACE start {start:.3f} deployed {dep:.3f} started {started:.3f} published {published or 0:.3f} "
+              f"heard {end:.3f}", file=sys.stderr, flush=True)
     return end - start, 0, steps
 
 

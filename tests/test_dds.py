@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from robocore.config.model import Robot
 from robocore.plan.discovery import fastdds as dds
+from robocore.plan.discovery.fastdds_transports import SHM_HEALTHY_CHECK_MS
 
 
 def robot(distro: str = "jazzy", servers: list[dict[str, Any]] | None = None, hosts: int = 3,
@@ -117,7 +118,23 @@ def test_udp_transport_settings() -> None:
     assert client.find(".//transport_descriptor/type").text == "UDPv4"  # type: ignore[union-attr]
     # It must not set the discovery protocol, or ROS_DISCOVERY_SERVER would be ignored.
     assert client.find(".//discoveryProtocol") is None
-    assert parse(dds.profile_files(robot("humble"))["client.xml"]).find(".//transport_descriptor") is None
+    assert "FASTDDS_BUILTIN_TRANSPORTS" not in dds.client_environment(robot("humble"))
+
+
+@pytest.mark.parametrize("distro", ["humble", "jazzy", "kilted"])
+def test_shared_memory_profiles_keep_udp_and_check_ports_quickly(distro: str) -> None:
+    r = robot(distro)
+    assert r.discovery.transport == "shm"
+    for name, xml in dds.profile_files(r).items():
+        root = parse(xml)
+        kinds = {d.findtext("transport_id"): d for d in root.iter("transport_descriptor")}
+        assert [d.findtext("type") for d in kinds.values()] == ["SHM", "UDPv4"], name
+        used = [t.text for t in root.find(".//userTransports")]  # type: ignore[union-attr]
+        assert used == list(kinds), name  # both, as Fast DDS's builtin transports would be
+        assert root.findtext(".//useBuiltinTransports") == "false"
+        shm = next(d for d in kinds.values() if d.findtext("type") == "SHM")
+        assert shm.findtext("healthy_check_timeout_ms") == str(SHM_HEALTHY_CHECK_MS)
+        assert 0 < SHM_HEALTHY_CHECK_MS < 1000  # quicker than Fast DDS's default
 
 
 @pytest.mark.parametrize("distro", ["humble", "jazzy", "kilted"])

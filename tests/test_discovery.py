@@ -300,10 +300,10 @@ def test_fast_dds_renders_the_transport_it_is_given_not_the_robots() -> None:
     shm_robot = robot(transport="shm")
     udp = discovery.for_robot(shm_robot, discovery.UDP)
     assert udp.client_environment("dev")["FASTDDS_BUILTIN_TRANSPORTS"] == "UDPv4"
-    assert "<type>UDPv4</type>" in udp.files()["client.xml"]
+    assert "<type>UDPv4</type>" in udp.files()["client.xml"] and "<type>SHM</type>" not in udp.files()["client.xml"]
     own = discovery.for_robot(shm_robot)
     assert "FASTDDS_BUILTIN_TRANSPORTS" not in own.client_environment("dev")  # control: the robot's shm
-    assert "<type>UDPv4</type>" not in own.files()["client.xml"]
+    assert "<type>SHM</type>" in own.files()["client.xml"]
 
 
 # ------------------------------------------------------------------ Fast DDS behind the interface

@@ -41,6 +41,7 @@ from robocore.plan.discovery.base import (
     last_error_line,
     plain_text,
 )
+from robocore.plan.discovery.fastdds_transports import TransportSettings, transport_settings
 from robocore.plan.discovery.replacements import rotate_profile
 from robocore.plan.naming import ENTRYPOINT
 
@@ -106,37 +107,6 @@ def _profile_env(robot: Robot, path: str | None) -> dict[str, str]:
     if robot.fastdds_line >= 3:
         return {"FASTDDS_DEFAULT_PROFILES_FILE": path}
     return {"FASTRTPS_DEFAULT_PROFILES_FILE": path, "FASTDDS_DEFAULT_PROFILES_FILE": path}
-
-
-@dataclass(frozen=True)
-class TransportSettings:
-    """How Fast DDS is told the transport: an environment variable and the XML blocks of UDP only."""
-
-    environment: dict[str, str]
-    descriptors: str  # <transport_descriptors> block of a profile
-    rtps: str  # participant <rtps> lines that use those descriptors only
-
-
-def transport_settings(transport: Transport) -> TransportSettings:
-    """The environment and XML that give Fast DDS ``transport``: its defaults with shared memory, else UDPv4 only.
-
-    Humble's Fast DDS 2.6 has no ``FASTDDS_BUILTIN_TRANSPORTS``, so the profiles say it too.
-    """
-    if transport.shared_memory:
-        return TransportSettings({}, "", "")
-    descriptors = (
-        "    <transport_descriptors>\n"
-        "      <transport_descriptor>\n"
-        "        <transport_id>robocore_udp</transport_id>\n"
-        "        <type>UDPv4</type>\n"
-        "      </transport_descriptor>\n"
-        "    </transport_descriptors>\n"
-    )
-    rtps = (
-        "        <userTransports><transport_id>robocore_udp</transport_id></userTransports>\n"
-        "        <useBuiltinTransports>false</useBuiltinTransports>\n"
-    )
-    return TransportSettings({"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}, descriptors, rtps)
 
 
 def _transport(robot: Robot, transport: Transport | None) -> TransportSettings:

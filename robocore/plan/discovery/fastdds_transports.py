@@ -1,0 +1,65 @@
+"""Fast DDS transports as robocore sets them: the XML blocks and environment of shared memory with UDP, or UDP only.
+
+Kept apart from :mod:`robocore.plan.discovery.fastdds` (servers, profiles, readiness), which renders these
+blocks into every client and super client profile.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from robocore.plan.discovery.base import Transport
+
+
+@dataclass(frozen=True)
+class TransportSettings:
+    """How Fast DDS is told the transport: an environment variable and the XML blocks of its transports."""
+
+    environment: dict[str, str]
+    descriptors: str  # <transport_descriptors> block of a profile
+    rtps: str  # participant <rtps> lines that use those descriptors only
+
+
+#: Fast DDS's shared-memory port health check, in ms (its default: 1000). A process that opens another's port, as
+#: a new node does for each peer it matches on its host, first checks that the port's listening thread is alive;
+#: when that thread has not woken since Fast DDS's watchdog last looked (about one open in six with the default),
+#: the opener sleeps a third of this value, its discovery held meanwhile. Captured over 40 `dev` rounds each
+#: (`bench/deploy.py --watch`, Jazzy): with the default, 4 new talkers went silent for 0.33 s right after taking in
+#: their first new peer and published that much later; with 150 ms none did; with 300 ms one, by 0.1 s. The
+#: listening thread wakes every third of this value, so a port is taken for dead (and made anew) only when that
+#: thread misses about two wake-ups in a row while another process opens the port: 0.2 s off the CPU at 300 ms.
+SHM_HEALTHY_CHECK_MS = 300
+
+
+def transport_settings(transport: Transport) -> TransportSettings:
+    """The environment and XML that give Fast DDS ``transport``: shared memory (with a quicker port health check,
+    :data:`SHM_HEALTHY_CHECK_MS`) and UDPv4, as Fast DDS's defaults, else UDPv4 only.
+
+    Humble's Fast DDS 2.6 has no ``FASTDDS_BUILTIN_TRANSPORTS``, so the profiles say it too.
+    """
+    udp = (
+        "      <transport_descriptor>\n"
+        "        <transport_id>robocore_udp</transport_id>\n"
+        "        <type>UDPv4</type>\n"
+        "      </transport_descriptor>\n"
+    )
+    if transport.shared_memory:
+        shm = (
+            "      <transport_descriptor>\n"
+            "        <transport_id>robocore_shm</transport_id>\n"
+            "        <type>SHM</type>\n"
+            f"        <healthy_check_timeout_ms>{SHM_HEALTHY_CHECK_MS}</healthy_check_timeout_ms>\n"
+            "      </transport_descriptor>\n"
+        )
+        rtps = (
+            "        <userTransports><transport_id>robocore_shm</transport_id>"
+            "<transport_id>robocore_udp</transport_id></userTransports>\n"
+            "        <useBuiltinTransports>false</useBuiltinTransports>\n"
+        )
+        return TransportSettings({}, f"    <transport_descriptors>\n{shm}{udp}    </transport_descriptors>\n", rtps)
+    rtps = (
+        "        <userTransports><transport_id>robocore_udp</transport_id></userTransports>\n"
+        "        <useBuiltinTransports>false</useBuiltinTransports>\n"
+    )
+    return TransportSettings({"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}, f"    <transport_descriptors>\n{udp}"
+                             "    </transport_descriptors>\n", rtps)
