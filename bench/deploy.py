@@ -210,7 +210,7 @@ def dev_path(project: Path, client: Any, loop: DevLoop, text: str) -> tuple[floa
     if TRACE:
         talker = client.containers.get(f"{PROJECT}-talker")
         published = first_log(talker, "Publishing:", since=start)
-        started = log_time(talker.attrs["State"]["StartedAt"].replace("Z", "").rstrip("0") + "Z")
+        started = log_time(talker.attrs["State"]["StartedAt"])
         dep = loop.deployed[count] if len(loop.deployed) > count else 0
         print(f"TRACE start {start:.3f} deployed {dep:.3f} started {started:.3f} published {published or 0:.3f} "
               f"heard {end:.3f}", file=sys.stderr, flush=True)

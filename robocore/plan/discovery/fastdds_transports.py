@@ -31,35 +31,31 @@ class TransportSettings:
 SHM_HEALTHY_CHECK_MS = 300
 
 
+def _descriptor(transport_id: str, kind: str, settings: str = "") -> str:
+    return (
+        "      <transport_descriptor>\n"
+        f"        <transport_id>{transport_id}</transport_id>\n"
+        f"        <type>{kind}</type>\n"
+        f"{settings}"
+        "      </transport_descriptor>\n"
+    )
+
+
 def transport_settings(transport: Transport) -> TransportSettings:
     """The environment and XML that give Fast DDS ``transport``: shared memory (with a quicker port health check,
     :data:`SHM_HEALTHY_CHECK_MS`) and UDPv4, as Fast DDS's defaults, else UDPv4 only.
 
     Humble's Fast DDS 2.6 has no ``FASTDDS_BUILTIN_TRANSPORTS``, so the profiles say it too.
     """
-    udp = (
-        "      <transport_descriptor>\n"
-        "        <transport_id>robocore_udp</transport_id>\n"
-        "        <type>UDPv4</type>\n"
-        "      </transport_descriptor>\n"
-    )
+    used = {"robocore_udp": _descriptor("robocore_udp", "UDPv4")}
+    environment = {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
     if transport.shared_memory:
-        shm = (
-            "      <transport_descriptor>\n"
-            "        <transport_id>robocore_shm</transport_id>\n"
-            "        <type>SHM</type>\n"
-            f"        <healthy_check_timeout_ms>{SHM_HEALTHY_CHECK_MS}</healthy_check_timeout_ms>\n"
-            "      </transport_descriptor>\n"
-        )
-        rtps = (
-            "        <userTransports><transport_id>robocore_shm</transport_id>"
-            "<transport_id>robocore_udp</transport_id></userTransports>\n"
-            "        <useBuiltinTransports>false</useBuiltinTransports>\n"
-        )
-        return TransportSettings({}, f"    <transport_descriptors>\n{shm}{udp}    </transport_descriptors>\n", rtps)
+        check = f"        <healthy_check_timeout_ms>{SHM_HEALTHY_CHECK_MS}</healthy_check_timeout_ms>\n"
+        used = {"robocore_shm": _descriptor("robocore_shm", "SHM", check), **used}
+        environment = {}
+    descriptors = f"    <transport_descriptors>\n{''.join(used.values())}    </transport_descriptors>\n"
     rtps = (
-        "        <userTransports><transport_id>robocore_udp</transport_id></userTransports>\n"
+        f"        <userTransports>{''.join(f'<transport_id>{name}</transport_id>' for name in used)}</userTransports>\n"
         "        <useBuiltinTransports>false</useBuiltinTransports>\n"
     )
-    return TransportSettings({"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}, f"    <transport_descriptors>\n{udp}"
-                             "    </transport_descriptors>\n", rtps)
+    return TransportSettings(environment, descriptors, rtps)
