@@ -15,7 +15,10 @@ arm64 robot's own daemon would run them natively.
 - negative controls: the talker's install tree swapped for the listener's (amd64), and an amd64 ELF put in
   place of the talker binary, are refused by ``sync`` in one line, and the host keeps its release;
 - the same robot's graph tests through the pytest plugin (``nox -s graph``): the template's ROS 1 graph tests
-  plus ``robot.exec(..., ["uname", "-m"])``: ``aarch64`` in the talker, ``x86_64`` in the listener.
+  plus ``robot.exec(..., ["uname", "-m"])``: ``aarch64`` in the talker, ``x86_64`` in the listener;
+- last, the same project as a robot with no x86 computer (robot-arm its only host): the ROS master runs the arm64
+  base on robot-arm, the listener is rebuilt for arm64, and it hears the talker through that master; with the
+  master stopped, a restarted listener hears nothing (the negative control).
 
 The arm64 root and base are built once per machine (content-hash labels): the first run of this module
 bootstraps the arm64 root under emulation (several minutes), later runs reuse it.
@@ -32,6 +35,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import pytest
+import yaml
 from arm64_project import NAME, init_project
 from deploy_helpers import HEARD, log_lines, remove_project_containers, run_nox, wait_for
 
@@ -190,3 +194,72 @@ def test_graph_tests_of_the_mixed_robot_through_the_plugin(mixed: Any) -> None:
     for test in ("test_the_talker_runs_aarch64", "test_the_listener_runs_x86_64",
                  "test_talker_and_listener_are_in_the_graph", "test_listener_hears_what_the_test_publishes"):
         assert f"{test} PASSED" in output, output[-6000:]
+
+
+def _only_arm64(root: Path, ip: str) -> None:
+    """robot.yaml of ``root`` with one host, robot-arm (arm64) at ``ip``: the ROS master, the talker and the
+    listener all on it."""
+    data = yaml.safe_load((root / "robot.yaml").read_text())
+    data["hosts"] = [{"name": "robot-arm", "ip": ip, "user": "root", "arch": "arm64"}]
+    data["discovery"] = {"servers": [{"host": "robot-arm"}]}
+    for comp in data["components"]:
+        comp["runs_on"] = "robot-arm"
+    (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+
+
+def test_a_robot_with_no_x86_host_runs_its_master_and_nodes_on_arm64(mixed: Any, run_robocore: RobocoreCli) -> None:
+    """The same project made a robot of one arm64 computer (a single Jetson or Pi): the ROS master, the C++ talker
+    and the Python listener all run arm64 on robot-arm, the listener hears the talker, ``status`` lists both.
+    Negative control: with that master stopped, a restarted listener hears nothing (it cannot register), so what
+    it heard went through the master on the arm64 host. Last of the module: it takes the mixed robot down."""
+    fleet, root = mixed
+    run_robocore(root, "down", "--quiet")
+    _only_arm64(root, fleet.hosts[1].ip)
+    validated = run_robocore(root, "validate")
+    assert "ok" in validated.stdout + validated.stderr
+    timings = {}
+    outcomes = {}
+    for step in ("prepare-base", "stage", "build", "sync"):
+        started = time.monotonic()
+        done = json.loads(run_robocore(root, step, "--json").stdout)
+        timings[step] = round(time.monotonic() - started, 1)
+        outcomes[step] = {str(r.get("what")): r.get("action") for r in done["results"] if r.get("what")}
+    print("all-arm64 robot set-up (s):", timings, outcomes)
+    # the dev machine (amd64) makes no amd64 base for a robot with no amd64 host: the arm64 base is reused
+    bases = outcomes["prepare-base"]
+    assert bases == {f"{NAME}-base:latest-arm64": "up-to-date"}, bases
+    compose = yaml.safe_load((root / ".robocore" / "compose" / "robot-arm.yaml").read_text())
+    assert compose["services"]["discovery-0"]["image"] == f"{NAME}-base:latest-arm64"
+    install = root / ".robocore" / "build"
+    assert (install / "listener" / "install" / arches.INSTALL_ARCH_FILE).read_text().strip() == "arm64"
+
+    run_robocore(root, "run", "--quiet")
+    arm = fleet.client(1)
+
+    def heard(since: float | None = None) -> list[str]:
+        lines = log_lines(arm.containers.get(f"{NAME}-listener"), HEARD, since)
+        return [line for line in lines if TALKER_TEXT in line]
+
+    assert wait_for(heard, 180, 1), "the arm64 listener never heard the arm64 talker through the arm64 master"
+    for name in (f"{NAME}-discovery-0", f"{NAME}-talker", f"{NAME}-listener"):
+        container = arm.containers.get(name)
+        assert arm.images.get(container.attrs["Config"]["Image"]).attrs["Architecture"] == "arm64", name
+        code, out = container.exec_run(["uname", "-m"])
+        assert (code, out.decode().strip()) == (0, "aarch64"), (name, out)
+    assert arm.containers.get(f"{NAME}-discovery-0").attrs["Config"]["Image"] == f"{NAME}-base:latest-arm64"
+    status = json.loads(run_robocore(root, "status", "--json", "--nodes", check=False).stdout)
+    [graph] = [r for r in status["results"] if r["kind"] == "ros_graph"]
+    assert {"/talker", "/listener"} <= set(graph["nodes"] or []), graph
+    assert "robot-arm" in graph["via"], graph
+
+    # negative control: the master stopped, a listener that starts again cannot register, so hears nothing
+    arm.containers.get(f"{NAME}-discovery-0").stop(timeout=5)
+    listener = arm.containers.get(f"{NAME}-listener")
+    listener.restart(timeout=5)
+    restarted = time.time()
+    time.sleep(25)
+    assert listener.reload() is None and listener.status == "running"
+    assert heard(restarted) == [], "a listener with the master stopped heard the talker: not through the master"
+    down = json.loads(run_robocore(root, "status", "--json", "--nodes", check=False).stdout)
+    [graph] = [r for r in down["results"] if r["kind"] == "ros_graph"]
+    assert graph["nodes"] is None and "the ROS master is down" in graph["via"], graph

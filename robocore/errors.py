@@ -68,7 +68,7 @@ class UsageError(RobocoreError):
 
 class ArchMismatch(UsageError):
     """Something of one CPU arch would go where another runs: an install tree synced to a host of another arch,
-    a host whose daemon cannot run its arch, a ROS master on a host its image is not built for."""
+    a host whose daemon cannot run its arch."""
 
 
 class UnsafePath(RobocoreError):

@@ -8,7 +8,8 @@ command line's first steps (the ssh warm-up) can use it before the config model 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import platform
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -146,9 +147,15 @@ class ProjectFolder:
 
 @dataclass(frozen=True)
 class Project(ProjectFolder):
-    """A robot project folder and its validated robot.yaml."""
+    """A robot project folder and its validated robot.yaml, as seen from the machine robocore runs on.
+
+    ``native_arch`` is that machine's arch (Docker's name): its base image is ``<base>:latest``, another arch's
+    ``<base>:latest-<arch>`` (:func:`robocore.plan.arches.base_tag`), so every image name planned from the
+    project reads it. Tests pin it to plan as another machine would.
+    """
 
     robot: Robot
+    native_arch: str = field(default_factory=lambda: this_machine_arch())
 
     @classmethod
     def load(cls, root: Path) -> Project:
@@ -173,6 +180,13 @@ class Project(ProjectFolder):
         except KeyError:
             known = ", ".join(h.name for h in self.robot.hosts)
             raise UsageError(f"unknown host {name!r} (known: {known})") from None
+
+
+def this_machine_arch() -> str:
+    """The arch of the machine robocore runs on, in Docker's terms (``amd64``, ``arm64``)."""
+    from robocore.config.model import docker_arch
+
+    return docker_arch(platform.machine())
 
 
 def _slug(text: str) -> str:

@@ -3,6 +3,7 @@ their host's arch; and the build's per-arch records (ccache folder, install mark
 
 from __future__ import annotations
 
+import dataclasses
 import struct
 from pathlib import Path
 
@@ -10,8 +11,8 @@ import pytest
 
 from robocore.commands import arch_checks, build, images, machine
 from robocore.config.model import Host
-from robocore.errors import ArchMismatch, ConfigError
-from robocore.plan import arches
+from robocore.errors import ArchMismatch
+from robocore.plan import arches, containers, naming
 from robocore.project import Project
 
 
@@ -147,15 +148,41 @@ def test_a_build_for_another_arch_than_the_last_one_starts_clean(tmp_path: Path)
     assert with_cache.ccache == moved.state_dir / "ccache" / "amd64"
 
 
-def test_a_master_on_a_host_of_another_arch_is_refused_before_any_build(tmp_path: Path) -> None:
-    project = _project(tmp_path, master="jetson")
-    native = machine.native_arch()
-    if native == "arm64":  # the rule is relative to the dev machine: its base runs the master
-        project = _project(tmp_path, master="ipc")
-    with pytest.raises(ConfigError) as info:
-        images.refuse_config_problems(project)
-    [problem] = info.value.problems
-    assert "the discovery server (ROS master) runs here" in str(problem) and "hosts.1.arch" in str(problem)
-    fine = _project(tmp_path, master="ipc" if native == "amd64" else "jetson")
-    images.refuse_config_problems(fine)
-    assert images.arches(fine) == ["amd64", "arm64"]
+@pytest.mark.parametrize("native", ["amd64", "arm64"])
+@pytest.mark.parametrize("master", ["ipc", "jetson"])
+def test_the_master_runs_the_base_of_its_hosts_arch(tmp_path: Path, native: str, master: str) -> None:
+    """Wherever the master is, and whatever this machine's arch, the image steps accept the robot and the master
+    runs the base prepare-base makes for its host's arch (``latest`` when that is this machine's)."""
+    project = dataclasses.replace(_project(tmp_path, master=master), native_arch=native)
+    images.refuse_config_problems(project)
+    arch = {"ipc": "amd64", "jetson": "arm64"}[master]
+    assert images.arches(project) == sorted({"arm64", arch})  # the talker's and the master's
+    [spec] = [s for s in containers.host_specs(project, master) if s.role == naming.ROLE_DISCOVERY]
+    assert spec.image == f"{project.name}-base:{arches.base_tag(arch, native)}"
+    assert spec.image.endswith(":latest") == (arch == native)
+    [released] = [s for s in containers.host_specs(project, master, tag="v1") if s.role == naming.ROLE_DISCOVERY]
+    assert released.image == f"{project.name}-base:v1"  # one multi-arch name: the host pulls its own arch
+
+
+def test_a_robot_with_no_host_of_this_machines_arch_has_only_that_arch(tmp_path: Path) -> None:
+    """One arm64 host, seen from an amd64 machine: one base (arm64), which the master runs, and no amd64 image."""
+    (tmp_path / "robot.yaml").write_text(ALL_ARM64)
+    (tmp_path / "components" / "talker").mkdir(parents=True)
+    project = dataclasses.replace(Project.load(tmp_path), native_arch="amd64")
+    images.refuse_config_problems(project)
+    assert images.arches(project) == ["arm64"]
+    specs = containers.host_specs(project, "pi")
+    assert [(s.role, s.image) for s in specs] == [
+        (naming.ROLE_DISCOVERY, f"{project.name}-base:latest-arm64"),
+        (naming.ROLE_COMPONENT, f"{project.name}-talker:latest")]
+    [plan] = arches.arch_plans(project.robot, project.name, "amd64")
+    assert (plan.arch, plan.base, plan.native) == ("arm64", f"{project.name}-base:latest-arm64", False)
+
+
+ALL_ARM64 = """ros_distro: noetic
+base: {kind: debian}
+hosts:
+  - {name: pi, ip: 192.168.1.20, arch: arm64}
+components:
+  - {name: talker, folder: components/talker, runs_on: pi}
+"""

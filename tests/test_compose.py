@@ -49,11 +49,21 @@ CASES: dict[str, dict[str, Any]] = {
              "entrypoint": "ros2 run perception detector", "restart": "no"},
         ],
     },
+    # a robot with no x86 computer (one Jetson), on the official base: its Fast DDS server runs the arm64 base
+    "jazzy-official-arm64-only": {
+        "ros_distro": "jazzy",
+        "base": {"kind": "official"},
+        "hosts": [{"name": "jetson", "ip": "10.1.0.3", "arch": "arm64"}],
+        "components": [
+            {"name": "talker", "runs_on": "jetson", "folder": "components/talker",
+             "entrypoint": "ros2 run demo_talker talker"},
+        ],
+    },
 }
 
 
 def make(case: str, root: Path = Path("/srv/myrobot")) -> Project:
-    return Project(root=root, robot=Robot.model_validate(CASES[case]))
+    return Project(root=root, robot=Robot.model_validate(CASES[case]), native_arch="amd64")
 
 
 @pytest.mark.parametrize("case", sorted(CASES))

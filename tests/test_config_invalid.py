@@ -604,6 +604,27 @@ def test_validate_reports_what_the_wheels_base_cannot_build(make_project: MakePr
     assert "humble has no ROS 2 wheels on PyPI" in caught.value.problems[0].message
 
 
+def test_validate_prepare_base_and_stage_refuse_the_same_robot_shape_in_the_same_lines(
+        make_project: MakeProject) -> None:
+    """A wheels robot whose Fast DDS server (on the first host, arm64) would need an arm64 wheels base: validate
+    says so, in the one line prepare-base and stage say it (one check, made where each of them starts)."""
+    from robocore.commands import base_image, component_images, validate
+    from robocore.commands.context import Options
+
+    project = make_project(edit({1: "ros_distro: jazzy\nbase: {kind: wheels}", 15: "    runs_on: dev"}), FOLDERS)
+    seen = []
+    steps = [(validate.run, False), (lambda o: base_image.prepare_base(o, force=False), True),
+             (lambda o: component_images.stage(o, refresh=False, component=None, force=False), True)]
+    for step, dry_run in steps:  # the image steps' dry runs: they refuse before contacting any daemon
+        with pytest.raises(ConfigError) as caught:
+            step(Options(project_dir=project, dry_run=dry_run))
+        seen.append(caught.value.lines())
+    [line] = seen[0]
+    assert line.endswith("robot.yaml:9: hosts[0].arch: arm64: this host runs a Fast DDS discovery server on the base "
+                         "of its arch, and ROS 2 wheels exist for amd64 only; use base.kind: official for this robot")
+    assert seen == [seen[0]] * 3, seen
+
+
 def test_folder_symlinked_outside_the_project_is_refused(tmp_path: Path) -> None:
     outside = tmp_path / "outside"
     outside.mkdir()

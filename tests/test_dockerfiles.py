@@ -129,6 +129,15 @@ def test_wheels_refuses_arm64_hosts_with_components() -> None:
     assert dockerfiles.wheels_problems(robot(components=comps)) == []
 
 
+def test_wheels_refuses_a_fast_dds_server_on_an_arm64_host() -> None:
+    """The server runs the base of its host's arch, which the wheels base cannot make for arm64."""
+    on_pi = robot(base={"kind": "wheels"}, components=[], discovery={"servers": [{"host": "pi"}]})
+    [(path, message)] = dockerfiles.wheels_problems(on_pi)
+    assert path == ("hosts", 1, "arch") and "a Fast DDS discovery server" in message and "master" not in message
+    assert dockerfiles.wheels_problems(robot(base={"kind": "wheels"}, components=[],
+                                             discovery={"servers": [{"host": "dev"}]})) == []
+
+
 def test_repo_folder_from_url() -> None:
     from robocore.config.model import Repository
 

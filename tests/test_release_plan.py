@@ -10,6 +10,7 @@ import pytest
 from robocore.commands.release import released_images
 from robocore.config.model import Robot
 from robocore.errors import UsageError
+from robocore.plan import containers
 from robocore.plan import release as plan
 from robocore.project import Project
 
@@ -80,3 +81,22 @@ def test_a_mixed_robot_releases_the_base_of_each_arch_and_each_component_of_its_
     assert {(i.repo, i.arch) for i in images} == {("r-base", "amd64"), ("r-base", "arm64"), ("r-talker", "arm64"),
                                                   ("r-listener", "amd64")}
     assert {i.source for i in images if i.repo != "r-base"} == {"r-talker:latest", "r-listener:latest"}
+
+
+def test_a_robot_with_no_x86_host_releases_the_arm64_base_its_server_runs(tmp_path: Path) -> None:
+    """One Jetson on the official base (jazzy), released from an amd64 machine: the arm64 base (which its Fast
+    DDS server runs) and the talker, each of arm64, and nothing of amd64; the host runs the release's names."""
+    robot = Robot.model_validate({
+        "ros_distro": "jazzy", "base": {"kind": "official"}, "registry": "127.0.0.1:5000",
+        "hosts": [{"name": "jetson", "ip": "10.0.0.7", "arch": "arm64"}],
+        "components": [{"name": "talker", "runs_on": "jetson", "folder": "t"}],
+    })
+    project = Project(root=tmp_path / "r", robot=robot, native_arch="amd64")
+    images = released_images(project)
+    assert {(i.repo, i.arch, i.source) for i in images} == {("r-base", "arm64", "r-base:latest-arm64"),
+                                                            ("r-talker", "arm64", "r-talker:latest")}
+    pushed = plan.plan_release("127.0.0.1:5000", "v1", images)
+    assert {p.arch for p in pushed.pushes} == {"arm64"}
+    server, talker = containers.host_specs(project, "jetson", tag="v1")
+    assert (server.role, server.image) == ("discovery", "127.0.0.1:5000/r-base:v1")
+    assert talker.image == "127.0.0.1:5000/r-talker:v1"

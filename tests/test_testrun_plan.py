@@ -126,3 +126,26 @@ def test_find_project_walks_up(tmp_path: Path) -> None:
     sibling = tmp_path.parent / f"{tmp_path.name}-elsewhere"
     sibling.mkdir()
     assert find_project(sibling) is None
+
+
+ALL_ARM64 = """\
+ros_distro: noetic
+image_prefix: demo-
+base: {kind: debian}
+hosts:
+  - {name: pi, ip: 192.168.1.20, arch: arm64}
+components:
+  - {name: talker, folder: components/talker, runs_on: pi}
+"""
+
+
+def test_a_run_of_a_robot_with_no_host_of_this_machines_arch_uses_the_base_of_its_hosts(make_project) -> None:  # type: ignore[no-untyped-def]
+    """One arm64 host, tested on an amd64 machine: its namespace holder and its master run the arm64 base, the
+    one base prepare-base made (there is no ``demo-base:latest``)."""
+    root = make_project(ALL_ARM64, folders=("components/talker",), name="demo")
+    source = Project.load(root)
+    project = Project(root=source.root, robot=testrun.isolated_robot(source.robot, {"pi": "172.30.0.2"}, 7),
+                      native_arch="amd64")
+    assert testrun.host_spec(RUN, project, "pi").image == "demo-base:latest-arm64"
+    [server] = testrun.server_specs(RUN, project, "/tmp/dds")
+    assert server.image == "demo-base:latest-arm64"

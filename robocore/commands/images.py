@@ -19,8 +19,7 @@ from robocore.commands.hosts import in_parallel
 from robocore.commands.machine import MAX_PARALLEL, local_docker, native_arch
 from robocore.commands.reporting import Outcome, Reporter, report_outcomes
 from robocore.config.model import Component
-from robocore.errors import BuildError, ConfigError, Problem
-from robocore.files import ROBOT_FILE
+from robocore.errors import BuildError
 from robocore.plan import discovery, dockerfiles, naming
 from robocore.plan.dockerfiles import ContextEntry, ImagePlan
 from robocore.plan.inputs import inputs_hash
@@ -31,24 +30,19 @@ if TYPE_CHECKING:
 
 
 def refuse_config_problems(project: Project) -> None:
-    """ConfigError when robot.yaml asks for images robocore cannot make (the wheels base's limits, a discovery
-    server on a host of another arch than this machine: its image is this machine's base)."""
+    """ConfigError, one line per problem with its line in robot.yaml, when robot.yaml asks for images robocore
+    cannot make for the robot's shape (the wheels base's limits). ``validate`` and every image step call it:
+    the one place these checks are made."""
+    from robocore.config.loader import located
+
     found = dockerfiles.wheels_problems(project.robot)
-    native = native_arch()
-    robot = project.robot
-    for server in discovery.for_robot(robot).servers():
-        index, host = next((i, h) for i, h in enumerate(robot.hosts) if h.name == server.host)
-        if host.arch.value != native:
-            found.append((("hosts", index, "arch"), f"{host.arch.value}: the discovery server (ROS master) runs here "
-                          f"in the base image of this machine's arch ({native}); put it on a host of arch {native}"))
     if found:
-        raise ConfigError([Problem(ROBOT_FILE, None, ".".join(str(p) for p in path), message)
-                           for path, message in found])
+        raise located(project.robot_file, found)
 
 
 def arches(project: Project, components: Sequence[Component] | None = None) -> list[str]:
-    """The archs the components (default: all) built from source run on, plus the discovery servers' hosts'
-    (they run the base image) when all are asked; the native one when none is."""
+    """The arches the components (default: all) built from source run on, plus the discovery servers' hosts'
+    (each runs the base of its host's arch) when all are asked; the native one when none is."""
     robot = project.robot
     comps = robot.components if components is None else components
     found = {robot.host(c.runs_on).arch.value for c in comps if c.image is None}

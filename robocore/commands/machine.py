@@ -4,12 +4,12 @@ arch's binaries, its trust store, and its Docker daemon."""
 from __future__ import annotations
 
 import os
-import platform as host_platform
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from robocore.config.model import docker_arch, machine_arch
+from robocore.config.model import machine_arch
 from robocore.errors import ToolMissing
+from robocore.project import this_machine_arch
 
 if TYPE_CHECKING:
     import docker
@@ -21,7 +21,7 @@ MAX_PARALLEL = 4
 
 def native_arch() -> str:
     """The dev machine's arch in Docker terms."""
-    return docker_arch(host_platform.machine())
+    return this_machine_arch()
 
 
 def emulation_hint(arch: str) -> str:

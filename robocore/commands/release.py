@@ -24,7 +24,6 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from robocore.commands.context import Options
 from robocore.commands.hosts import for_each_host, select_hosts
 from robocore.commands.images import arches
-from robocore.commands.machine import native_arch
 from robocore.commands.run import deploy_host
 from robocore.commands.state import history, read_synced, record_run, with_synced_release, write_synced
 from robocore.config.model import Host
@@ -95,9 +94,8 @@ def released_images(project: Project) -> list[LocalImage]:
     """The images of this machine that a release carries: the base of each arch in use and every built
     component image (of its host's arch)."""
     robot = project.robot
-    native = native_arch()
     base = naming.base_image(robot, project.name)
-    images = [LocalImage(repo=base, arch=arch, source=f"{base}:{dockerfiles.base_tag(arch, native)}")
+    images = [LocalImage(repo=base, arch=arch, source=f"{base}:{dockerfiles.base_tag(arch, project.native_arch)}")
               for arch in arches(project)]
     for comp in robot.components:
         if not comp.image:

@@ -39,12 +39,10 @@ def run(options: Options) -> None:
         return
     project = options.load()
     robot = project.robot
-    from robocore.config.loader import located, robot_warnings
-    from robocore.plan.dockerfiles import wheels_problems
+    from robocore.commands.images import refuse_config_problems
+    from robocore.config.loader import robot_warnings
 
-    found = wheels_problems(robot)
-    if found:
-        raise located(project.robot_file, found)
+    refuse_config_problems(project)  # what prepare-base and stage refuse for the robot's shape
     from robocore.commands.workspace import check_wheels_packages, debian_dependency_warnings
 
     check_wheels_packages(project)

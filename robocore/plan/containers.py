@@ -18,7 +18,7 @@ from pathlib import PurePosixPath
 from typing import Any
 
 from robocore.config.model import Component, Host, Robot, is_project_path, port_pattern, read_only_project_path
-from robocore.plan import discovery, gui, layout, naming
+from robocore.plan import arches, discovery, gui, layout, naming
 from robocore.plan.addresses import extra_hosts, reachable_from_container
 from robocore.plan.layout import host_paths
 from robocore.project import Project
@@ -219,6 +219,17 @@ def image_ref(project: Project, repository: str, tag: str | None) -> str:
     return f"{naming.registry_image(project.robot, repository)}:{tag}"
 
 
+def base_ref(project: Project, arch: str, tag: str | None) -> str:
+    """The base image a container of a host of ``arch`` runs (a discovery server, a test run's host):
+    ``<base>:latest`` when that is the arch of the machine robocore runs on, else ``<base>:latest-<arch>``,
+    the names prepare-base gives them; a released ``tag`` is one multi-arch name, which each host pulls for
+    its own arch."""
+    repository = naming.base_image(project.robot, project.name)
+    if tag is not None:
+        return image_ref(project, repository, tag)
+    return f"{repository}:{arches.base_tag(arch, project.native_arch)}"
+
+
 def component_command(component: Component) -> tuple[str, ...] | None:
     """argv of a component: its entrypoint then launch_args, split like a shell would (no shell).
 
@@ -319,7 +330,8 @@ def discovery_state_volume(project_name: str, index: int) -> str:
 
 
 def discovery_spec(project: Project, index: int, *, tag: str | None = None) -> ContainerSpec:
-    """The container of discovery server ``index``: the base image running what the robot's discovery kind says."""
+    """The container of discovery server ``index``: the base image of its host's arch running what the robot's
+    discovery kind says."""
     robot = project.robot
     kind = discovery.for_robot(robot)
     endpoint = kind.servers()[index]
@@ -333,7 +345,7 @@ def discovery_spec(project: Project, index: int, *, tag: str | None = None) -> C
         host=endpoint.host,
         role=naming.ROLE_DISCOVERY,
         project=project.name,
-        image=image_ref(project, naming.base_image(robot, project.name), tag),
+        image=base_ref(project, robot.host(endpoint.host).arch.value, tag),
         entrypoint=(naming.ENTRYPOINT,),
         command=process.command,
         environment=tuple(sorted(process.environment.items())),

@@ -142,11 +142,16 @@ def wheels_problems(robot: Robot) -> list[tuple[tuple[str | int, ...], str]]:
         known = ", ".join(sorted(WHEELS))
         found.append((("ros_distro",), f"{distro} has no ROS 2 wheels on PyPI (wheels base: {known}); "
                                        "use base.kind: official"))
-    used = {c.runs_on for c in robot.components if c.image is None}
+    built = {c.runs_on for c in robot.components if c.image is None}
+    servers = {s.host for s in robot.discovery_servers}  # a Fast DDS server runs its host's arch's base
     for index, host in enumerate(robot.hosts):
-        if host.arch is not Arch.amd64 and host.name in used:
-            found.append((("hosts", index, "arch"), f"{host.arch.value}: ROS 2 wheels exist for amd64 only; "
-                                                    "use base.kind: official for this robot"))
+        if host.arch is Arch.amd64 or host.name not in built | servers:
+            continue
+        runs = " and ".join(what for what, names in (("components built from source", built),
+                                                      ("a Fast DDS discovery server", servers)) if host.name in names)
+        found.append((("hosts", index, "arch"), f"{host.arch.value}: this host runs {runs} on the base of its arch, "
+                                                "and ROS 2 wheels exist for amd64 only; use base.kind: official "
+                                                "for this robot"))
     return found
 
 

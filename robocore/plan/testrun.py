@@ -118,14 +118,15 @@ def probe_profile(robot: Robot) -> str:
 
 
 def host_spec(run: TestRun, project: Project, host: str) -> ContainerSpec:
-    """The container that holds robot host ``host``'s network and IPC namespaces."""
+    """The container that holds robot host ``host``'s network and IPC namespaces (the base image of its arch, as
+    its discovery servers run: the one base a robot of no host of this machine's arch has of it)."""
     return ContainerSpec(
         name=run.host_container(host),
         service=f"host-{host}",
         host=host,
         role=ROLE_HOST,
         project=run.label_project,
-        image=containers.image_ref(project, naming.base_image(project.robot, project.name), None),
+        image=containers.base_ref(project, project.robot.host(host).arch.value, None),
         entrypoint=HOST_COMMAND[:1],
         command=HOST_COMMAND[1:],
         environment=(),
