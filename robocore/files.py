@@ -289,3 +289,65 @@ def path_kind(path: Path) -> tuple[str, str]:
     except (OSError, ValueError) as error:  # ValueError: a NUL byte in the name
         return "unusable", getattr(error, "strerror", None) or str(error)
     return ("dir" if stat.S_ISDIR(mode) else "file"), ""
+
+
+def _record_names(text: bytes) -> list[str]:
+    """The relative paths a :data:`WRITTEN_RECORD` lists, those that could name a file robocore writes (no absolute
+    path, no ``..``, no empty part): a hand-edited record never makes robocore remove a file outside the folder."""
+    names = []
+    for line in text.decode("utf-8", errors="replace").splitlines():
+        parts = line.split("/")
+        if line and not line.startswith("/") and all(p and p not in (".", "..") for p in parts):
+            names.append(line)
+    return names
+
+
+def write_tree(folder: Path, files: Mapping[str, str | bytes], *, mode: int | None = None) -> list[Path]:
+    """Write ``files`` (relative path -> content) under ``folder``, a folder robocore owns entirely: one it made,
+    or one holding its :data:`WRITTEN_RECORD`. A folder that exists and holds anything without that record is
+    refused (:class:`~robocore.errors.UnsafePath`), so a user's files are never mixed with or replaced by
+    robocore's. In its own folder robocore replaces only the files it wrote (its record lists them), removes
+    the ones no longer wanted, and leaves any other file alone. Nothing is written or removed through a link:
+    ``folder`` itself and every folder on the way from it are checked with lstat (:func:`check_no_links`).
+    The record is written first with old and new names, so an interrupted run still owns all it wrote."""
+    try:
+        info = os.lstat(folder)
+    except FileNotFoundError:
+        info = None
+    if info is not None and stat.S_ISLNK(info.st_mode):
+        raise UnsafePath(f"{folder}: a symlink; robocore does not write through links", hint=f"give the folder "
+                         f"the link points to, or remove {folder}")
+    if info is not None and not stat.S_ISDIR(info.st_mode):
+        raise UnsafePath(f"{folder}: is not a folder", hint="give a new or empty folder")
+    record = folder / WRITTEN_RECORD
+    before: list[str] = []
+    if info is not None:
+        own = read_own_file(record)
+        if own is None and any(os.scandir(folder)):
+            raise UnsafePath(f"{folder}: holds files robocore did not write (no {WRITTEN_RECORD} record in it); "
+                             "robocore writes only into a new or empty folder, or one it wrote before",
+                             hint="give a new folder, or empty this one")
+        before = _record_names(own or b"")
+    for name in files:
+        check_no_links(folder / name, anchor=folder)
+    make_folder(folder, private=mode == PRIVATE)
+    write_atomic(record, "".join(f"{n}\n" for n in sorted(set(before) | set(files))))
+    paths = []
+    for name, content in files.items():
+        path = folder / name
+        check_no_links(path, anchor=folder)
+        make_folder(path.parent, private=mode == PRIVATE)
+        write_atomic(path, content, mode=mode)
+        paths.append(path)
+    for stale in sorted(set(before) - set(files)):
+        path = folder / stale
+        with contextlib.suppress(UnsafePath):  # a name now held by a link or a folder is left alone
+            check_no_links(path, anchor=folder)
+            remove_file(path)
+            for parent in path.parents:  # the folders it leaves empty, up to the export folder
+                if parent == folder or not parent.is_relative_to(folder):
+                    break
+                with contextlib.suppress(OSError):
+                    os.rmdir(parent)
+    write_atomic(record, "".join(f"{n}\n" for n in sorted(files)))
+    return paths

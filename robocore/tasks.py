@@ -360,6 +360,32 @@ def rollback(c: Context, host: str = "", dry_run: bool = False) -> None:
     _execute(options, lambda: command.rollback(options, host=host or None))
 
 
+@task(
+    help={
+        "engine": "What to export for: kubernetes (kustomize, Rancher Fleet, Argo CD).",
+        "path": "The folder to write: new, empty, or written by an earlier export (only its files are replaced).",
+        "tag": "The release whose images the robots run (robocore release --tag V).",
+        "git_repo": "The git repository the GitOps controllers pull the folder from (Argo CD's repoURL).",
+        "git_path": "The folder's path inside that repository (default: its top).",
+        "dry_run": "Only list the files that would be written.",
+        "json": "Machine-readable result on stdout.",
+    },
+)
+@reported
+def export(c: Context, engine: str, path: str, tag: str = "", git_repo: str = "", git_path: str = "",
+           dry_run: bool = False, json: bool = False) -> None:
+    """Write the robot, or the fleet of fleet.yaml, as Kubernetes objects for k3s, Rancher Fleet and Argo CD."""
+    from robocore.commands import export as command
+    from robocore.errors import UsageError
+
+    if engine != "kubernetes":
+        raise UsageError(f"unknown export {engine!r} (known: kubernetes)", hint="robocore export kubernetes DIR")
+    options = _options(c, "export", dry_run=dry_run, json=json)
+    folder = Path(path)
+    _execute(options, lambda: command.export_kubernetes(options, folder, tag=_tag(tag), git_repo=git_repo or None,
+                                                        git_path=git_path))
+
+
 @task(help={"host": "Only this host.", "json": "Machine-readable result on stdout."})
 @reported
 def doctor(c: Context, host: str = "", json: bool = False) -> None:
@@ -381,7 +407,7 @@ def desktop_password(c: Context) -> None:
 
 
 PROJECT_TASKS = (validate, prepare_base, stage, build, test, dev, sync, run, down, status, logs, shell, connect,
-                 release, rollback, doctor, desktop_password)
+                 release, rollback, export, doctor, desktop_password)
 
 #: The collection a project's tasks.py re-exports (``from robocore.tasks import namespace``).
 namespace = Collection(*PROJECT_TASKS)

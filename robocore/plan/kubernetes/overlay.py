@@ -1,0 +1,99 @@
+"""One robot's kustomize overlay: its namespace, labels, release images and node pinning over its model's base (pure).
+
+``robots/<robot>/`` changes nothing of the base but these, so that checking one base checks every robot of it
+(bench/k8s_export.py proves it on 1000 robots):
+
+* ``namespace: robot-<robot>`` and the Namespace itself;
+* the label :data:`~robocore.plan.kubernetes.names.LABEL_ROBOT` (and the fleet file's labels of the robot)
+  on every object and pod;
+* ``images``: each logical image name of the base mapped to the release's image, by tag or by digest;
+* node pinning: every pod's nodeSelector gains the robot's label (one JSON patch, ``pin.yaml``), so a
+  pod runs only on that robot's host, even in one cluster holding many robots;
+* the robot's ``ros_domain_id`` when the fleet file gives it another one than robot.yaml.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from robocore.plan.kubernetes.base import KUSTOMIZATION, Base, kustomization
+from robocore.plan.kubernetes.names import LABEL_ROBOT, dump, logical_image, namespace
+
+#: JSON-patch path segment of the robot label inside nodeSelector ('/' written '~1').
+_ROBOT_KEY = LABEL_ROBOT.replace("~", "~0").replace("/", "~1")
+
+
+@dataclass(frozen=True)
+class ImageRef:
+    """A release image: its name (``registry/repository``) and a tag or a digest (``sha256:...``)."""
+
+    name: str
+    tag: str | None = None
+    digest: str | None = None
+
+    def kustomize(self, logical: str) -> dict[str, str]:
+        """The kustomize ``images`` entry that maps ``logical`` to this image."""
+        entry = {"name": logical, "newName": self.name}
+        if self.digest:
+            entry["digest"] = self.digest
+        elif self.tag:
+            entry["newTag"] = self.tag
+        return entry
+
+    @property
+    def text(self) -> str:
+        """``name@digest`` or ``name:tag``."""
+        return f"{self.name}@{self.digest}" if self.digest else f"{self.name}:{self.tag}"
+
+
+#: The release's image of (repository, arch).
+ImageSource = Callable[[str, str], ImageRef]
+
+
+@dataclass(frozen=True)
+class RobotTarget:
+    """One robot of the fleet: its name, model, wave, free labels, release images and per-robot settings."""
+
+    name: str
+    model: str
+    wave: str
+    images: ImageSource
+    labels: Mapping[str, str] = field(default_factory=dict)
+    #: The robot's DDS domain when it differs from its model's (None: the model's).
+    ros_domain_id: int | None = None
+
+
+def robot_path(robot: str) -> str:
+    """The overlay folder of ``robot``, relative to the export folder."""
+    return f"robots/{robot}"
+
+
+def plan_overlay(target: RobotTarget, base: Base, *, ros2: bool) -> dict[str, str]:
+    """The files of ``robots/<robot>/`` (path relative to it -> text)."""
+    ns = namespace(target.name)
+    labels = {LABEL_ROBOT: target.name, **dict(sorted(target.labels.items()))}
+    images = [target.images(repo, arch).kustomize(logical_image(repo, arch)) for repo, arch in base.images]
+    pin: list[dict[str, Any]] = [
+        {"op": "add", "path": f"/spec/template/spec/nodeSelector/{_ROBOT_KEY}", "value": target.name},
+    ]
+    patches: list[dict[str, Any]] = [{"path": "pin.yaml", "target": {"kind": "DaemonSet"}}]
+    files = {"namespace.yaml": dump([{"apiVersion": "v1", "kind": "Namespace", "metadata": {"name": ns}}]),
+             "pin.yaml": dump([pin])}
+    if ros2 and target.ros_domain_id is not None:
+        files["domain.yaml"] = dump([{
+            "apiVersion": "apps/v1", "kind": "DaemonSet", "metadata": {"name": "any"},
+            "spec": {"template": {"spec": {"containers": [
+                {"name": "main", "env": [{"name": "ROS_DOMAIN_ID", "value": str(target.ros_domain_id)}]}]}}},
+        }])
+        patches.append({"path": "domain.yaml", "target": {"kind": "DaemonSet"}})
+    document = kustomization(
+        namespace=ns,
+        resources=["namespace.yaml", f"../../bases/{base.model}"],
+        labels=[{"pairs": labels, "includeTemplates": True}],
+        images=images,
+        patches=patches,
+    )
+    files[KUSTOMIZATION] = dump([document])
+    return files
