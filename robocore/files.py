@@ -24,6 +24,8 @@ from robocore.errors import UnsafePath
 
 #: The file that describes a robot, at the top of its project folder.
 ROBOT_FILE = "robot.yaml"
+#: The fleet file of a project (many robots of its robot.yaml), next to robot.yaml; optional.
+FLEET_FILE = "fleet.yaml"
 #: The folder of everything robocore writes in a project (generated files, builds, caches, records).
 STATE_DIR = ".robocore"
 #: Mode of the folders holding private files (compose files, cookies, the desktop password).

@@ -14,9 +14,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from robocore.errors import UsageError
-from robocore.files import ROBOT_FILE, STATE_DIR, check_no_links
+from robocore.files import FLEET_FILE, ROBOT_FILE, STATE_DIR, check_no_links
 
 if TYPE_CHECKING:
+    from robocore.config.fleet import Fleet
     from robocore.config.model import Component, Host, Robot
 
 #: The folders robocore writes directly under ``.robocore/`` (checked for links before a task writes).
@@ -38,6 +39,16 @@ class ProjectFolder:
     def robot_file(self) -> Path:
         """The robot.yaml path."""
         return self.root / ROBOT_FILE
+
+    @property
+    def fleet_file(self) -> Path:
+        """The fleet file path (fleet.yaml, next to robot.yaml; a project may have none)."""
+        return self.root / FLEET_FILE
+
+    @property
+    def has_fleet(self) -> bool:
+        """True when something is at the fleet file's path (loading it then says what is wrong with it)."""
+        return self.fleet_file.is_symlink() or self.fleet_file.exists()
 
     @property
     def name(self) -> str:
@@ -118,6 +129,11 @@ class ProjectFolder:
         return self.state_dir / "robot.schema.json"
 
     @property
+    def fleet_schema_file(self) -> Path:
+        """fleet.yaml's JSON Schema, for editors."""
+        return self.state_dir / "fleet.schema.json"
+
+    @property
     def shell_dir(self) -> Path:
         """The dev shell's setup files (mounted read-only into dev containers)."""
         return self.state_dir / "shell"
@@ -141,7 +157,8 @@ class ProjectFolder:
         outside the project is written or removed through it. Folders below these are checked as they are
         written (:func:`robocore.files.write_atomic` and its siblings)."""
         folders = [self.state_dir / name for name in STATE_FOLDERS]
-        for path in (self.state_dir, *folders, self.ssh_hosts_record, self.schema_file, self.build_lock):
+        for path in (self.state_dir, *folders, self.ssh_hosts_record, self.schema_file, self.fleet_schema_file,
+                     self.build_lock):
             check_no_links(path, anchor=self.root)
 
 
@@ -164,6 +181,12 @@ class Project(ProjectFolder):
 
         root = root.resolve()
         return cls(root=root, robot=load_robot(root))
+
+    def load_fleet(self) -> Fleet:
+        """Load and check ``fleet.yaml`` against this project's robot.yaml (ConfigError naming every problem)."""
+        from robocore.config.fleet import load_fleet
+
+        return load_fleet(self.root, self.robot)
 
     def component(self, name: str) -> Component:
         """The component called ``name``, or a UsageError listing the known ones."""

@@ -170,12 +170,12 @@ def init(
                 source=source or None, ref=ref or None)
 
 
-@task
-def schema(c: Context) -> None:
-    """Print the JSON Schema of robot.yaml."""
+@task(help={"fleet": "The schema of the fleet file (fleet.yaml) instead of robot.yaml's."})
+def schema(c: Context, fleet: bool = False) -> None:
+    """Print the JSON Schema of robot.yaml (of fleet.yaml with --fleet)."""
     from robocore.config.schema import schema_json
 
-    print(schema_json())
+    print(schema_json(fleet=fleet))
 
 
 @task(name="prepare-base", help={"force": "Rebuild even if inputs are unchanged.", "dry_run": "Print the plan only.",

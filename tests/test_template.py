@@ -60,7 +60,8 @@ def robot_doc(project: Path) -> dict[str, Any]:
 
 def test_init_writes_the_project_files(project: Path) -> None:
     for rel in ["robot.yaml", "tasks.py", "README.md", ".gitignore", ".copier-answers.yml",
-                ".robocore/robot.schema.json", "noxfile.py", "pytest.ini", "tests/graph/test_talker_listener.py",
+                ".robocore/robot.schema.json", ".robocore/fleet.schema.json", "fleet.example.yaml",
+                "noxfile.py", "pytest.ini", "tests/graph/test_talker_listener.py",
                 ".github/workflows/robot.yml",
                 "components/talker/src/demo_talker/package.xml",
                 "components/listener/src/demo_listener/package.xml"]:
@@ -237,6 +238,41 @@ def test_desktop_example_is_commented_out_and_valid_once_uncommented(project: Pa
     assert desktop.desktop is not None and desktop.desktop.web_port == 6080 and desktop.runs_on == "devmachine"
     assert {"tigervnc-standalone-server", "tigervnc-tools"} <= set(desktop.apt_packages) and desktop.folder is None
     assert clock.gui == "desktop" and clock.runs_on == "devmachine" and clock.entrypoint == "xclock -update 1"
+
+
+def test_fleet_example_is_a_commented_fleet_file_that_validates_once_copied(project: Path, tmp_path: Path) -> None:
+    from robocore.config.fleet import load_fleet
+    from robocore.config.schema import fleet_schema
+    from robocore.plan.fleet import plan_waves
+
+    example = (project / "fleet.example.yaml").read_text()
+    assert not (project / "fleet.yaml").exists()  # only an example: the project stays one robot
+    assert example.splitlines()[0] == "# yaml-language-server: $schema=.robocore/fleet.schema.json"
+    assert sum(line.lstrip().startswith("#") for line in example.splitlines()) >= 15
+    assert json.loads(ProjectFolder(project).fleet_schema_file.read_text()) == fleet_schema()
+    jsonschema.validate(yaml.safe_load(example), fleet_schema())
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    (copy / "robot.yaml").write_text((project / "robot.yaml").read_text())
+    (copy / "fleet.yaml").write_text(example)
+    fleet = load_fleet(copy, load_robot(project))
+    assert fleet.robot_names == ["robot-1", "robot-2", "robot-3"] and set(fleet.robots[0].hosts) == {"devmachine"}
+    assert [(w.name, w.robots) for w in plan_waves(fleet)] == [
+        ("canary", ("robot-1",)), ("half", ("robot-2",)), ("field", ("robot-3",))]
+    readme = (project / "README.md").read_text()
+    assert "## Fleets" in readme and "fleet.example.yaml" in readme and "robocore schema --fleet" in readme
+
+
+def test_fleet_example_gives_every_host_even_ones_yaml_would_misread(tmp_path: Path) -> None:
+    from robocore.config.fleet import load_fleet
+
+    hosts = [{"name": "on", "ip": "10.0.0.5", "user": "robot", "arch": "arm64"},
+             {"name": "devmachine", "ip": "10.0.0.6", "user": "me", "arch": "amd64"}]
+    copier_adapter.copy(copier_adapter.CopyRequest(template=str(TEMPLATE), destination=tmp_path / "f",
+                                                   data={"hosts": hosts}, defaults=True))
+    (tmp_path / "f" / "fleet.yaml").write_text((tmp_path / "f" / "fleet.example.yaml").read_text())
+    fleet = load_fleet(tmp_path / "f", load_robot(tmp_path / "f"))
+    assert all(set(robot.hosts) == {"on", "devmachine"} for robot in fleet.robots)
 
 
 # ---------------------------------------------------------------- where init may write

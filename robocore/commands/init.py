@@ -204,7 +204,8 @@ def run(path: Path, *, defaults: bool, distro: str | None, base: str | None, dry
     report.notice(template.note)
     if dry_run:
         folder = ProjectFolder(destination)
-        report.notice(f"would write {folder.schema_file} and check {folder.robot_file}")
+        report.notice(f"would write {folder.schema_file}, {folder.fleet_schema_file.name} and check "
+                      f"{folder.robot_file}")
         return
     _write_schema(destination)
     _check(destination, report)
@@ -214,7 +215,9 @@ def _write_schema(project: Path) -> None:
     from robocore.config.schema import schema_json
     from robocore.files import write_atomic
 
-    write_atomic(ProjectFolder(project).schema_file, schema_json() + "\n")
+    folder = ProjectFolder(project)
+    write_atomic(folder.schema_file, schema_json() + "\n")
+    write_atomic(folder.fleet_schema_file, schema_json(fleet=True) + "\n")
 
 
 def _check(project: Path, report: Reporter) -> None:

@@ -1,11 +1,14 @@
-"""validate: load robot.yaml and say what it describes."""
+"""validate: load robot.yaml (and fleet.yaml when the project has one) and say what they describe."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 from robocore.commands.context import Options
+
+if TYPE_CHECKING:
+    from robocore.project import Project
 
 
 @dataclass(frozen=True)
@@ -29,6 +32,25 @@ class RobotSummary:
     base: str
     hosts: list[HostSummary]
     discovery_servers: list[str]
+
+
+@dataclass(frozen=True)
+class WaveSummary:
+    """One wave of the fleet's rollout and its robots."""
+
+    name: str
+    robots: list[str]
+
+
+@dataclass(frozen=True)
+class FleetSummary:
+    """What a valid fleet.yaml describes."""
+
+    kind: ClassVar[str] = "fleet"
+    file: str
+    engine: str
+    robots: list[str]
+    waves: list[WaveSummary]
 
 
 def run(options: Options) -> None:
@@ -66,3 +88,21 @@ def run(options: Options) -> None:
     lines.append(f"  discovery ({robot.discovery_kind}): {', '.join(summary.discovery_servers)}")
     for line in lines:
         report.info(line)
+    if project.has_fleet:
+        _validate_fleet(options, project)
+
+
+def _validate_fleet(options: Options, project: Project) -> None:
+    """Load fleet.yaml against robot.yaml, refuse what its engine cannot run, and say what it describes."""
+    from robocore.errors import ConfigError
+    from robocore.plan.fleet import plan_waves, swarm_problems
+
+    fleet = project.load_fleet()
+    problems = swarm_problems(project.robot, fleet, project.robot_file)
+    if problems:
+        raise ConfigError(problems)
+    waves = [WaveSummary(wave.name, list(wave.robots)) for wave in plan_waves(fleet)]
+    summary = FleetSummary(file=str(project.fleet_file), engine=fleet.engine, robots=fleet.robot_names, waves=waves)
+    options.report.add(summary)
+    options.report.info(f"{summary.file}: ok — {fleet.engine}, {len(fleet.robots)} robot(s), "
+                        f"{len(waves)} wave(s): " + ", ".join(f"{w.name} ({len(w.robots)})" for w in waves))

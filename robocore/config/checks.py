@@ -91,10 +91,10 @@ def salvage(data: Mapping[str, Any]) -> Parts:
     discovery = data.get("discovery")
     servers = discovery.get("servers") if isinstance(discovery, dict) else None
     return Parts(
-        hosts=_salvage_list(data.get("hosts"), Host),
-        components=_salvage_list(data.get("components"), Component),
-        common_packages=_salvage_list(data.get("common_packages"), CommonPackage),
-        servers=_salvage_list(servers, DiscoveryServer),
+        hosts=salvage_list(data.get("hosts"), Host),
+        components=salvage_list(data.get("components"), Component),
+        common_packages=salvage_list(data.get("common_packages"), CommonPackage),
+        servers=salvage_list(servers, DiscoveryServer),
         names={section: _raw_names(data[section]) for section in NAMED_SECTIONS if isinstance(data.get(section), list)},
         image_prefix=_valid_prefix(data.get("image_prefix", "")),
     )
@@ -112,7 +112,9 @@ def _raw_names(items: list[Any]) -> list[tuple[int, str]]:
     ]
 
 
-def _salvage_list(items: object, model: type[M]) -> list[tuple[int, M]]:
+def salvage_list(items: object, model: type[M]) -> list[tuple[int, M]]:
+    """The items of a raw list that validate as ``model`` (each with its index), an item with bad fields
+    validated again without them; not a list: none."""
     if not isinstance(items, list):
         return []
     out: list[tuple[int, M]] = []

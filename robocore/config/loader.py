@@ -148,15 +148,16 @@ def _model_in(annotation: Any) -> type[BaseModel] | None:
     return None
 
 
-def _field_problems(exc: ValidationError, file: str, lines: LineMap) -> list[Problem]:
-    """One problem per pydantic error; only the first :data:`MAX_SUGGESTIONS` get a "did you mean"."""
+def field_problems(exc: ValidationError, file: str, lines: LineMap, model: type[BaseModel] = Robot) -> list[Problem]:
+    """One problem per pydantic error of ``model`` (robot.yaml's :class:`Robot`, or another file's top model);
+    only the first :data:`MAX_SUGGESTIONS` get a "did you mean"."""
     problems: list[Problem] = []
     for count, error in enumerate(exc.errors()):
         suggest = count < MAX_SUGGESTIONS
         loc = tuple(part for part in error["loc"] if part != "[key]")
         message = _friendly(dict(error), suggest=suggest)
         if error.get("type") == "extra_forbidden":
-            allowed = _allowed_keys(Robot, loc)
+            allowed = _allowed_keys(model, loc)
             if allowed:
                 hint = did_you_mean(str(loc[-1]), allowed) if suggest else ""
                 message += hint + f" (allowed: {', '.join(allowed)})"
@@ -174,28 +175,31 @@ def parse_robot_text(text: str, *, file: str = ROBOT_FILE, project: Path | None 
     """
     data, lines = read_yaml(text, file)
     if not isinstance(data, dict):
-        raise ConfigError([
-            problem(file, lines.line_of(()), "",
-                    f"top level must be a mapping of keys (ros_distro, hosts, components, ...), got {_kind_of(data)}")
-        ])
+        raise not_a_mapping(data, lines, file, "ros_distro, hosts, components, ...")
     problems = [problem(file, line, format_path(path), "this key appears twice") for path, line in lines.duplicates]
     robot: Robot | None
     try:
         robot = Robot.model_validate(data)
     except ValidationError as exc:
         robot = None
-        problems += _field_problems(exc, file, lines)
+        problems += field_problems(exc, file, lines)
     except RecursionError:
         raise ConfigError([problem(file, None, "", "YAML is nested too deeply")]) from None
     found = check_robot(robot, project) if robot is not None else check_parts(salvage(data), project)
     problems += [problem(file, lines.line_of(path), format_path(path), message) for path, message in found]
     if problems:
-        raise ConfigError(_ordered(problems))
+        raise ConfigError(ordered(problems))
     assert robot is not None
     return robot
 
 
-def _ordered(problems: list[Problem]) -> list[Problem]:
+def not_a_mapping(data: object, lines: LineMap, file: str, keys: str) -> ConfigError:
+    """The one-line refusal of a file whose top level is not a mapping (``keys``: the keys it should hold)."""
+    return ConfigError([
+        problem(file, lines.line_of(()), "", f"top level must be a mapping of keys ({keys}), got {_kind_of(data)}")])
+
+
+def ordered(problems: list[Problem]) -> list[Problem]:
     """Problems without repeats, sorted by line; past :data:`MAX_PROBLEMS`, one last line counts the rest."""
     unique = sorted(dict.fromkeys(problems), key=lambda p: p.line if p.line is not None else 0)
     if len(unique) <= MAX_PROBLEMS:
@@ -215,6 +219,16 @@ def display_path(path: Path) -> str:
 
 def load_robot(project: Path, *, file_name: str = ROBOT_FILE) -> Robot:
     """Load ``project/robot.yaml``; raise :class:`ConfigError` naming every problem."""
+    text, shown_path = read_config_file(project, file_name, schema_hint="robocore schema")
+    return parse_robot_text(text, file=shown_path, project=project)
+
+
+def read_config_file(project: Path, file_name: str, *, schema_hint: str) -> tuple[str, str]:
+    """The text of ``project/file_name`` (robot.yaml, fleet.yaml) and the path to show in messages, read under the
+    rules every robocore input file obeys: the project must be a folder; the file a regular file inside the project
+    (a link out of it, a FIFO or a device is one line at once, never a blocked read); at most
+    :data:`MAX_FILE_BYTES`; UTF-8; not empty (``schema_hint`` is the command that prints its keys).
+    Raises :class:`ConfigError` with one problem."""
     path = project / file_name
     shown_path = display_path(path)
     folder, reason = path_kind(project)
@@ -234,14 +248,14 @@ def load_robot(project: Path, *, file_name: str = ROBOT_FILE) -> Robot:
     except OSError as exc:
         raise ConfigError([problem(shown_path, None, "", f"cannot read file: {exc.strerror or exc}")]) from None
     if len(raw) > MAX_FILE_BYTES:
-        raise too_big(os.stat(path).st_size, shown_path)
+        raise too_big(os.stat(path).st_size, shown_path, file_name)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise ConfigError([problem(shown_path, None, "", f"not UTF-8 text (byte {exc.start})")]) from None
     if not text.strip():
-        raise ConfigError([problem(shown_path, None, "", "file is empty; see 'robocore schema' for its keys")])
-    return parse_robot_text(text, file=shown_path, project=project)
+        raise ConfigError([problem(shown_path, None, "", f"file is empty; see '{schema_hint}' for its keys")])
+    return text, shown_path
 
 
 def located(path: Path, found: Iterable[tuple[KeyPath, str]]) -> ConfigError:
@@ -252,7 +266,7 @@ def located(path: Path, found: Iterable[tuple[KeyPath, str]]) -> ConfigError:
     """
     shown_path = display_path(path)
     lines = _lines_of(path, shown_path)
-    return ConfigError(_ordered([problem(shown_path, lines.line_of(p), format_path(p), m) for p, m in found]))
+    return ConfigError(ordered([problem(shown_path, lines.line_of(p), format_path(p), m) for p, m in found]))
 
 
 def _lines_of(path: Path, shown_path: str) -> LineMap:

@@ -1,8 +1,8 @@
-"""The JSON Schema of robot.yaml, for editors (yaml-language-server) and for checks.
+"""The JSON Schemas of robot.yaml and fleet.yaml, for editors (yaml-language-server) and for checks.
 
-The schema describes the shape of the file (keys, types, allowed values); the
-cross-field rules (``runs_on`` names a host, folders exist, ...) are only checked by
-``robocore validate``.
+A schema describes the shape of the file (keys, types, allowed values); the
+cross-field rules (``runs_on`` names a host, folders exist, every robot of the fleet gives
+each host of robot.yaml, ...) are only checked by ``robocore validate``.
 """
 
 from __future__ import annotations
@@ -10,10 +10,13 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from robocore.config.fleet import Fleet
 from robocore.config.model import Robot
 
 #: Stable identifier of the schema; editors match it, and it does not change between releases.
 SCHEMA_ID = "https://robocore.dev/schema/robot.schema.json"
+#: Stable identifier of the fleet file's schema.
+FLEET_SCHEMA_ID = "https://robocore.dev/schema/fleet.schema.json"
 DRAFT = "https://json-schema.org/draft/2020-12/schema"
 
 
@@ -30,6 +33,19 @@ def robot_schema() -> dict[str, Any]:
     return schema
 
 
-def schema_json() -> str:
-    """The schema as indented JSON text."""
-    return json.dumps(robot_schema(), indent=2, sort_keys=True)
+def fleet_schema() -> dict[str, Any]:
+    """The JSON Schema (draft 2020-12) of fleet.yaml."""
+    schema = Fleet.model_json_schema()
+    schema["$schema"] = DRAFT
+    schema["$id"] = FLEET_SCHEMA_ID
+    schema["title"] = "robocore fleet.yaml"
+    schema["description"] = (
+        "Many robots of one robot.yaml: each robot's host addresses, the engine and its manager, the rollout "
+        "policy (waves, health gate, timeouts). Checks against robot.yaml are made by 'robocore validate'."
+    )
+    return schema
+
+
+def schema_json(*, fleet: bool = False) -> str:
+    """The schema of robot.yaml (of fleet.yaml with ``fleet``) as indented JSON text."""
+    return json.dumps(fleet_schema() if fleet else robot_schema(), indent=2, sort_keys=True)

@@ -247,23 +247,26 @@ def _compose(text: str, file: str) -> tuple[Any, yaml.Node | None]:
         raise
 
 
-def too_big(size: int, file: str) -> ConfigError:
-    """The one-line refusal of a file of ``size`` bytes (over :data:`MAX_FILE_BYTES`)."""
-    what = f"file is larger than 1 MB ({size:,} bytes); a robot.yaml is a few kilobytes"
+def too_big(size: int, file: str, kind: str = ROBOT_FILE) -> ConfigError:
+    """The one-line refusal of a file of ``size`` bytes (over :data:`MAX_FILE_BYTES`); ``kind`` names the file
+    (robot.yaml, fleet.yaml)."""
+    what = f"file is larger than 1 MB ({size:,} bytes); a {kind} is a few kilobytes"
     return ConfigError([problem(file, None, "", what)])
 
 
-def read_yaml(text: str, file: str) -> tuple[Any, LineMap]:
-    """Compose and load ``text``; raise a one-problem ConfigError when it is not YAML."""
+def read_yaml(text: str, file: str, *, kind: str = ROBOT_FILE,
+              schema_hint: str = "robocore schema") -> tuple[Any, LineMap]:
+    """Compose and load ``text``; raise a one-problem ConfigError when it is not YAML. ``kind`` names the file
+    (robot.yaml, fleet.yaml) and ``schema_hint`` the command that prints its keys, for messages."""
     if len(text) > MAX_FILE_BYTES or len(text.encode("utf-8", errors="replace")) > MAX_FILE_BYTES:
-        raise too_big(len(text.encode("utf-8", errors="replace")), file)
+        raise too_big(len(text.encode("utf-8", errors="replace")), file, kind)
     if "\x00" in text:
         raise ConfigError([problem(file, None, "", "not a text file (contains NUL bytes)")])
     try:
         loader, node = _compose(text, file)
         try:
             if node is None:
-                raise ConfigError([problem(file, None, "", "file is empty; see 'robocore schema' for its keys")])
+                raise ConfigError([problem(file, None, "", f"file is empty; see '{schema_hint}' for its keys")])
             _check_size(node, file)
             lines = LineMap()
             lines.add(node)
