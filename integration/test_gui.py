@@ -24,6 +24,7 @@ from typing import Any
 import pytest
 import yaml
 from deploy_helpers import copy_project, log_lines, remove_project_containers, wait_for
+from screens import display_taken, free_display
 
 from robocore.plan import gui
 
@@ -51,14 +52,6 @@ def uncommented_desktop_example(text: str) -> list[dict[str, Any]]:
     return list(components)
 
 
-def _display_taken(number: int) -> bool:
-    if Path(f"/tmp/.X11-unix/X{number}").exists() or Path(f"/tmp/.X{number}-lock").exists():
-        return True
-    abstract = f"@/tmp/.X11-unix/X{number}"
-    return any(line.split()[-1] == abstract for line in Path("/proc/net/unix").read_text().splitlines()[1:]
-               if line.split())
-
-
 def rfb_security(port: int, choose: int) -> tuple[list[int], int | None]:
     """An RFB 3.8 handshake by hand: the security types the server offers, and its security result when the
     client picks ``choose`` (1: None) anyway: 0 is OK, anything else a failure, None when it hung up."""
@@ -73,27 +66,6 @@ def rfb_security(port: int, choose: int) -> tuple[list[int], int | None]:
         sock.sendall(bytes([choose]))
         result = reader.read(4)
         return types, int.from_bytes(result, "big") if len(result) == 4 else None
-
-
-def _tcp_free(port: int) -> bool:
-    with socket.socket() as sock:
-        try:
-            sock.bind(("0.0.0.0", port))
-        except OSError:
-            return False
-    return True
-
-
-def free_display() -> tuple[int, int, int]:
-    """A display number no X server uses here, with its free VNC port (5900 + N) and a free web port."""
-    for number in random.sample(range(20, 64), 44):
-        if _display_taken(number) or not _tcp_free(5900 + number):
-            continue
-        for _ in range(100):
-            web = random.randint(20000, 40000)
-            if _tcp_free(web):
-                return number, 5900 + number, web
-    raise RuntimeError("no free X display and ports")
 
 
 def magenta_pixels(vnc_port: int, shot: Path, password: str | None,
@@ -279,7 +251,7 @@ def host_display(tmp_path: Path) -> Iterator[tuple[str, Path]]:
     import secrets
     import subprocess
 
-    number = next(n for n in random.sample(range(64, 200), 136) if not _display_taken(n))
+    number = next(n for n in random.sample(range(64, 200), 136) if not display_taken(n))
     auth = tmp_path / "login.xauth"
     subprocess.run(["xauth", "-q", "-f", str(auth), "add", f":{number}", ".", secrets.token_hex(16)], check=True)
     server = subprocess.Popen(["Xvfb", f":{number}", "-auth", str(auth), "-nolisten", "tcp", "-screen", "0",

@@ -211,12 +211,12 @@ def test_init_turns_an_awkward_folder_name_into_a_project_name(tmp_path: Path) -
     assert load_robot(project).image_prefix == "my-robot-"
 
 
-def uncommented_desktop_example(text: str) -> str:
-    """The commented-out desktop example of a generated robot.yaml, uncommented (components' indent)."""
+def uncommented_example(text: str, first: str) -> str:
+    """The commented-out example block of a generated robot.yaml that starts at ``  # - name: FIRST``, uncommented
+    (components' indent); it ends at the first line that is not ``  # ...``."""
     lines = text.splitlines()
-    start = lines.index("  # - name: desktop")
     block = []
-    for line in lines[start:]:
+    for line in lines[lines.index(f"  # - name: {first}"):]:
         if not line.startswith("  # "):
             break
         block.append("  " + line[4:])
@@ -229,7 +229,7 @@ def test_desktop_example_is_commented_out_and_valid_once_uncommented(project: Pa
     comments = text[:text.index("  # - name: desktop")]
     assert "http://<host ip>:6080/vnc.html" in comments and "invoke shell --component" in comments
     assert "gui: true" in comments and "ghcr.io" not in text  # built from Debian packages: no registry
-    (project / "robot.yaml").write_text(text + "\n" + uncommented_desktop_example(text))
+    (project / "robot.yaml").write_text(text + "\n" + uncommented_example(text, "desktop"))
     try:
         robot = load_robot(project)
     finally:
@@ -273,6 +273,34 @@ def test_fleet_example_gives_every_host_even_ones_yaml_would_misread(tmp_path: P
     (tmp_path / "f" / "fleet.yaml").write_text((tmp_path / "f" / "fleet.example.yaml").read_text())
     fleet = load_fleet(tmp_path / "f", load_robot(tmp_path / "f"))
     assert all(set(robot.hosts) == {"on", "devmachine"} for robot in fleet.robots)
+
+
+@pytest.mark.parametrize(("distro", "base", "package", "command"), [
+    ("noetic", "debian", "rviz", "rviz -d /robocore/rviz/robot.rviz"),
+    ("noetic", "official", "ros-noetic-rviz", "rviz -d /robocore/rviz/robot.rviz"),
+    ("jazzy", "official", "ros-jazzy-rviz2", "ros2 run rviz2 rviz2 -d /robocore/rviz/robot.rviz"),
+])
+def test_rviz_example_draws_into_the_desktop_in_software_and_says_how_a_gpu_is_used(
+        tmp_path: Path, distro: str, base: str, package: str, command: str) -> None:
+    project = make(tmp_path / "viz", distro=distro, base=base)
+    text = (project / "robot.yaml").read_text()
+    comments = text[text.index("  # rviz in that desktop"):text.index("  # - name: rviz")]
+    for recipe in ("llvmpipe", "LIBGL_ALWAYS_SOFTWARE", "nvidia: true", "NVIDIA_DRIVER_CAPABILITIES", "/dev/dri",
+                   "Gazebo"):
+        assert recipe in comments, recipe
+    examples = uncommented_example(text, "desktop") + uncommented_example(text, "rviz")
+    (project / "robot.yaml").write_text(text + "\n" + examples)
+    robot = load_robot(project)
+    rviz = robot.component("rviz")
+    assert rviz.gui == "desktop" and robot.component("desktop").desktop is not None
+    assert rviz.apt_packages == [package] and rviz.entrypoint == command
+    assert rviz.environment == {"LIBGL_ALWAYS_SOFTWARE": "1"} and rviz.volumes == ["./rviz:/robocore/rviz:ro"]
+
+
+def test_the_wheels_base_has_no_rviz_example_and_says_where_rviz2_is(tmp_path: Path) -> None:
+    text = (make(tmp_path / "viz", distro="jazzy", base="wheels") / "robot.yaml").read_text()
+    assert "  # - name: rviz" not in text
+    assert "The wheels base has no rviz2 (PyPI has none): use base: official" in text
 
 
 # ---------------------------------------------------------------- where init may write
