@@ -22,8 +22,9 @@ if TYPE_CHECKING:
 
 
 @contextlib.contextmanager
-def serve_registry(fleet: RobotFleet, folder: Path) -> Iterator[str]:
-    """Serve a registry (its data under ``folder``) to this machine and to ``fleet``'s hosts; ``127.0.0.1:PORT``."""
+def serve_registry(fleet: RobotFleet | None, folder: Path) -> Iterator[str]:
+    """Serve a registry (its data under ``folder``) to this machine and to ``fleet``'s hosts (None: to this machine
+    only); ``127.0.0.1:PORT``."""
     binary = shutil.which("docker-registry")
     assert binary, "the release tests need Debian's docker-registry package (apt-get install docker-registry)"
     port = free_tcp_port()
@@ -40,12 +41,14 @@ def serve_registry(fleet: RobotFleet, folder: Path) -> Iterator[str]:
 
     try:
         assert wait_for(serving, 30, interval=0.2), f"docker-registry did not answer on 127.0.0.1:{port}"
-        for host in fleet.hosts:
+        hosts = fleet.hosts if fleet is not None else []
+        for host in hosts:
             tunnels.append(subprocess.Popen(
                 ["ssh", "-F", str(fleet.ssh_config), "-N", "-o", "ExitOnForwardFailure=yes",
                  "-R", f"{port}:127.0.0.1:{port}", f"root@{host.ip}"], stdin=subprocess.DEVNULL))
         probe = ["sh", "-c", '"$@" && echo up || true', "sh", "bash", "-c", f"exec 3<>/dev/tcp/127.0.0.1/{port}"]
-        for host in fleet.hosts:
+        for host in hosts:
+            assert fleet is not None
             assert wait_for(lambda h=host: h.ssh(fleet, *probe).strip() == "up", 20, interval=0.3), \
                 f"registry tunnel to {host.name} did not come up"
         yield f"127.0.0.1:{port}"

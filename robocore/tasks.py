@@ -340,13 +340,21 @@ def connect(c: Context, component: str = "", cmd: str = "", dry_run: bool = Fals
         raise Exit(code=code)
 
 
-@task(help={"tag": "Version (default: git describe).", "dry_run": "Print what would be pushed."})
+@task(help={"tag": "Version (default: git describe).", "dry_run": "Print what would be pushed.",
+            "fleet": "Self-contained images for fleet.yaml's robots (install trees inside), recorded by digest in "
+                     ".robocore/releases/V.json.",
+            "json": "Machine-readable result on stdout."})
 @reported
-def release(c: Context, tag: str = "", dry_run: bool = False) -> None:
-    """Tag every image with a version and push it to the registry."""
+def release(c: Context, tag: str = "", dry_run: bool = False, fleet: bool = False, json: bool = False) -> None:
+    """Tag every image with a version and push it to the registry (--fleet: images a fleet runs, by digest)."""
+    options = _options(c, "release", dry_run=dry_run, json=json)
+    if fleet:
+        from robocore.commands import fleet_release
+
+        _execute(options, lambda: fleet_release.release_fleet(options, tag=_tag(tag)))
+        return
     from robocore.commands import release as command
 
-    options = _options(c, "release", dry_run=dry_run)
     _execute(options, lambda: command.release(options, tag=_tag(tag)))
 
 

@@ -149,6 +149,29 @@ def check_stream(events: Iterable[dict[str, Any]], what: str) -> None:
                               hint="is the registry reachable from this machine and from the host?")
 
 
+def push_digest(client: docker.DockerClient, target: str, tag: str) -> str:
+    """Push ``target:tag`` from this machine and return the digest the registry gave its manifest
+    (``sha256:...``, from the push stream's last ``aux`` event); DockerError when the push fails or names none."""
+    from docker.errors import APIError
+
+    digest = ""
+    try:
+        for event in client.images.push(target, tag, stream=True, decode=True):
+            if "error" in event:
+                detail = event.get("errorDetail", {}).get("message") or event["error"]
+                raise DockerError(f"push {target}:{tag} failed: {detail}",
+                                  hint="is the registry reachable (and trusted) from this machine?")
+            aux = event.get("aux")
+            if isinstance(aux, dict) and isinstance(aux.get("Digest"), str):
+                digest = aux["Digest"]
+    except APIError as exc:
+        raise DockerError(f"push {target}:{tag} failed: {exc.explanation or exc}",
+                          hint="is the registry reachable (and trusted) from this machine?") from None
+    if not digest.startswith("sha256:"):
+        raise DockerError(f"push {target}:{tag}: the registry named no digest for it")
+    return digest
+
+
 def _stream(local: docker.DockerClient, remote: docker.DockerClient, image: Any, name: str, *,
             progress: bool, label: str) -> Delivery:
     have = _remote_chains(remote)

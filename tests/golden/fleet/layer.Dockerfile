@@ -1,0 +1,3 @@
+FROM sha256:1111111111111111111111111111111111111111111111111111111111111111
+COPY rootfs/ /
+LABEL dev.robocore.component="talker" dev.robocore.release="v1"
