@@ -1,4 +1,5 @@
-"""Files robocore writes, removes, reads or copies: atomic writes with the user's umask, never through a link.
+"""Files robocore writes, removes, reads or copies: atomic writes with modes that do not depend on the umask,
+never through a link.
 
 Every path robocore writes or removes in a project lies under its state folder (:data:`STATE_DIR`). Before
 writing, creating or removing there, each folder from the project folder down (and the file itself) is
@@ -6,6 +7,10 @@ checked without following symlinks: a link (a cloned repository can carry one wh
 refused with :class:`~robocore.errors.UnsafePath` naming it, before anything is written or removed.
 Files robocore reads from the project (robot.yaml, package.xml, ``.repos``, TLS files) are read with
 :func:`read_project_file`: inside the project after links are followed, a regular file, never a FIFO.
+
+Under :data:`STATE_DIR` every folder robocore creates is 0700 and every file 0600, whatever the umask, except
+the few that a process of another user reads (:data:`SHARED` and :data:`SHARED_DIR`); nothing robocore
+creates anywhere may be written by others (:data:`NEVER`).
 
 The umask is read once, when this module is imported (from ``/proc/self/status`` where the kernel
 shows it, else by setting and restoring it): it is process-wide state, and setting it while other
@@ -28,8 +33,13 @@ ROBOT_FILE = "robot.yaml"
 FLEET_FILE = "fleet.yaml"
 #: The folder of everything robocore writes in a project (generated files, builds, caches, records).
 STATE_DIR = ".robocore"
-#: Mode of the folders holding private files (compose files, cookies, the desktop password).
+#: Mode of every folder robocore creates under :data:`STATE_DIR` (whatever the umask), and of the folders
+#: holding private files elsewhere (the X11 cookies).
 PRIVATE_DIR = 0o700
+#: Mode of the few folders under :data:`STATE_DIR` that a process of another user reads: those mounted into
+#: containers, whose user may not be the invoking one (``dds``, ``shell``), and those sent to the robot hosts as
+#: they are (a component's ``install`` tree, the ``sync`` folder of linked read-only volumes).
+SHARED_DIR = 0o755
 #: The record, in a folder of generated files, of the names robocore wrote there (what stale cleaning may remove).
 WRITTEN_RECORD = ".robocore-written"
 
@@ -49,13 +59,26 @@ def _read_umask() -> int:
 
 #: The process's umask when robocore started.
 UMASK = _read_umask()
-#: Mode of generated files that hold environment values or other data for the user's eyes only.
+#: Mode of every file robocore writes under :data:`STATE_DIR` unless it is :data:`SHARED` (whatever the umask).
 PRIVATE = 0o600
+#: Mode of the files robocore writes under :data:`STATE_DIR` that a process of another user reads: the DDS
+#: profiles and the dev shell's start files, read inside containers whose user may not be the invoking one.
+SHARED = 0o644
+#: Bits no file or folder robocore creates ever has, whatever the umask: no one else may write to them.
+NEVER = 0o022
 
 
 def default_mode() -> int:
-    """The mode a new file gets here: ``0o666`` less the umask."""
-    return 0o666 & ~UMASK
+    """The mode a new file outside :data:`STATE_DIR` gets: ``0o666`` less the umask, never writable by others."""
+    return 0o666 & ~UMASK & ~NEVER
+
+
+def state_mode(path: Path, mode: int | None = None) -> int:
+    """The mode of a file robocore writes at ``path``: ``mode`` when given; else :data:`PRIVATE` under
+    :data:`STATE_DIR` and :func:`default_mode` elsewhere. Never writable by others."""
+    if mode is not None:
+        return mode & ~NEVER
+    return PRIVATE if _anchor(path) is not None else default_mode()
 
 
 def _anchor(path: Path) -> Path | None:
@@ -103,10 +126,14 @@ def check_no_links(path: Path, *, anchor: Path | None = None) -> None:
                              hint=f"remove {current}")
 
 
-def make_folder(path: Path, *, private: bool = False) -> Path:
+def make_folder(path: Path, *, private: bool = False, shared: bool = False) -> Path:
     """Create ``path`` and its missing parents, refusing any symlink on the way (:func:`check_no_links`).
 
-    ``private`` makes ``path`` mode 0700 whatever the umask (folders holding 0600 files)."""
+    Every folder created under :data:`STATE_DIR` is :data:`PRIVATE_DIR` (0700) whatever the umask, except
+    ``path`` itself when ``shared`` (:data:`SHARED_DIR`, 0755: another user reads it). ``private`` makes ``path``
+    0700 even when it exists already, or lies outside the state folder. A folder of this user under the state
+    folder that others may write to (made under a loose umask before) loses those bits. Elsewhere new folders
+    get ``0o777`` less the umask, never writable by others."""
     check_no_links(path)
     anchor = _anchor(path)
     missing = []
@@ -115,46 +142,74 @@ def make_folder(path: Path, *, private: bool = False) -> Path:
         missing.append(probe)
         probe = probe.parent
     for folder in reversed(missing):
-        with contextlib.suppress(FileExistsError):
-            os.mkdir(folder, PRIVATE_DIR if private and folder == path else 0o777)
+        if _anchor(folder) is not None or (private and folder == path):
+            wanted: int | None = SHARED_DIR if shared and folder == path else PRIVATE_DIR
+        else:
+            wanted = None  # outside the state folder: the umask's mode, never writable by others
+        created = True
+        try:
+            os.mkdir(folder, 0o777 & ~NEVER if wanted is None else wanted)
+        except FileExistsError:
+            created = False  # another process made it meanwhile
         check_no_links(folder, anchor=anchor)  # another process may have made it a link meanwhile
+        if created and wanted is not None and stat.S_IMODE(os.lstat(folder).st_mode) != wanted:
+            os.chmod(folder, wanted)  # mkdir's mode passes through the umask
     if not path.is_dir():
         raise UnsafePath(f"{path}: is not a folder; robocore keeps its files in it", hint=f"remove {path}")
-    if private and stat.S_IMODE(os.lstat(path).st_mode) != PRIVATE_DIR:
+    info = os.lstat(path)
+    now = stat.S_IMODE(info.st_mode)
+    if private and now != PRIVATE_DIR:
         os.chmod(path, PRIVATE_DIR)
+    elif anchor is not None and now & NEVER and info.st_uid == os.geteuid():
+        os.chmod(path, now & ~NEVER)
     return path
 
 
-def read_own_file(path: Path) -> bytes | None:
+def is_private(info: os.stat_result) -> bool:
+    """True when ``info`` (an lstat) is owned by this process's user and no one else may write to it: what a
+    record must be for robocore to believe it (another local user could otherwise have written it)."""
+    return info.st_uid == os.geteuid() and not info.st_mode & 0o022
+
+
+def read_own_file(path: Path, *, limit: int | None = None, private: bool = False) -> bytes | None:
     """The content of ``path``, a file robocore wrote, when it is a regular file; None otherwise (missing, a link,
-    a FIFO, a device: never followed, never blocking). For robocore's records under ``.robocore/``."""
+    a FIFO, a device: never followed, never blocking). For robocore's records under ``.robocore/``.
+
+    ``limit``: None too when the file holds more than that many bytes (no more than one byte past it is read).
+    ``private``: None too when the file is not :func:`is_private` (another user could have written it)."""
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_NOCTTY)
-    except OSError:
+    except (OSError, ValueError):
+        return None
+    info = os.fstat(fd)
+    if not stat.S_ISREG(info.st_mode) or (private and not is_private(info)):
+        os.close(fd)
         return None
     with os.fdopen(fd, "rb") as handle:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            return None
-        return handle.read()
+        if limit is None:
+            return handle.read()
+        data = handle.read(limit + 1)
+        return None if len(data) > limit else data
 
 
 def write_atomic(path: Path, content: str | bytes, *, mode: int | None = None, private_dir: bool = False) -> bool:
     """Write ``content`` to ``path`` through a temp file and rename; return False if unchanged.
 
-    ``mode`` None gives the mode any new file gets (``0o666`` less the umask); an explicit mode is
-    applied as given (:data:`PRIVATE` for files holding environment values), and a :data:`PRIVATE` file's
-    folder is made 0700 (as ``private_dir`` asks). An unchanged file keeps its content but still gets
-    ``mode``, so a file written before with a wider mode is narrowed. A symlink at ``path`` or on the way to
+    ``mode`` None gives :data:`PRIVATE` under :data:`STATE_DIR` and the umask's mode elsewhere
+    (:func:`state_mode`); an explicit mode is applied as given, less the bits that let others write
+    (:data:`SHARED` for the files another user reads), whatever the umask. A :data:`PRIVATE` file's folder is
+    made 0700 (as ``private_dir`` asks). An unchanged file keeps its content but still gets its mode, so a file
+    written before with a wider mode is narrowed. A symlink at ``path`` or on the way to
     it from the project folder is refused (:func:`check_no_links`) before anything is written.
     """
     data = content.encode("utf-8") if isinstance(content, str) else content
-    wanted = default_mode() if mode is None else mode
+    wanted = state_mode(path, mode)
     check_no_links(path)
-    make_folder(path.parent, private=private_dir or mode == PRIVATE)
+    make_folder(path.parent, private=private_dir or mode == PRIVATE, shared=mode == SHARED)
     if os.path.lexists(path) and not stat.S_ISREG(os.lstat(path).st_mode):
         raise UnsafePath(f"{path}: is not a regular file; robocore writes its own file there", hint=f"remove {path}")
     if read_own_file(path) == data:
-        if mode is not None and (os.lstat(path).st_mode & 0o7777) != wanted:
+        if (os.lstat(path).st_mode & 0o7777) != wanted:
             os.chmod(path, wanted)
         return False
     import tempfile  # here, not at import: the command line's first steps read paths only
@@ -173,13 +228,19 @@ def write_atomic(path: Path, content: str | bytes, *, mode: int | None = None, p
     return True
 
 
-def remove_file(path: Path) -> bool:
-    """Remove the regular file ``path`` (False when there is none); a link at it or on the way is refused."""
-    check_no_links(path)
+def remove_file(path: Path, *, any_kind: bool = False) -> bool:
+    """Remove the regular file ``path`` (False when there is none); a link at it or on the way is refused.
+
+    ``any_kind`` removes whatever non-folder entry is at ``path`` (a link is removed as a link, never followed; a
+    FIFO or device node as a name): for a record robocore drops because it cannot be trusted."""
+    check_no_links(path.parent if any_kind else path)
     try:
         info = os.lstat(path)
     except FileNotFoundError:
         return False
+    if any_kind and not stat.S_ISDIR(info.st_mode):
+        path.unlink()
+        return True
     if not stat.S_ISREG(info.st_mode):
         raise UnsafePath(f"{path}: is not a regular file; robocore removes only files it wrote", hint=f"remove {path}")
     path.unlink()
@@ -202,8 +263,8 @@ def remove_tree(path: Path, *, ignore_errors: bool = False) -> bool:
 def write_generated(folder: Path, files: Mapping[str, str | bytes], *, mode: int | None = None) -> list[Path]:
     """Write ``files`` (name -> content) into ``folder`` and remove the ones robocore wrote there before that
     are no longer wanted: only names listed in the folder's :data:`WRITTEN_RECORD`, never a file robocore did
-    not write. The folder is private (0700) when ``mode`` is :data:`PRIVATE`."""
-    make_folder(folder, private=mode == PRIVATE)
+    not write. The folder is private (0700) when ``mode`` is :data:`PRIVATE`, 0755 when :data:`SHARED`."""
+    make_folder(folder, private=mode == PRIVATE, shared=mode == SHARED)
     record = folder / WRITTEN_RECORD
     before = (read_own_file(record) or b"").decode("utf-8", errors="replace").splitlines()
     paths = []
@@ -214,7 +275,7 @@ def write_generated(folder: Path, files: Mapping[str, str | bytes], *, mode: int
         if stale and "/" not in stale and not stale.startswith("."):
             with contextlib.suppress(UnsafePath):  # a name now held by something else is left alone
                 remove_file(folder / stale)
-    write_atomic(record, "".join(f"{name}\n" for name in sorted(files)))
+    write_atomic(record, "".join(f"{name}\n" for name in sorted(files)), mode=mode)
     return paths
 
 

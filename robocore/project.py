@@ -21,8 +21,8 @@ if TYPE_CHECKING:
     from robocore.config.model import Component, Host, Robot
 
 #: The folders robocore writes directly under ``.robocore/`` (checked for links before a task writes).
-STATE_FOLDERS = ("build", "cache", "compose", "dds", "desktop", "history", "home", "releases", "shell", "sync",
-                 "test-results", "test-runs", "x11")
+STATE_FOLDERS = ("build", "cache", "compose", "dds", "desktop", "history", "home", "noop", "releases", "shell",
+                 "sync", "test-results", "test-runs", "x11")
 #: Inside a component's build folder: the state of its last successful build (package hashes, files, copies).
 BUILD_STATE = ".robocore-build.json"
 #: Inside a component's build folder: the state of its last successful build on its host (``builds_here``).

@@ -31,7 +31,7 @@ from robocore.commands.state import read_build_state, write_build_state
 from robocore.commands.workspace import check_workspace, selected_components, wheels_cmake_packages, workspace_files
 from robocore.config.model import Component
 from robocore.errors import BuildError, UnsafePath, UsageError
-from robocore.files import check_no_links, make_folder, read_project_file, remove_tree, write_atomic
+from robocore.files import SHARED, check_no_links, make_folder, read_project_file, remove_tree, write_atomic
 from robocore.plan import arches, cmake_packages, colcon, dockerfiles, install_patch, naming
 from robocore.plan.inputs import FileDigest, digest_bytes, tree_hash
 from robocore.plan.remote_build import builds_on_host
@@ -192,8 +192,8 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callabl
     if plan.clean:  # CMake would keep the other arch's objects (same compiler path, older sources)
         for sub in ("build", "install"):
             remove_tree(plan.out / sub)
-    for sub in ("build", "install", "log"):
-        make_folder(plan.out / sub)  # mounted into the container: a link here would let colcon write elsewhere
+    for sub in ("build", "install", "log"):  # mounted into the container: a link here would let colcon write elsewhere
+        make_folder(plan.out / sub, shared=sub == "install")  # the install tree is sent to hosts and read there
     uid, gid = os.getuid(), os.getgid()
     if plan.ccache is not None:
         make_folder(plan.ccache)
@@ -232,7 +232,7 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callabl
                              hint=f"fix it in {plan.component.folder}, then run build --component {name}")
         tail = "\n".join(f"  {line}" for line in other[-20:])
         raise BuildError(f"component {name}: colcon build exited {code}\n{tail}")
-    write_atomic(plan.out / "install" / arches.INSTALL_ARCH_FILE, plan.arch + "\n")
+    write_atomic(plan.out / "install" / arches.INSTALL_ARCH_FILE, plan.arch + "\n", mode=SHARED)  # sent with the tree
     record_build(plan)
     built = [e.package for e in events if e.state == "finished"]
     return Outcome(what=name, role="build", action="built", reason=plan.reason, image_id=plan.image_id,

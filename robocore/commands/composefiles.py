@@ -6,7 +6,7 @@ from pathlib import Path
 
 from robocore.commands.displays import ensure_desktop_password
 from robocore.commands.state import with_local_build
-from robocore.files import PRIVATE, write_generated
+from robocore.files import PRIVATE, SHARED, write_generated
 from robocore.plan import compose, discovery
 from robocore.plan.containers import host_specs
 from robocore.project import Project
@@ -17,7 +17,7 @@ def write_dds_profiles(project: Project) -> list[Path]:
     (only those: :func:`~robocore.files.write_generated`); return the paths."""
     files = discovery.for_robot(project.robot).files()
     # the folder is made even when the kind has no files: every component mounts it
-    return write_generated(project.dds_dir, files)
+    return write_generated(project.dds_dir, files, mode=SHARED)  # read in containers, maybe by another user
 
 
 def write_compose_files(project: Project, *, tag: str | None = None) -> list[Path]:

@@ -30,7 +30,7 @@ from robocore.commands.host_build import fetch_install
 from robocore.commands.machine import check_emulation, native_arch
 from robocore.commands.reporting import Reporter
 from robocore.errors import DockerError, ToolMissing, UsageError
-from robocore.files import make_folder, remove_tree, write_atomic
+from robocore.files import PRIVATE, SHARED, make_folder, remove_tree, write_atomic
 from robocore.plan import devshell as plan
 from robocore.plan import discovery, naming
 from robocore.plan.gui import X11_SOCKETS
@@ -224,9 +224,9 @@ def _write_files(project: Project, spec: plan.ShellSpec) -> None:
     folder = project.shell_dir
     source = resources.files("robocore.resources").joinpath("shell")
     for name in plan.SHELL_FILES:
-        write_atomic(folder / name, source.joinpath(name).read_bytes(), mode=0o644)
+        write_atomic(folder / name, source.joinpath(name).read_bytes(), mode=SHARED)
     for name, text in discovery.for_robot(project.robot).files().items():
-        write_atomic(project.dds_dir / name, text)
+        write_atomic(project.dds_dir / name, text, mode=SHARED)
     owner = (spec.uid, spec.gid)
     for mount in spec.mounts:
         src = Path(mount.source)
@@ -326,8 +326,8 @@ def _wait_ready(container: Container, spec: plan.ShellSpec) -> None:
 def _container_lock(project: Project, name: str) -> Iterator[None]:
     """Serialise "find or create, then start a session" against "last session left, remove"."""
     folder = project.shell_dir
-    make_folder(folder)
-    fd = os.open(folder / f".{name}.lock", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, 0o666)
+    make_folder(folder, shared=True)
+    fd = os.open(folder / f".{name}.lock", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, PRIVATE)
     with os.fdopen(fd, "a+b") as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
         try:

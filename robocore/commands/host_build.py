@@ -29,6 +29,7 @@ from robocore.commands.reporting import Outcome, Reporter
 from robocore.commands.state import read_build_state, write_build_state
 from robocore.config.model import Component, Host
 from robocore.errors import BuildError, HostError, RobocoreError
+from robocore.files import make_folder
 from robocore.plan import arches, colcon, naming
 from robocore.plan import remote_build as plan
 from robocore.plan.sync import LOCK_FILE
@@ -215,7 +216,7 @@ def fetch_install(project: Project, comp: Component, host: Host, report: Reporte
         report.notice(f"{why} and was not built there yet: the shell has no install tree of it")
         return
     local = project.build_dir(comp.name) / "install"
-    local.mkdir(parents=True, exist_ok=True)
+    make_folder(local, shared=True)  # read by the dev shell, whose user may be another
     where = plan.host_build(host, comp.name)
     try:
         rsync.run(host, plan.fetch_install_argv(where, host, ssh.rsh_command(host), local), timeout=1800)

@@ -9,18 +9,29 @@ would have found nothing to do and printed exactly that. Any difference takes th
 which records again when it finds nothing to do.
 
 The snapshot is stat-based and errs towards the ordinary path. Every file and folder of the
-project is listed (following symlinked folders, so a change inside one is seen; only
-``.git`` and these memos left out: robocore's own records in ``.robocore`` count, so a removed
+project is listed (following symlinked folders that stay inside the project, so a change inside one is seen;
+only ``.git`` and these memos left out: robocore's own records in ``.robocore`` count, so a removed
 install tree or build record is seen) with its type, mode, size, inode, modification and change times (a folder
 by its entries), and each symlink's target; a touched file whose content is identical differs, so the ordinary path
-runs, hashes its content, finds nothing to do and records the new snapshot. A file modified less
-than :data:`RACY_SECONDS` before the run is not trusted (a second edit within the clock's
-granularity could keep its times), so no memo is written then. Only plain command lines are
-memoised (the task name, ``--quiet`` and ``--component``), on a local unix-socket daemon.
+runs, hashes its content, finds nothing to do and records the new snapshot. The walk never leaves the project:
+a symlink to a folder outside it makes the project unmemoisable (the ordinary path runs, and refuses the link
+or, where robot.yaml allows it, reads through it).
+
+A file changed less than :data:`RACY_SECONDS` before the run is "racily clean" (git's term): a second edit within
+the file system's time granularity could keep every time the snapshot holds. Such files are hashed, the memo
+keeps their hashes, and every replay hashes them again, so a memo is written and answers at any file age and a
+second edit within one tick is still seen.
+
+A memo file is believed only when it can be trusted: reached without a link, a regular file of this user that no
+one else may write (in folders likewise), at most :data:`MAX_MEMO_BYTES`, its checksum matching, its snapshot
+(which names the project's path and every file's inode and change time) equal to a fresh one. Anything else is
+dropped. Only plain command lines are memoised (the task name, ``--quiet`` and ``--component``), on a local
+unix-socket daemon.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import json
@@ -39,8 +50,14 @@ TASKS = {"validate": False, "stage": True, "build": True}
 PLAIN_FLAGS = {"--quiet": False, "-q": False, "--component": True, "-c": True}
 #: Project folders left out of the snapshot: these memos, and git's own.
 SKIPPED = (".robocore/noop", ".git")
-#: A file modified this recently is not trusted to show its next change in its times.
+#: A file changed this recently is not trusted to show its next change in its times (the coarsest file system
+#: clock, FAT's, ticks every 2 s): its content is hashed into the memo.
 RACY_SECONDS = 2.0
+#: Young files hashed for one snapshot at most, by count and by bytes; past either, no memo (the ordinary path).
+MAX_YOUNG_FILES = 2000
+MAX_YOUNG_BYTES = 64 << 20
+#: A memo file larger than this is neither read nor written (a recorded output that long is not worth replaying).
+MAX_MEMO_BYTES = 8 << 20
 #: The environment that can change what a task does or prints.
 ENVIRONMENT = ("DOCKER_HOST", "DOCKER_CONTEXT", "DOCKER_CONFIG", "NO_COLOR", "FORCE_COLOR", "TERM", "COLUMNS",
                "LINES", "HOME", "PATH", "SSH_AUTH_SOCK")
@@ -51,13 +68,20 @@ DISABLE = "ROBOCORE_NO_MEMO"
 
 
 class Snapshot:
-    """What a task's result depends on, as a digest, and the newest modification time seen.
+    """What a task's result depends on: a digest of every entry's stat, and the content hashes of the young files.
 
     (Plain classes here: importing dataclasses costs more than this whole module's work.)"""
 
-    def __init__(self, digest: str, newest: float) -> None:
+    def __init__(self, digest: str, young: dict[str, str]) -> None:
         self.digest = digest
-        self.newest = newest
+        #: Relative path (``:robocore/...`` for robocore's own code) -> content hash, for every file changed since
+        #: the snapshot's threshold (git's "racily clean" entries: their times alone cannot show a second change).
+        self.young = young
+
+
+class Untrusted(Exception):
+    """The project cannot be snapshotted safely (a link to a folder outside it, too many young files to hash):
+    no memo is read or written, the ordinary path runs."""
 
 
 def _stat_row(rel: str, st: os.stat_result, link: str | None) -> str:
@@ -67,47 +91,105 @@ def _stat_row(rel: str, st: os.stat_result, link: str | None) -> str:
             f"{st.st_ctime_ns}\0{link or ''}\n")
 
 
-def tree_rows(root: Path, skipped: Sequence[str] = ()) -> Iterator[tuple[str, os.stat_result]]:
-    """``(relative path, lstat)`` of every entry under ``root``, following symlinked folders (each folder once);
-    ``skipped`` folders (relative paths) and Python's ``__pycache__`` folders are left out."""
+def _inside(real: str, boundary: str) -> bool:
+    return real == boundary or real.startswith(boundary.rstrip("/") + "/")
+
+
+def tree_rows(root: Path, skipped: Sequence[str] = (), *, boundary: Path | None = None,
+              ) -> Iterator[tuple[str, os.stat_result, str | None, os.stat_result | None]]:
+    """``(relative path, lstat, link target or None, stat or None when broken)`` of every entry under ``root``,
+    each folder once; ``skipped`` entries (relative paths) and Python's ``__pycache__`` folders are left out.
+
+    Symlinked folders are walked when they resolve inside ``boundary`` (the project; None: anywhere). A symlink
+    resolving to a folder outside it raises :class:`Untrusted` at once: the walk never leaves the project, and a
+    link to a huge tree costs one ``realpath``. A symlink to anything else outside is listed with its target's
+    stat (metadata only: nothing outside is opened)."""
+    fence = None if boundary is None else os.path.realpath(boundary)
     seen: set[tuple[int, int]] = set()
-    for here, dirs, files in os.walk(root, followlinks=True):
-        base = Path(here)
-        key = os.stat(here)
+    pending = [(str(root), "")]
+    while pending:
+        folder, prefix = pending.pop()
+        key = os.stat(folder)
         if (key.st_dev, key.st_ino) in seen:
-            dirs[:] = []
             continue
         seen.add((key.st_dev, key.st_ino))
-        dirs[:] = sorted(d for d in dirs
-                         if d != "__pycache__" and (base / d).relative_to(root).as_posix() not in skipped)
-        for name in [*dirs, *sorted(files)]:
-            path = base / name
-            rel = path.relative_to(root).as_posix()
-            yield rel, os.lstat(path)
+        with os.scandir(folder) as listing:
+            names = sorted(entry.name for entry in listing)
+        below = []
+        for name in names:
+            rel = prefix + name
+            if name == "__pycache__" or rel in skipped:
+                continue
+            path = os.path.join(folder, name)
+            lst = os.lstat(path)
+            link = None
+            st: os.stat_result | None = lst
+            if stat.S_ISLNK(lst.st_mode):
+                link = os.readlink(path)
+                try:
+                    st = os.stat(path)
+                except OSError:
+                    st = None
+                if st is not None and stat.S_ISDIR(st.st_mode):
+                    if fence is not None and not _inside(os.path.realpath(path), fence):
+                        raise Untrusted(f"{rel}: a symlink to a folder outside the project")
+                    below.append((path, rel + "/"))
+            elif stat.S_ISDIR(lst.st_mode):
+                below.append((path, rel + "/"))
+            yield rel, lst, link, st
+        pending.extend(reversed(below))
 
 
-def _tree_digest(root: Path, skipped: Sequence[str], into: hashlib._Hash) -> float:
-    newest = 0.0
+def _hash_file(path: str, budget: list[int]) -> str:
+    """The sha256 of the regular file at ``path`` (never blocking on a FIFO); ``budget`` holds the bytes still
+    allowed, and :class:`Untrusted` is raised past it."""
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        return "not-a-file"
+    with os.fdopen(fd, "rb") as handle:
+        digest = hashlib.sha256()
+        while chunk := handle.read(1 << 20):
+            budget[0] -= len(chunk)
+            if budget[0] < 0:
+                raise Untrusted("too many bytes changed in the last seconds to hash")
+            digest.update(chunk)
+        return digest.hexdigest()
+
+
+def _tree_digest(root: Path, skipped: Sequence[str], into: hashlib._Hash, *, boundary: Path | None = None,
+                 young_after: float | None = None, young: dict[str, str] | None = None, tag: str = "",
+                 budget: list[int] | None = None) -> None:
     into.update(_stat_row(".", os.stat(root), None).encode())
-    for rel, lst in tree_rows(root, skipped):
-        link = None
+    fence = os.path.realpath(boundary) if boundary is not None else None
+    budget = [MAX_YOUNG_BYTES] if budget is None else budget
+    for rel, lst, link, target in tree_rows(root, skipped, boundary=boundary):
+        if rel == ".robocore" and stat.S_ISDIR(lst.st_mode):
+            continue  # made with the first memo: its entries count, its own row would spoil that memo
         st = lst
-        if stat.S_ISLNK(lst.st_mode):
-            link = os.readlink(root / rel)
-            try:
-                st = os.stat(root / rel)
-            except OSError:
+        if link is not None:
+            if target is None:
                 link += "\0broken"
+            else:
+                st = target
             into.update(_stat_row(rel + "\0lstat", lst, link).encode())
         into.update(_stat_row(rel, st, link).encode())
-        if not stat.S_ISDIR(st.st_mode):
-            newest = max(newest, st.st_mtime, st.st_ctime)
-    return newest
+        if young is None or young_after is None or not stat.S_ISREG(st.st_mode):
+            continue
+        if max(st.st_mtime, st.st_ctime, lst.st_ctime) < young_after:
+            continue
+        path = os.path.join(root, rel)
+        if link is not None and fence is not None and not _inside(os.path.realpath(path), fence):
+            raise Untrusted(f"{rel}: a symlink to a file outside the project, changed in the last seconds")
+        if len(young) >= MAX_YOUNG_FILES:
+            raise Untrusted("too many files changed in the last seconds to hash")
+        young[tag + rel] = _hash_file(path, budget)
 
 
 def folders_digest(folders: Sequence[Path]) -> str:
-    """A digest of every entry of ``folders`` (as the memo's snapshot lists them; a missing folder counts as
-    missing): any save, even of identical content, changes it. The dev loop watches with it."""
+    """A digest of every entry of ``folders`` (as the memo's snapshot lists them, symlinked folders followed; a
+    missing folder counts as missing): any save, even of identical content, changes it. The dev loop watches
+    with it."""
     digest = hashlib.sha256()
     for folder in folders:
         digest.update(f"{folder}\0".encode())
@@ -118,15 +200,27 @@ def folders_digest(folders: Sequence[Path]) -> str:
     return digest.hexdigest()
 
 
-def snapshot(project: Path, *, images: bool, environ: dict[str, str] | None = None) -> Snapshot | None:
+def _code_root() -> Path:
+    return Path(__file__).resolve().parents[1]
+
+
+def snapshot(project: Path, *, images: bool, environ: dict[str, str] | None = None,
+             young_after: float | None = None) -> Snapshot | None:
     """The snapshot of ``project``, robocore's code and (with ``images``) the local robocore-built images;
-    None when the images cannot be asked for (the ordinary path then runs)."""
+    None when the images cannot be asked for (the ordinary path then runs). Files changed at or after
+    ``young_after`` (default: :data:`RACY_SECONDS` ago) are hashed into :attr:`Snapshot.young`. Raises
+    :class:`Untrusted` for a project whose walk would leave it through a link."""
     env = dict(os.environ if environ is None else environ)
+    threshold = time.time() - RACY_SECONDS if young_after is None else young_after
     digest = hashlib.sha256()
-    digest.update(json.dumps([sys.executable, sys.version, [env.get(k) for k in ENVIRONMENT],
+    digest.update(json.dumps([str(project), sys.executable, sys.version, [env.get(k) for k in ENVIRONMENT],
                               sys.stdout.isatty(), sys.stderr.isatty()]).encode())
-    newest = _tree_digest(project, SKIPPED, digest)
-    _tree_digest(Path(__file__).resolve().parents[1], (), digest)
+    young: dict[str, str] = {}
+    budget = [MAX_YOUNG_BYTES]
+    _tree_digest(project, SKIPPED, digest, boundary=project, young_after=threshold, young=young, budget=budget)
+    code = _code_root()
+    _tree_digest(code, (), digest, boundary=code, young_after=threshold, young=young, tag=":robocore/",
+                 budget=budget)
     if images:
         from robocore.adapters import docker_socket
 
@@ -134,7 +228,38 @@ def snapshot(project: Path, *, images: bool, environ: dict[str, str] | None = No
         if found is None:
             return None
         digest.update(found.encode())
-    return Snapshot(digest=digest.hexdigest(), newest=newest)
+    return Snapshot(digest=digest.hexdigest(), young=young)
+
+
+def _young_now(project: Path, rel: str) -> str | None:
+    """The content hash of a file the memo recorded as young, now (None when it cannot be read as a file)."""
+    root = _code_root() if rel.startswith(":robocore/") else project
+    path = root / rel.removeprefix(":robocore/")
+    try:
+        if not _inside(os.path.realpath(path), os.path.realpath(root)):
+            return None  # a memo naming a file outside (forged): nothing outside is read
+        return _hash_file(str(path), [MAX_YOUNG_BYTES])
+    except (OSError, Untrusted):
+        return None
+
+
+def seal(document: Mapping[str, object]) -> str:
+    """The text of a memo file: a checksum line, then ``document`` as JSON. A memo whose checksum does not match
+    (edited, truncated, half-written) is dropped."""
+    text = json.dumps(document, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest() + "\n" + text
+
+
+def unseal(data: bytes) -> dict[str, object] | None:
+    """The document of a memo file's bytes, None unless its checksum matches and it is a JSON object."""
+    head, _, body = data.partition(b"\n")
+    if hashlib.sha256(body).hexdigest().encode() != head:
+        return None
+    try:
+        document = json.loads(body)
+    except ValueError:
+        return None
+    return document if isinstance(document, dict) else None
 
 
 def command(args: Sequence[str], cwd: Path, tasks: Collection[str] = tuple(TASKS),
@@ -155,12 +280,12 @@ def command(args: Sequence[str], cwd: Path, tasks: Collection[str] = tuple(TASKS
     i = 0
     while i < len(given):
         flag = given[i]
-        if flag.startswith("--") and "=" in flag and flags.get(flag.split("=", 1)[0]):
+        if flag.startswith("--") and "=" in flag and flags.get(flag.split("=", 1)[0]) and flag.split("=", 1)[1]:
             i += 1
-        elif flag in flags:
+        elif flag in flags and (not flags[flag] or (i + 1 < len(given) and given[i + 1])):
             i += 2 if flags[flag] else 1
         else:
-            return None
+            return None  # an unknown flag, or an empty value: the ordinary path says what is wrong
     if i != len(given):
         return None
     project = (cwd / project).absolute()
@@ -186,35 +311,75 @@ class Memo:
     @property
     def path(self) -> Path:
         """``.robocore/noop/<task>-<hash of the command line>.json``."""
-        key = hashlib.sha256("\0".join(self.line).encode()).hexdigest()[:16]
+        key = hashlib.sha256("\0".join(self.line).encode(errors="surrogateescape")).hexdigest()[:16]
         return self.project / ".robocore" / "noop" / f"{self.task}-{key}.json"
 
     def take(self) -> Snapshot | None:
-        """A snapshot of what this task depends on; None when one cannot be taken (a file vanished or is
-        unreadable while listed: the ordinary path then runs, and reports what it finds)."""
+        """A snapshot of what this task depends on, files changed since :data:`RACY_SECONDS` before the command
+        started hashed; None when one cannot be taken (a file vanished or is unreadable while listed, a link
+        leaves the project: the ordinary path then runs, and reports what it finds)."""
         try:
-            return snapshot(self.project, images=TASKS.get(self.task, False))
-        except (OSError, ValueError):
+            return snapshot(self.project, images=TASKS.get(self.task, False),
+                            young_after=self.started - RACY_SECONDS)
+        except (OSError, ValueError, Untrusted):
             return None
 
     def begin(self) -> None:
         """Take the snapshot before the ordinary run (its "before"), which :meth:`keep` compares with the one after."""
         self.before = self.take()
 
+    def exists(self) -> bool:
+        """Whether anything is at the memo's name (a quick look before a snapshot is worth taking)."""
+        try:
+            return os.path.lexists(self.path)
+        except ValueError:
+            return False
+
+    def _recorded(self) -> dict[str, object] | None:
+        """The memo file's document when it can be trusted: no link on the way from the project or at it, a
+        regular file of this user that no one else may write, in folders of this user that no one else may write,
+        at most :data:`MAX_MEMO_BYTES`, its checksum matching. Anything else there is dropped (removed as a
+        name, never followed), so the next ordinary run writes a good one."""
+        from robocore.errors import UnsafePath
+        from robocore.files import check_no_links, is_private, read_own_file
+
+        path = self.path
+        try:
+            check_no_links(path.parent, anchor=self.project)  # a link at the memo's name itself is dropped
+            folders_ok = all(is_private(os.lstat(p)) for p in (path.parent.parent, path.parent))
+        except FileNotFoundError:
+            return None
+        except (OSError, UnsafePath):
+            return None  # a linked state folder: the ordinary path refuses it in one line
+        data = read_own_file(path, limit=MAX_MEMO_BYTES, private=True) if folders_ok else None
+        document = unseal(data) if data is not None else None
+        if document is None and folders_ok:
+            self.drop()
+        return document
+
+    def drop(self) -> None:
+        """Remove whatever is at the memo's name (a link as a link), when its folders are robocore's own."""
+        from robocore.errors import UnsafePath
+        from robocore.files import remove_file
+
+        with contextlib.suppress(OSError, UnsafePath):
+            remove_file(self.path, any_kind=True)
+
     def current(self) -> dict[str, object] | None:
         """The recorded document when nothing changed since it was recorded, else None; either way the snapshot
-        taken is kept (the ordinary run's "before")."""
-        try:
-            text = self.path.read_text(encoding="utf-8")
-        except OSError:
-            text = None
+        taken is kept (the ordinary run's "before"). A file the memo recorded as young (changed within
+        :data:`RACY_SECONDS` of its recording) is hashed again: its times alone cannot show a second change."""
+        recorded = self._recorded() if self.exists() else None
         self.begin()
-        try:
-            recorded = json.loads(text) if text is not None else None
-        except ValueError:
+        if self.before is None or recorded is None or recorded.get("snapshot") != self.before.digest:
             return None
-        if self.before is None or not isinstance(recorded, dict) or recorded.get("snapshot") != self.before.digest:
+        young = recorded.get("young")
+        if not isinstance(young, dict):
             return None
+        for rel, digest in young.items():
+            now = self.before.young.get(rel) or _young_now(self.project, rel)
+            if now is None or now != digest:
+                return None
         return recorded
 
     def replay(self, out: TextIO, err: TextIO) -> bool:
@@ -229,20 +394,27 @@ class Memo:
 
     def record(self, stdout: str, stderr: str) -> bool:
         """After a successful ordinary run: write the memo when the run changed nothing (the snapshot after
-        equals the one before) and no file is too recent to trust. True when written."""
+        equals the one before, young files' contents included). True when written."""
         return self.keep({"stdout": stdout, "stderr": stderr})
 
     def keep(self, content: dict[str, object]) -> bool:
-        """:meth:`record` with any JSON ``content``: written beside the snapshot under the same conditions."""
-        after = self.take()
-        if self.before is None or after is None or after.digest != self.before.digest:
-            return False
-        if after.newest > self.started - RACY_SECONDS:
-            return False
-        from robocore.files import write_atomic
+        """:meth:`record` with any JSON ``content``: written beside the snapshot under the same conditions, as a
+        private file (0600 in a 0700 folder) whatever the umask. Never raises for a memo that cannot be written
+        (a linked folder, a full disk): the next run takes the ordinary path, which reports what it finds."""
+        from robocore.errors import RobocoreError
+        from robocore.files import PRIVATE, write_atomic
 
-        document = {"snapshot": after.digest, **content}
-        write_atomic(self.path, json.dumps(document))
+        after = self.take()
+        before = self.before
+        if before is None or after is None or after.digest != before.digest or after.young != before.young:
+            return False
+        text = seal({"snapshot": after.digest, "young": after.young, **content})
+        if len(text.encode()) > MAX_MEMO_BYTES:
+            return False
+        try:
+            write_atomic(self.path, text, mode=PRIVATE)
+        except (OSError, RobocoreError):
+            return False
         return True
 
 

@@ -226,7 +226,7 @@ def _run(project: Project, plan: ComponentTests, report: Reporter,
 
     name = plan.component.name
     for sub in ("build", "install", "log"):
-        make_folder(plan.out / sub)
+        make_folder(plan.out / sub, shared=sub == "install")  # as build makes them: the install tree is sent to hosts
     clear_results(plan)
     events: list[colcon.PackageEvent] = []
     other: list[str] = []

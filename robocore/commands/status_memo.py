@@ -58,7 +58,7 @@ def answer(argv: Sequence[str]) -> bool:
     """Print the status of an unchanged all-local project from its memo and the daemon; True when done, False
     when the ordinary path must run (nothing printed then)."""
     memo = memo_for(argv)
-    if memo is None or not memo.path.is_file():
+    if memo is None or not memo.exists():
         return False
     recorded = memo.current()
     plan = _plan(recorded) if recorded is not None else None

@@ -154,7 +154,10 @@ def _project_files(project: Project, host: Host, comp: Component, *, dry_run: bo
     if _farm_links(farm) != links:  # made anew only when it changes: its folders' times are in the digest
         remove_tree(farm, ignore_errors=True)
         for rel, real in links.items():
-            make_folder((farm / rel).parent)
+            folder = farm
+            for part in ("", *Path(rel).parent.parts):  # sent as they are to the host and read there: 0755
+                folder = folder / part if part else folder
+                make_folder(folder, shared=True)
             (farm / rel).symlink_to(real)
     return plan.Source(farm, layout.FILES, follow=True) if links else None
 

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from robocore.errors import RobocoreError
-from robocore.files import make_folder, remove_tree, write_atomic
+from robocore.files import SHARED, make_folder, remove_tree, write_atomic
 from robocore.plan import discovery, naming, testrun
 from robocore.plan.containers import ContainerSpec
 from robocore.plan.testrun import TestRun
@@ -398,11 +398,11 @@ def _start(robot: RobotUnderTest, source: Project, *, servers: bool) -> None:
         addresses[host] = _address(wrapper, run.network)
     robot.project = Project(root=source.root, robot=testrun.isolated_robot(source.robot, addresses, run.domain_id))
     dds_dir = robot.run_dir / "dds"
-    make_folder(dds_dir)
+    make_folder(dds_dir, shared=True)  # mounted into the run's containers, whose user may be another
     kind = discovery.for_robot(robot.project.robot)
     for name, text in kind.files().items():
-        write_atomic(dds_dir / name, text)
-    write_atomic(robot.run_dir / "probe.xml", testrun.probe_profile(robot.project.robot))
+        write_atomic(dds_dir / name, text, mode=SHARED)
+    write_atomic(robot.run_dir / "probe.xml", testrun.probe_profile(robot.project.robot), mode=SHARED)
     if servers:
         for spec in testrun.server_specs(run, robot.project, str(dds_dir)):
             for volume in (m.source for m in spec.mounts if m.is_named_volume):

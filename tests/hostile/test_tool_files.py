@@ -60,9 +60,9 @@ def test_the_umask_is_read_without_changing_it() -> None:
         os.umask(old)
 
 
-@pytest.mark.parametrize("umask, expected", [(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)])
-def test_write_atomic_gives_new_files_the_umasks_mode(umask: int, expected: int, tmp_path: Path,
-                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.parametrize("umask, expected", [(0o022, 0o644), (0o077, 0o600), (0o002, 0o644), (0o000, 0o644)])
+def test_write_atomic_gives_new_files_outside_the_state_folder_the_umasks_mode(
+        umask: int, expected: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(files, "UMASK", umask)
 
     def no_umask(_: int) -> int:
@@ -92,7 +92,7 @@ def test_compose_files_holding_environment_values_are_private(tmp_path: Path, mo
     assert {p.name for p in paths} == {"dev.yaml", "pi.yaml"}
     assert "secret-value" in project.compose_file("pi").read_text()
     assert all(mode(p) == 0o600 for p in paths)
-    assert mode(project.state_dir / "dds" / "super_client.xml") == 0o664  # no secrets: the umask decides
+    assert mode(project.state_dir / "dds" / "super_client.xml") == 0o644  # read in containers: SHARED, not 0664
     project.compose_file("pi").chmod(0o644)  # written by an older robocore
     write_compose_files(project)
     assert mode(project.compose_file("pi")) == 0o600
