@@ -36,13 +36,14 @@ import hashlib
 import io
 import json
 import os
-import stat
 import sys
 import time
 from collections.abc import Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TextIO
+
+from robocore.commands.trees import MAX_YOUNG_BYTES, Snapshot, Untrusted, hash_file, inside, tree_digest
 
 #: Tasks whose no-op is memoised, and whether their result depends on the local images.
 TASKS = {"validate": False, "stage": True, "build": True}
@@ -53,9 +54,6 @@ SKIPPED = (".robocore/noop", ".git")
 #: A file changed this recently is not trusted to show its next change in its times (the coarsest file system
 #: clock, FAT's, ticks every 2 s): its content is hashed into the memo.
 RACY_SECONDS = 2.0
-#: Young files hashed for one snapshot at most, by count and by bytes; past either, no memo (the ordinary path).
-MAX_YOUNG_FILES = 2000
-MAX_YOUNG_BYTES = 64 << 20
 #: A memo file larger than this is neither read nor written (a recorded output that long is not worth replaying).
 MAX_MEMO_BYTES = 8 << 20
 #: The environment that can change what a task does or prints.
@@ -67,125 +65,6 @@ IMAGES_LABEL = "dev.robocore.inputs"
 DISABLE = "ROBOCORE_NO_MEMO"
 
 
-class Snapshot:
-    """What a task's result depends on: a digest of every entry's stat, and the content hashes of the young files.
-
-    (Plain classes here: importing dataclasses costs more than this whole module's work.)"""
-
-    def __init__(self, digest: str, young: dict[str, str]) -> None:
-        self.digest = digest
-        #: Relative path (``:robocore/...`` for robocore's own code) -> content hash, for every file changed since
-        #: the snapshot's threshold (git's "racily clean" entries: their times alone cannot show a second change).
-        self.young = young
-
-
-class Untrusted(Exception):
-    """The project cannot be snapshotted safely (a link to a folder outside it, too many young files to hash):
-    no memo is read or written, the ordinary path runs."""
-
-
-def _stat_row(rel: str, st: os.stat_result, link: str | None) -> str:
-    if stat.S_ISDIR(st.st_mode):  # a folder's own times and size only repeat what the rows of its entries say
-        return f"{rel}\0{st.st_mode}\0{st.st_ino}\0{st.st_dev}\0{link or ''}\n"
-    return (f"{rel}\0{st.st_mode}\0{st.st_size}\0{st.st_ino}\0{st.st_dev}\0{st.st_mtime_ns}\0"
-            f"{st.st_ctime_ns}\0{link or ''}\n")
-
-
-def _inside(real: str, boundary: str) -> bool:
-    return real == boundary or real.startswith(boundary.rstrip("/") + "/")
-
-
-def tree_rows(root: Path, skipped: Sequence[str] = (), *, boundary: Path | None = None,
-              ) -> Iterator[tuple[str, os.stat_result, str | None, os.stat_result | None]]:
-    """``(relative path, lstat, link target or None, stat or None when broken)`` of every entry under ``root``,
-    each folder once; ``skipped`` entries (relative paths) and Python's ``__pycache__`` folders are left out.
-
-    Symlinked folders are walked when they resolve inside ``boundary`` (the project; None: anywhere). A symlink
-    resolving to a folder outside it raises :class:`Untrusted` at once: the walk never leaves the project, and a
-    link to a huge tree costs one ``realpath``. A symlink to anything else outside is listed with its target's
-    stat (metadata only: nothing outside is opened)."""
-    fence = None if boundary is None else os.path.realpath(boundary)
-    seen: set[tuple[int, int]] = set()
-    pending = [(str(root), "")]
-    while pending:
-        folder, prefix = pending.pop()
-        key = os.stat(folder)
-        if (key.st_dev, key.st_ino) in seen:
-            continue
-        seen.add((key.st_dev, key.st_ino))
-        with os.scandir(folder) as listing:
-            names = sorted(entry.name for entry in listing)
-        below = []
-        for name in names:
-            rel = prefix + name
-            if name == "__pycache__" or rel in skipped:
-                continue
-            path = os.path.join(folder, name)
-            lst = os.lstat(path)
-            link = None
-            st: os.stat_result | None = lst
-            if stat.S_ISLNK(lst.st_mode):
-                link = os.readlink(path)
-                try:
-                    st = os.stat(path)
-                except OSError:
-                    st = None
-                if st is not None and stat.S_ISDIR(st.st_mode):
-                    if fence is not None and not _inside(os.path.realpath(path), fence):
-                        raise Untrusted(f"{rel}: a symlink to a folder outside the project")
-                    below.append((path, rel + "/"))
-            elif stat.S_ISDIR(lst.st_mode):
-                below.append((path, rel + "/"))
-            yield rel, lst, link, st
-        pending.extend(reversed(below))
-
-
-def _hash_file(path: str, budget: list[int]) -> str:
-    """The sha256 of the regular file at ``path`` (never blocking on a FIFO); ``budget`` holds the bytes still
-    allowed, and :class:`Untrusted` is raised past it."""
-    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
-    if not stat.S_ISREG(os.fstat(fd).st_mode):
-        os.close(fd)
-        return "not-a-file"
-    with os.fdopen(fd, "rb") as handle:
-        digest = hashlib.sha256()
-        while chunk := handle.read(1 << 20):
-            budget[0] -= len(chunk)
-            if budget[0] < 0:
-                raise Untrusted("too many bytes changed in the last seconds to hash")
-            digest.update(chunk)
-        return digest.hexdigest()
-
-
-def _tree_digest(root: Path, skipped: Sequence[str], into: hashlib._Hash, *, boundary: Path | None = None,
-                 young_after: float | None = None, young: dict[str, str] | None = None, tag: str = "",
-                 budget: list[int] | None = None) -> None:
-    into.update(_stat_row(".", os.stat(root), None).encode())
-    fence = os.path.realpath(boundary) if boundary is not None else None
-    budget = [MAX_YOUNG_BYTES] if budget is None else budget
-    for rel, lst, link, target in tree_rows(root, skipped, boundary=boundary):
-        if rel == ".robocore" and stat.S_ISDIR(lst.st_mode):
-            continue  # made with the first memo: its entries count, its own row would spoil that memo
-        st = lst
-        if link is not None:
-            if target is None:
-                link += "\0broken"
-            else:
-                st = target
-            into.update(_stat_row(rel + "\0lstat", lst, link).encode())
-        into.update(_stat_row(rel, st, link).encode())
-        if young is None or young_after is None or not stat.S_ISREG(st.st_mode):
-            continue
-        if max(st.st_mtime, st.st_ctime, lst.st_ctime) < young_after:
-            continue
-        path = os.path.join(root, rel)
-        if link is not None and fence is not None and not _inside(os.path.realpath(path), fence):
-            raise Untrusted(f"{rel}: a symlink to a file outside the project, changed in the last seconds")
-        if len(young) >= MAX_YOUNG_FILES:
-            raise Untrusted("too many files changed in the last seconds to hash")
-        young[tag + rel] = _hash_file(path, budget)
-
-
 def folders_digest(folders: Sequence[Path]) -> str:
     """A digest of every entry of ``folders`` (as the memo's snapshot lists them, symlinked folders followed; a
     missing folder counts as missing): any save, even of identical content, changes it. The dev loop watches
@@ -194,7 +73,7 @@ def folders_digest(folders: Sequence[Path]) -> str:
     for folder in folders:
         digest.update(f"{folder}\0".encode())
         try:
-            _tree_digest(folder, SKIPPED, digest)
+            tree_digest(folder, SKIPPED, digest)
         except OSError:
             digest.update(b"\0missing")
     return digest.hexdigest()
@@ -217,9 +96,9 @@ def snapshot(project: Path, *, images: bool, environ: dict[str, str] | None = No
                               sys.stdout.isatty(), sys.stderr.isatty()]).encode())
     young: dict[str, str] = {}
     budget = [MAX_YOUNG_BYTES]
-    _tree_digest(project, SKIPPED, digest, boundary=project, young_after=threshold, young=young, budget=budget)
+    tree_digest(project, SKIPPED, digest, boundary=project, young_after=threshold, young=young, budget=budget)
     code = _code_root()
-    _tree_digest(code, (), digest, boundary=code, young_after=threshold, young=young, tag=":robocore/",
+    tree_digest(code, (), digest, boundary=code, young_after=threshold, young=young, tag=":robocore/",
                  budget=budget)
     if images:
         from robocore.adapters import docker_socket
@@ -236,9 +115,9 @@ def _young_now(project: Path, rel: str) -> str | None:
     root = _code_root() if rel.startswith(":robocore/") else project
     path = root / rel.removeprefix(":robocore/")
     try:
-        if not _inside(os.path.realpath(path), os.path.realpath(root)):
+        if not inside(os.path.realpath(path), os.path.realpath(root)):
             return None  # a memo naming a file outside (forged): nothing outside is read
-        return _hash_file(str(path), [MAX_YOUNG_BYTES])
+        return hash_file(str(path), [MAX_YOUNG_BYTES])
     except (OSError, Untrusted):
         return None
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from robocore.commands import noop, status_memo
+from robocore.commands import noop, status_memo, trees
 from robocore.files import is_private
 
 GOOD = ("ros_distro: jazzy\nhosts:\n  - name: dev\n    ip: 127.0.0.1\n    docker: local\n"
@@ -344,7 +344,7 @@ def test_young_files_are_hashed_only_while_young(tmp_path: Path) -> None:
 
 def test_too_many_young_files_write_no_memo(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     root = project(tmp_path)
-    monkeypatch.setattr(noop, "MAX_YOUNG_FILES", 1)
+    monkeypatch.setattr(trees, "MAX_YOUNG_FILES", 1)
     run = noop.Memo(root, "validate", [])
     assert not run.replay(io.StringIO(), io.StringIO())
     assert run.record("ok\n", "") is False
