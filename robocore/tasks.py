@@ -74,16 +74,29 @@ def reported(body: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
-def _require(component: str, task_name: str) -> None:
-    if not component:
+def _given(value: str | None, flag: str) -> str | None:
+    """An option's value: None when the option was not given; an empty (or blank) value is refused in one line,
+    never read as "not given" (``down --host ""`` must not mean every host)."""
+    if value is not None and not value.strip():
+        from robocore.errors import UsageError
+
+        raise UsageError(f"{flag} was given an empty value; name one (or leave {flag} out)")
+    return value
+
+
+def _require(component: str | None, task_name: str) -> str:
+    component = _given(component, "--component")
+    if component is None:
         from robocore.errors import UsageError
 
         raise UsageError(f"{task_name} needs --component NAME", hint=f"robocore {task_name} --component talker")
+    return component
 
 
-def _tag(tag: str) -> str | None:
+def _tag(tag: str | None) -> str | None:
     """``--tag``: None when not given, else a valid image tag (UsageError otherwise)."""
-    if not tag:
+    tag = _given(tag, "--tag")
+    if tag is None:
         return None
     from robocore.plan.naming import is_image_tag
 
@@ -160,14 +173,15 @@ def validate(c: Context, dry_run: bool = False, json: bool = False) -> None:
 )
 @reported
 def init(
-    c: Context, path: str, defaults: bool = False, distro: str = "", base: str = "", dry_run: bool = False,
-    source: str = "", ref: str = "",
+    c: Context, path: str, defaults: bool = False, distro: str | None = None, base: str | None = None,
+    dry_run: bool = False, source: str | None = None, ref: str | None = None,
 ) -> None:
     """Create a robot project in PATH from the copier template."""
     from robocore.commands import init as command
 
-    command.run(Path(path), defaults=defaults, distro=distro or None, base=base or None, dry_run=dry_run,
-                source=source or None, ref=ref or None)
+    command.run(Path(_given(path, "PATH") or "."), defaults=defaults, distro=_given(distro, "--distro"),
+                base=_given(base, "--base"), dry_run=dry_run, source=_given(source, "--source"),
+                ref=_given(ref, "--ref"))
 
 
 @task(help={"fleet": "The schema of the fleet file (fleet.yaml) instead of robot.yaml's."})
@@ -195,27 +209,27 @@ def prepare_base(
             "force": "Rebuild even if inputs are unchanged.", "dry_run": "Print the plan only.",
             "quiet": "Only errors.", "json": "Machine-readable result on stdout."})
 @reported
-def stage(c: Context, refresh: bool = False, component: str = "", force: bool = False,
+def stage(c: Context, refresh: bool = False, component: str | None = None, force: bool = False,
           dry_run: bool = False, quiet: bool = False, json: bool = False) -> None:
     """Build one image per component (dependencies, no user code) and write compose files."""
     from robocore.commands import component_images
 
     options = _options(c, "stage", dry_run=dry_run, quiet=quiet, json=json)
-    _execute(options, lambda: component_images.stage(options, refresh=refresh, component=component or None,
-                                                     force=force))
+    _execute(options, lambda: component_images.stage(
+        options, refresh=refresh, component=_given(component, "--component"), force=force))
 
 
 @task(help={"component": "Build only this component.", "dry_run": "Print the plan only.",
             "full": "Always run colcon, even for edits that only change files colcon copies as they are.",
             "quiet": "Only errors.", "json": "Machine-readable result on stdout."})
 @reported
-def build(c: Context, component: str = "", full: bool = False, dry_run: bool = False, quiet: bool = False,
+def build(c: Context, component: str | None = None, full: bool = False, dry_run: bool = False, quiet: bool = False,
           json: bool = False) -> None:
     """colcon-build each component's workspace inside its staged image."""
     from robocore.commands import build as command
 
     options = _options(c, "build", dry_run=dry_run, quiet=quiet, json=json)
-    _execute(options, lambda: command.build(options, component=component or None, full=full))
+    _execute(options, lambda: command.build(options, component=_given(component, "--component"), full=full))
 
 
 @task(help={"component": "Test only this component.",
@@ -224,62 +238,65 @@ def build(c: Context, component: str = "", full: bool = False, dry_run: bool = F
             "quiet": "Only errors.", "json": "Machine-readable result on stdout."},
       iterable=["packages_select"])
 @reported
-def test(c: Context, component: str = "", packages_select: list[str] | None = None, dry_run: bool = False,
+def test(c: Context, component: str | None = None, packages_select: list[str] | None = None, dry_run: bool = False,
          no_build: bool = False, quiet: bool = False, json: bool = False) -> None:
     """Build what is stale, then colcon-test each component's packages inside its staged image; one result per
     package (exit 9 on failure)."""
     from robocore.commands import package_tests
 
     options = _options(c, "test", dry_run=dry_run, quiet=quiet, json=json)
-    _execute(options, lambda: package_tests.test(options, component=component or None,
-                                                 packages=packages_select or [], build_first=not no_build))
+    _execute(options, lambda: package_tests.test(options, component=_given(component, "--component"),
+                                                 packages=[_given(p, "--packages-select") or ""
+                                                           for p in packages_select or []],
+                                                 build_first=not no_build))
 
 
 @task(help={"component": "Build and watch only this component (default: every component with a folder).",
             "dry_run": "Print the plans of build, sync and run once; watch nothing.",
             "quiet": "Only errors and one line per deploy."})
 @reported
-def dev(c: Context, component: str = "", dry_run: bool = False, quiet: bool = False) -> None:
+def dev(c: Context, component: str | None = None, dry_run: bool = False, quiet: bool = False) -> None:
     """build, sync and run, then again on every save (quick saves coalesce); a failed build leaves the robot on
     the last good release and says why in one line. Ctrl-C stops."""
     from robocore.commands import watch
 
     options = _options(c, "dev", dry_run=dry_run, quiet=quiet)
-    watch.dev(options, component=component or None)
+    watch.dev(options, component=_given(component, "--component"))
 
 
 @task(help={"host": "Sync only this host.", "dry_run": "Print the rsync commands only.", "quiet": "Only errors.",
             "json": "Machine-readable result on stdout."})
 @reported
-def sync(c: Context, host: str = "", dry_run: bool = False, quiet: bool = False, json: bool = False) -> None:
+def sync(c: Context, host: str | None = None, dry_run: bool = False, quiet: bool = False, json: bool = False) -> None:
     """Copy compiled install trees and runtime files to each host; only what changed."""
     from robocore.commands import sync as command
 
     options = _options(c, "sync", dry_run=dry_run, quiet=quiet, json=json)
-    _execute(options, lambda: command.sync(options, host=host or None))
+    _execute(options, lambda: command.sync(options, host=_given(host, "--host")))
 
 
 @task(help={"host": "Start/restart only this host.", "tag": "Deploy this released version.",
             "dry_run": "Print the container plan only.", "quiet": "Only errors.", "json": "Machine-readable result."})
 @reported
 def run(
-    c: Context, host: str = "", tag: str = "", dry_run: bool = False, quiet: bool = False, json: bool = False
+    c: Context, host: str | None = None, tag: str | None = None, dry_run: bool = False, quiet: bool = False,
+    json: bool = False,
 ) -> None:
     """(Re)start each host's containers and the discovery server."""
     from robocore.commands import run as command
 
     options = _options(c, "run", dry_run=dry_run, quiet=quiet, json=json)
-    _execute(options, lambda: command.run(options, host=host or None, tag=_tag(tag)))
+    _execute(options, lambda: command.run(options, host=_given(host, "--host"), tag=_tag(tag)))
 
 
 @task(help={"host": "Stop only this host.", "dry_run": "Print what would be removed.", "quiet": "Only errors."})
 @reported
-def down(c: Context, host: str = "", dry_run: bool = False, quiet: bool = False) -> None:
+def down(c: Context, host: str | None = None, dry_run: bool = False, quiet: bool = False) -> None:
     """Stop and remove the robot's containers."""
     from robocore.commands import run as command
 
     options = _options(c, "down", dry_run=dry_run, quiet=quiet)
-    _execute(options, lambda: command.down(options, host=host or None))
+    _execute(options, lambda: command.down(options, host=_given(host, "--host")))
 
 
 @task(help={"json": "Machine-readable output.", "dry_run": "Print what would be queried.",
@@ -297,13 +314,13 @@ def status(c: Context, json: bool = False, dry_run: bool = False, nodes: bool = 
             "tail": "Lines per container (a whole number; default 100).", "dry_run": "Print what would be read.",
             "json": "Machine-readable result on stdout (with --follow: one JSON object per line)."})
 @reported
-def logs(c: Context, component: str = "", follow: bool = False, tail: str = "100", dry_run: bool = False,
+def logs(c: Context, component: str | None = None, follow: bool = False, tail: str = "100", dry_run: bool = False,
          json: bool = False) -> None:
     """Logs of the robot's containers on all hosts, each line prefixed by its component."""
     from robocore.commands import observe
 
     options = _options(c, "logs", dry_run=dry_run, json=json)
-    _execute(options, lambda: observe.logs(options, component=component or None, follow=follow,
+    _execute(options, lambda: observe.logs(options, component=_given(component, "--component"), follow=follow,
                                            tail=_count(tail, "--tail")))
 
 
@@ -312,15 +329,16 @@ def logs(c: Context, component: str = "", follow: bool = False, tail: str = "100
             "devices": "'all' to pass every device of /dev.", "gpus": "Force GPUs on.", "no_gpus": "Force GPUs off.",
             "privileged": "Run privileged.", "dry_run": "Print the container spec only."})
 @reported
-def shell(c: Context, component: str = "", cmd: str = "", new: bool = False, devices: str = "", gpus: bool = False,
-          no_gpus: bool = False, privileged: bool = False, dry_run: bool = False) -> None:
+def shell(c: Context, component: str | None = None, cmd: str | None = None, new: bool = False,
+          devices: str | None = None, gpus: bool = False, no_gpus: bool = False, privileged: bool = False,
+          dry_run: bool = False) -> None:
     """Interactive dev container in a component's environment (source mounted, ROS sourced)."""
-    _require(component, "shell")
+    component = _require(component, "shell")
     from robocore.commands import devshell
 
     options = _options(c, "shell", dry_run=dry_run)
     code = _execute(options, lambda: devshell.run(
-        options, component=component, cmd=cmd or None, new=new, devices=devices or None,
+        options, component=component, cmd=_given(cmd, "--cmd"), new=new, devices=_given(devices, "--devices"),
         gpus=True if gpus else (False if no_gpus else None), privileged=privileged))
     if code:
         raise Exit(code=code)
@@ -329,13 +347,13 @@ def shell(c: Context, component: str = "", cmd: str = "", new: bool = False, dev
 @task(help={"component": "The component whose live container to enter (required).",
             "cmd": "Run this instead of a shell.", "dry_run": "Print what would be run."})
 @reported
-def connect(c: Context, component: str = "", cmd: str = "", dry_run: bool = False) -> None:
+def connect(c: Context, component: str | None = None, cmd: str | None = None, dry_run: bool = False) -> None:
     """Shell inside the running container of a component on its host, as a ROS super client."""
-    _require(component, "connect")
+    component = _require(component, "connect")
     from robocore.commands import observe
 
     options = _options(c, "connect", dry_run=dry_run)
-    code = _execute(options, lambda: observe.connect(options, component=component, cmd=cmd or None))
+    code = _execute(options, lambda: observe.connect(options, component=component, cmd=_given(cmd, "--cmd")))
     if code:
         raise Exit(code=code)
 
@@ -345,7 +363,8 @@ def connect(c: Context, component: str = "", cmd: str = "", dry_run: bool = Fals
                      ".robocore/releases/V.json.",
             "json": "Machine-readable result on stdout."})
 @reported
-def release(c: Context, tag: str = "", dry_run: bool = False, fleet: bool = False, json: bool = False) -> None:
+def release(c: Context, tag: str | None = None, dry_run: bool = False, fleet: bool = False,
+            json: bool = False) -> None:
     """Tag every image with a version and push it to the registry (--fleet: images a fleet runs, by digest)."""
     options = _options(c, "release", dry_run=dry_run, json=json)
     if fleet:
@@ -360,12 +379,12 @@ def release(c: Context, tag: str = "", dry_run: bool = False, fleet: bool = Fals
 
 @task(help={"host": "Only this host.", "dry_run": "Print what would be done."})
 @reported
-def rollback(c: Context, host: str = "", dry_run: bool = False) -> None:
+def rollback(c: Context, host: str | None = None, dry_run: bool = False) -> None:
     """Return each host to the version it ran before the last run."""
     from robocore.commands import release as command
 
     options = _options(c, "rollback", dry_run=dry_run)
-    _execute(options, lambda: command.rollback(options, host=host or None))
+    _execute(options, lambda: command.rollback(options, host=_given(host, "--host")))
 
 
 @task(
@@ -396,12 +415,12 @@ def export(c: Context, engine: str, path: str, tag: str = "", git_repo: str = ""
 
 @task(help={"host": "Only this host.", "json": "Machine-readable result on stdout."})
 @reported
-def doctor(c: Context, host: str = "", json: bool = False) -> None:
+def doctor(c: Context, host: str | None = None, json: bool = False) -> None:
     """Check every host: reachable, Docker version, arch, free disk, rsync."""
     from robocore.commands import doctor as command
 
     options = _options(c, "doctor", json=json)
-    _execute(options, lambda: command.doctor(options, host=host or None))
+    _execute(options, lambda: command.doctor(options, host=_given(host, "--host")))
 
 
 @task(name="desktop-password")
