@@ -123,9 +123,9 @@ def _usage_error(message: str) -> Any:
     """invoke's Exit carrying one escaped line and exit code 2 (Program.run prints it and exits)."""
     from invoke.exceptions import Exit
 
-    from robocore.ui import clean
+    from robocore.ui import bounded, clean
 
-    text = " ".join(clean(message).split("\n"))
+    text = " ".join(clean(bounded(message)).split("\n"))
     return Exit(message=f"robocore: {text} ({USAGE_HINT})", code=2)
 
 
@@ -158,7 +158,9 @@ def _one_line(step: Any) -> Any:
         except ParseError as error:
             raise _usage_error(str(error)) from None
         except ValueError as error:
-            raise _usage_error(f"a flag's value is not valid: {error}") from None
+            from robocore.ui import plain_words
+
+            raise _usage_error(f"a flag's value is not valid: {plain_words(str(error))}") from None
 
     return wrapped
 
@@ -254,15 +256,15 @@ def main(argv: Sequence[str] | None = None) -> None:
     try:
         project, rest = split_project(args, names)
     except CommandLineError as error:
-        from robocore.ui import clean
+        from robocore.ui import bounded, clean
 
-        print(f"robocore: {clean(str(error))} (robocore -p DIR TASK, robocore DIR TASK)", file=sys.stderr)
+        print(f"robocore: {clean(bounded(str(error)))} (robocore -p DIR TASK, robocore DIR TASK)", file=sys.stderr)
         sys.exit(2)
     problem = config_file_problem(rest)
     if problem is not None:
-        from robocore.ui import clean
+        from robocore.ui import bounded, clean
 
-        print(f"robocore: {clean(problem)} ({USAGE_HINT})", file=sys.stderr)
+        print(f"robocore: {clean(bounded(problem))} ({USAGE_HINT})", file=sys.stderr)
         sys.exit(2)
     # the steps that follow decide the ssh warm-up: only a real command line warms anything
     settings: dict[str, Any] = {"argv": args if argv is None else []}

@@ -62,10 +62,10 @@ def reported(body: F) -> F:
         try:
             return body(*args, **kwargs)
         except RobocoreError as error:
-            from robocore.ui import clean
+            from robocore.ui import bounded, clean
 
             for line in error.lines():
-                print(clean(f"error: {line}" if not line.startswith("hint:") else line), file=sys.stderr)
+                print(clean(bounded(f"error: {line}" if not line.startswith("hint:") else line)), file=sys.stderr)
             raise Exit(code=error.exit_code) from None
         except KeyboardInterrupt:
             print("interrupted", file=sys.stderr)

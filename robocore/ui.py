@@ -53,6 +53,59 @@ def clean(text: str, *, keep_sgr: bool = False) -> str:
     return out + _RESET if last else out
 
 
+#: Longest rendering of a user's value inside a message (:func:`shown`).
+MAX_SHOWN = 60
+#: Longest run of a value that reaches an error or warning line through any other way (:func:`bounded`), and the
+#: longest such line: a 120,000-character option or robot.yaml value never comes back whole.
+MAX_ECHO = 200
+MAX_LINE = 1000
+_QUOTED = re.compile(r"'(?:[^'\\\n]|\\.)*'|\"(?:[^\"\\\n]|\\.)*\"")
+_LONG_WORD = re.compile(rf"\S{{{MAX_ECHO + 4},}}")  # longer than what a cut quoted value leaves
+
+
+def shown(value: object, limit: int = MAX_SHOWN) -> str:
+    """A short one-line ``repr`` of a user's value, at most about ``limit`` characters: a longer one is cut and
+    says its length (``'xxxx...' (120000 characters)``)."""
+    text = repr(value)
+    if len(text) <= limit:
+        return text
+    size = len(value) if isinstance(value, (str, bytes, list, tuple, dict)) else len(text)
+    return f"{text[: max(limit - 3, 1)]}... ({size:,} characters)"
+
+
+def _cut(text: str, keep: int, size: int) -> str:
+    return f"{text[:keep]}... ({size:,} characters)"
+
+
+def bounded(text: str) -> str:
+    """``text`` (an error or warning, one or more lines) with every quoted value and every word longer than
+    :data:`MAX_ECHO` cut, saying its length, and every line cut at :data:`MAX_LINE`: the one rule for echoed
+    values at the edges where messages are printed, whatever built the message."""
+    if len(text) <= MAX_ECHO:
+        return text
+    text = _QUOTED.sub(lambda m: m.group() if len(m.group()) <= MAX_ECHO + 2 else
+                       _cut(m.group(), MAX_ECHO, len(m.group()) - 2), text)
+    text = _LONG_WORD.sub(lambda m: _cut(m.group(), MAX_ECHO, len(m.group())), text)
+    return "\n".join(line if len(line) <= MAX_LINE else _cut(line, MAX_LINE, len(line))
+                     for line in text.split("\n"))
+
+
+_DIGITS = re.compile(r"value has (\d+) digits")
+_NOT_INT = re.compile(r"invalid literal for int\(\) with base \d+: (.*)", re.S)
+
+
+def plain_words(reason: str) -> str:
+    """Python's words for a number it cannot convert, in a user's words: no ``sys.set_int_max_str_digits()``
+    (a setting of the Python process, not of robocore), no ``int() with base 10``. Other text is returned as is."""
+    digits = _DIGITS.search(reason)
+    if digits and "integer string conversion" in reason:
+        return f"a number of {digits.group(1)} digits is too large"
+    literal = _NOT_INT.match(reason)
+    if literal:
+        return f"not a whole number: {literal.group(1)}"
+    return reason
+
+
 def _make(**kwargs: Any) -> Console:
     from rich.console import Console
     from rich.text import Text

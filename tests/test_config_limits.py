@@ -110,8 +110,9 @@ def test_messages_are_printable_and_capped() -> None:
     assert lines == [
         "robot.yaml:4: registry: must be a registry such as ghcr.io/org or localhost:5000 without control characters "
         "(got '\\x1b[2J\\u202e')",
-        "robot.yaml:5: image_prefix: 'xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx... is not a valid value "
-        "here (expected lower-case letters and digits, separated by '.', '_', '-' or '/', at most 128)",
+        "robot.yaml:5: image_prefix: 'xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx... (5,001 characters) "
+        "is not a valid value here (expected lower-case letters and digits, separated by '.', '_', '-' or '/', "
+        "at most 128)",
     ]
     capped = yamltext.problem("robot.yaml", 1, "k", "word " * 1000 + "\x1b\n\u2028")
     assert len(capped.message) == yamltext.MAX_MESSAGE and capped.message.endswith("...")

@@ -24,6 +24,7 @@ from robocore.config.generations import base_problem
 from robocore.config.model import Arch, BaseKind, RosDistro, docker_arch
 from robocore.errors import UsageError
 from robocore.project import ProjectFolder
+from robocore.ui import shown
 
 #: Where the generated robot.yaml's ``yaml-language-server`` comment points (relative to the project).
 
@@ -80,6 +81,11 @@ def _choice(value: str | None, allowed: type[RosDistro] | type[BaseKind], flag: 
 
 def check_destination(path: Path) -> bool:
     """Refuse a folder that is not empty and not a robocore project; True when it is an existing project."""
+    from robocore.files import path_kind
+
+    kind, reason = path_kind(path)
+    if kind == "unusable":  # a name too long, a NUL, no permission: one line, never a traceback
+        raise UsageError(f"{shown(str(path))}: cannot be used as the project folder: {reason}")
     if path.exists() and not path.is_dir():
         raise UsageError(f"{path}: exists and is not a folder", hint="choose a new or empty folder")
     if not path.is_dir() or not any(path.iterdir()):

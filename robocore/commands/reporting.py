@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from robocore.errors import ConfigError, GroupError, Problem, RobocoreError
+from robocore.ui import bounded
 
 #: Version of the JSON envelope; it changes only when a key changes meaning or goes away.
 SCHEMA_VERSION = 1
@@ -36,8 +37,8 @@ SCHEMA_VERSION = 1
 
 def problem_dict(problem: Problem) -> dict[str, Any]:
     """A robot.yaml problem as the envelope writes it."""
-    return {"file": problem.file, "line": problem.line, "key": problem.path or None, "message": problem.message,
-            "severity": problem.severity, "hint": None}
+    return {"file": problem.file, "line": problem.line, "key": bounded(problem.path) or None,
+            "message": bounded(problem.message), "severity": problem.severity, "hint": None}
 
 
 def error_problems(error: RobocoreError) -> list[dict[str, Any]]:
@@ -54,9 +55,9 @@ def error_problems(error: RobocoreError) -> list[dict[str, Any]]:
     found = []
     for line in error.lines():
         if line.startswith("hint: ") and found:
-            found[-1]["hint"] = line.removeprefix("hint: ")
+            found[-1]["hint"] = bounded(line.removeprefix("hint: "))
         else:
-            found.append({"file": None, "line": None, "key": None, "message": line, "severity": "error",
+            found.append({"file": None, "line": None, "key": None, "message": bounded(line), "severity": "error",
                           "hint": None})
     return found
 
@@ -111,13 +112,14 @@ class Reporter:
         """A message on stderr that is shown even when quiet (warnings, what could not be done)."""
         from robocore.ui import console
 
-        console().print(message, markup=markup, style=style, soft_wrap=True)
+        console().print(bounded(message), markup=markup, style=style, soft_wrap=True)
 
     def warn(self, message: str, problem: Problem | None = None) -> None:
         """A warning: ``warning: message`` on stderr for people, a problem of severity warning in JSON."""
         if self.json:
             self.problems.append(problem_dict(problem) if problem is not None else {
-                "file": None, "line": None, "key": None, "message": message, "severity": "warning", "hint": None})
+                "file": None, "line": None, "key": None, "message": bounded(message), "severity": "warning",
+                "hint": None})
         else:
             self.notice(str(problem) if problem is not None else f"warning: {message}")
 

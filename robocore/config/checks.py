@@ -344,15 +344,17 @@ def _tls_files(parts: Parts, project: Path) -> Iterator[Found]:
                 path = project / path
             kind, reason = path_kind(path)
             if kind == "unusable":
-                yield ("hosts", index, "tls", key), f"file {value!r} cannot be read: {reason}"
+                yield ("hosts", index, "tls", key), f"file {shown(value)} cannot be read: {reason}"
             elif kind != "file":
-                yield ("hosts", index, "tls", key), f"file {value!r} not found"
+                yield ("hosts", index, "tls", key), f"file {shown(value)} not found"
             elif not stat.S_ISREG(os.stat(path).st_mode):
-                yield ("hosts", index, "tls", key), f"file {value!r} is not a regular file (a FIFO or a device?)"
+                yield ("hosts", index, "tls", key), f"file {shown(value)} is not a regular file (a FIFO or a device?)"
             elif not Path(value).expanduser().is_absolute() and not is_inside(path, project):
+                spelled = Path(os.path.normpath(project / value)).is_relative_to(os.path.normpath(project))
+                why = "leads through a symlink to a file outside" if spelled else "names a file outside"
                 yield (("hosts", index, "tls", key),
-                       f"file {value!r} is a symlink leading outside the project folder; name the file outside "
-                       "by its absolute path instead")
+                       f"file {shown(value)} {why} the project folder (a relative path is read from the project); "
+                       "name the file outside by its absolute path instead")
 
 
 def discovery_hosts(parts: Parts) -> set[str]:

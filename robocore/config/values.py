@@ -20,19 +20,11 @@ from typing import Annotated, Any
 
 from pydantic import AfterValidator, Field, Strict
 
-#: Longest rendering of a user's value inside a message.
-MAX_SHOWN = 60
+from robocore.ui import MAX_SHOWN as MAX_SHOWN
+from robocore.ui import shown as shown
 
 _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
 _CONTROL_BUT_NEWLINE_TAB = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")
-
-
-def shown(value: object) -> str:
-    """A short one-line ``repr`` of a user's value: control characters escaped, at most :data:`MAX_SHOWN` long."""
-    text = repr(value)
-    if len(text) > MAX_SHOWN:
-        text = text[: MAX_SHOWN - 3] + "..."
-    return text
 
 
 def has_control(text: str, *, allow_newline_tab: bool = False) -> bool:

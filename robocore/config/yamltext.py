@@ -17,6 +17,7 @@ import yaml
 from robocore.config.values import printable, shown
 from robocore.errors import ConfigError, Problem
 from robocore.files import ROBOT_FILE as ROBOT_FILE
+from robocore.ui import plain_words
 
 KeyPath = tuple[str | int, ...]
 
@@ -294,12 +295,12 @@ def _construct(loader: Any, node: yaml.Node, file: str) -> Any:
     except Exception as exc:
         culprit = _culprit(node)
         if culprit is None:
-            raise ConfigError([problem(file, None, "", f"YAML value could not be read: {exc}")]) from None
+            why_not = plain_words(str(exc))
+            raise ConfigError([problem(file, None, "", f"YAML value could not be read: {why_not}")]) from None
         bad, why = culprit
         tag = bad.tag.rsplit(":", 1)[-1]
         reason = str(why) if isinstance(why, (ValueError, yaml.YAMLError)) else "malformed value"
-        if "integer string conversion" in reason:  # Python's digit limit, not a setting the user can change here
-            reason = f"a number of {len(str(bad.value).strip())} digits is too large"
+        reason = plain_words(reason)  # Python's digit limit, not a setting the user can change here
         message = f"YAML value {shown(bad.value)} could not be read as {tag}: {reason}"
         raise ConfigError([problem(file, bad.start_mark.line + 1, "", message)]) from None
 

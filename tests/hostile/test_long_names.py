@@ -32,7 +32,7 @@ def test_a_component_folder_name_too_long_is_one_problem(tmp_path: Path) -> None
         parse_robot_text(text, file="robot.yaml", project=tmp_path)
     (line,) = caught.value.lines()
     assert line.startswith("robot.yaml:5: components[0].folder: 'aaaa"), line
-    assert line.endswith("... cannot be used as a folder: File name too long"), line  # the value shortened
+    assert line.endswith("... (300 characters) cannot be used as a folder: File name too long"), line  # shortened
 
 
 def test_a_project_folder_name_too_long_is_one_line_and_exit_2(tmp_path: Path) -> None:
@@ -40,5 +40,7 @@ def test_a_project_folder_name_too_long_is_one_line_and_exit_2(tmp_path: Path) -
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr
-    assert proc.stderr.strip().splitlines() == [
-        f"error: {tmp_path / LONG}: cannot be used as a project folder: File name too long"]
+    path = f"error: {tmp_path / LONG}:"
+    assert proc.stderr.strip().splitlines() == [  # the path cut to 200 characters, with its length (issue 37)
+        f"error: {path[7:207]}... ({len(path) - 7:,} characters) cannot be used as a project folder: "
+        "File name too long"]
