@@ -121,3 +121,24 @@ def test_write_compose_files(tmp_path: Path) -> None:
     before = paths[0].stat().st_mtime_ns
     write_compose_files(project)  # unchanged: not rewritten
     assert paths[0].stat().st_mtime_ns == before
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_libyamls_text_is_pyyamls_and_the_spec_hash_is_asdicts(case: str) -> None:
+    """The fast paths of a 10,000-component compose file (issue 37) change no byte and no container's hash."""
+    import dataclasses
+    import hashlib
+    import json
+
+    project = make(case)
+    for host in project.robot.hosts:
+        specs = containers.host_specs(project, host.name)
+        document = compose.compose_document(specs)
+        assert yaml.dump(document, Dumper=compose.DUMPER, sort_keys=False, default_flow_style=False, width=120) == \
+            yaml.dump(document, Dumper=yaml.SafeDumper, sort_keys=False, default_flow_style=False, width=120)
+        for spec in specs:
+            data = dataclasses.asdict(spec)
+            if not data["extra_hosts"]:
+                del data["extra_hosts"]
+            payload = json.dumps(data, sort_keys=True, separators=(",", ":"))
+            assert spec.spec_hash == hashlib.sha256(payload.encode()).hexdigest()[:16]

@@ -1,0 +1,79 @@
+"""The no-op memo seconds after an edit (issue 37: "racily clean" files are hashed, not a reason to skip the memo).
+
+A project made by ``robocore init --defaults`` (no image needed) answers ``validate`` side by side:
+- bare ``python -c pass`` (the floor);
+- the ordinary path (``ROBOCORE_NO_MEMO=1``);
+- the memo with every file older than the memo's racy window (``noop.RACY_SECONDS``);
+- the memo right after ``robot.yaml`` was saved again (same content, new times): one ordinary run records the
+  memo with the young file's hash, and the next run, still inside the window, replays it. Each such row says how
+  old robot.yaml was when the replay started; a row whose file had left the window is marked.
+
+Before this change the young case took the ordinary path every time until the file was 2 s old. The goal is a
+replay under 0.1 s at any file age; on a loaded machine compare the memo rows with bare start-up (same run).
+
+    python bench/noop_young.py [--runs N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from robocore.commands import noop
+
+
+def run(argv: list[str], cwd: Path, **env: str) -> float:
+    start = time.perf_counter()
+    done = subprocess.run(argv, cwd=cwd, env={**os.environ, **env}, capture_output=True, text=True)
+    seconds = time.perf_counter() - start
+    if done.returncode != 0:
+        sys.exit(f"{argv} failed: {done.stderr}")
+    return seconds
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--runs", type=int, default=7)
+    args = parser.parse_args()
+    py = sys.executable
+    validate = [py, "-m", "robocore", "validate"]
+    with tempfile.TemporaryDirectory(prefix="robocore-bench-young-") as tmp:
+        subprocess.run([py, "-m", "robocore", "init", "robot", "--defaults"], cwd=tmp, check=True, capture_output=True)
+        root = Path(tmp) / "robot"
+        robot = root / "robot.yaml"
+        text = robot.read_bytes()
+        bare = statistics.median(run([py, "-c", "pass"], root) for _ in range(args.runs))
+        ordinary = statistics.median(run(validate, root, ROBOCORE_NO_MEMO="1") for _ in range(args.runs))
+        time.sleep(noop.RACY_SECONDS + 0.5)
+        run(validate, root)  # records the memo of old files
+        old = statistics.median(run(validate, root) for _ in range(args.runs))
+        young: list[tuple[float, float]] = []
+        for _ in range(args.runs):
+            robot.write_bytes(text)  # saved again: new times, same content
+            run(validate, root)  # the ordinary path finds nothing to do and records (the young file hashed)
+            age = time.time() - robot.stat().st_mtime
+            young.append((run(validate, root), age))
+        print(f"validate on {root} (median of {args.runs}; load average {os.getloadavg()[0]:.1f} on "
+              f"{os.cpu_count()} cores: compare rows of this run)")
+        print(f"{'python -c pass':44} {bare:6.3f} s")
+        print(f"{'ordinary path (ROBOCORE_NO_MEMO=1)':44} {ordinary:6.3f} s  {ordinary / bare:5.2f}x bare")
+        print(f"{'memo, files older than the racy window':44} {old:6.3f} s  {old / bare:5.2f}x bare")
+        inside = [seconds for seconds, age in young if age < noop.RACY_SECONDS]
+        for seconds, age in young:
+            mark = "" if age < noop.RACY_SECONDS else "  (file had left the window)"
+            label = f"memo, robot.yaml saved {age:.2f} s before"
+            print(f"{label:44} {seconds:6.3f} s  {seconds / bare:5.2f}x bare{mark}")
+        if inside:
+            median = statistics.median(inside)
+            print(f"{'memo, young files (median of those inside)':44} {median:6.3f} s  {median / bare:5.2f}x bare")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
