@@ -350,11 +350,10 @@ def _tls_files(parts: Parts, project: Path) -> Iterator[Found]:
             elif not stat.S_ISREG(os.stat(path).st_mode):
                 yield ("hosts", index, "tls", key), f"file {shown(value)} is not a regular file (a FIFO or a device?)"
             elif not Path(value).expanduser().is_absolute() and not is_inside(path, project):
-                spelled = Path(os.path.normpath(project / value)).is_relative_to(os.path.normpath(project))
-                why = "leads through a symlink to a file outside" if spelled else "names a file outside"
-                yield (("hosts", index, "tls", key),
-                       f"file {shown(value)} {why} the project folder (a relative path is read from the project); "
-                       "name the file outside by its absolute path instead")
+                why = ("leads through a symlink to a file outside" if Path(os.path.normpath(project / value))
+                       .is_relative_to(os.path.normpath(project)) else "names a file outside")
+                yield ("hosts", index, "tls", key), (f"file {shown(value)} {why} the project folder (a relative "
+                                                     "path is read from it); name a file outside by its absolute path")
 
 
 def discovery_hosts(parts: Parts) -> set[str]:
