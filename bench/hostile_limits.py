@@ -10,7 +10,10 @@ measured first in the same run), side by side:
 - robot.yaml as a FIFO (a plain reader would wait for ever), as ``/dev/zero``, as a link out of the project;
 - ``.robocore``, ``.robocore/compose`` and ``.robocore/dds`` as links to a folder outside (stage --refresh,
   build), a package.xml FIFO (stage --dry-run);
-- a relative volume that leaves the project; ``--dry-run`` on a line with a task that has none.
+- a relative volume that leaves the project; ``--dry-run`` on a line with a task that has none;
+- issue 37: a link to ``/usr`` in the project, ``.robocore/noop`` linked outside, the memo as a FIFO and as a link
+  to ``/dev/zero`` (each reproduction hung, ran out of memory or took 7-24 s before), a 120,000-character
+  ``--component`` and an empty ``--host``.
 
     python bench/hostile_limits.py
 """
@@ -68,6 +71,26 @@ def robot_as(root: Path, kind: str) -> Path:
     return root
 
 
+def memo_as(root: Path, kind: str) -> Path:
+    """Issue 37: something planted at the name of ``validate``'s memo (predictable from the project's path)."""
+    from robocore.commands import noop
+
+    project(root)
+    path = noop.Memo(root, "validate", [], line=[str(Path.cwd()), "-p", str(root), "validate"]).path
+    path.parent.mkdir(parents=True)
+    if kind == "fifo":
+        os.mkfifo(path)
+    else:
+        path.symlink_to("/dev/zero")
+    return root
+
+
+def link_to_usr(root: Path) -> Path:
+    project(root)
+    (root / "extlink").symlink_to("/usr", target_is_directory=True)
+    return root
+
+
 def package_fifo(root: Path) -> Path:
     project(root)
     manifest = root / "components" / "talker" / "src" / "talker_pkg" / "package.xml"
@@ -94,6 +117,13 @@ CASES: list[tuple[str, Callable[[Path], Path], list[str]]] = [
     (".robocore/dds links outside: build", lambda r: link_state(project(r), ".robocore/dds"), ["build"]),
     ("package.xml is a FIFO: stage --dry-run", package_fifo, ["stage", "--dry-run"]),
     ("relative volume leaves the project", lambda r: project(r, OUT_VOLUME), ["validate"]),
+    ("extlink -> /usr in the project: validate", link_to_usr, ["validate"]),
+    (".robocore/noop links outside: validate", lambda r: link_state(project(r), ".robocore/noop"), ["validate"]),
+    ("the memo is a FIFO: validate", lambda r: memo_as(r, "fifo"), ["validate"]),
+    ("the memo links to /dev/zero: validate", lambda r: memo_as(r, "device"), ["validate"]),
+    ("--component of 120,000 characters: logs --dry-run", project, ["logs", "--component", "x" * 120_000,
+                                                                   "--dry-run"]),
+    ("--host '': down --dry-run", project, ["down", "--host", "", "--dry-run"]),
     ("--dry-run line with doctor", project, ["stage", "--dry-run", "doctor"]),
 ]
 
