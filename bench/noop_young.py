@@ -5,10 +5,11 @@ A project made by ``robocore init --defaults`` (no image needed) answers ``valid
 - the ordinary path (``ROBOCORE_NO_MEMO=1``);
 - the memo with every file older than the memo's racy window (``noop.RACY_SECONDS``);
 - the memo right after ``robot.yaml`` was saved again (same content, new times): one ordinary run records the
-  memo with the young file's hash, and the next run, still inside the window, replays it. Each such row says how
-  old robot.yaml was when the replay started; a row whose file had left the window is marked.
+  memo with the young file's hash, and the next run replays it (hashing the file again). Each such row says how
+  old robot.yaml was when the recording run started (inside the window: its hash is in the memo).
 
-Before this change the young case took the ordinary path every time until the file was 2 s old. The goal is a
+Before this change no memo was recorded by a run that started within 2 s of a save: the next run took the
+ordinary path again, and so on until a run started with every file older than the window. The goal is a
 replay under 0.1 s at any file age; on a loaded machine compare the memo rows with bare start-up (same run).
 
     python bench/noop_young.py [--runs N]
@@ -56,8 +57,8 @@ def main() -> int:
         young: list[tuple[float, float]] = []
         for _ in range(args.runs):
             robot.write_bytes(text)  # saved again: new times, same content
+            age = time.time() - robot.stat().st_mtime  # its age when the recording run starts
             run(validate, root)  # the ordinary path finds nothing to do and records (the young file hashed)
-            age = time.time() - robot.stat().st_mtime
             young.append((run(validate, root), age))
         print(f"validate on {root} (median of {args.runs}; load average {os.getloadavg()[0]:.1f} on "
               f"{os.cpu_count()} cores: compare rows of this run)")
@@ -66,8 +67,8 @@ def main() -> int:
         print(f"{'memo, files older than the racy window':44} {old:6.3f} s  {old / bare:5.2f}x bare")
         inside = [seconds for seconds, age in young if age < noop.RACY_SECONDS]
         for seconds, age in young:
-            mark = "" if age < noop.RACY_SECONDS else "  (file had left the window)"
-            label = f"memo, robot.yaml saved {age:.2f} s before"
+            mark = "" if age < noop.RACY_SECONDS else "  (outside the window)"
+            label = f"memo recorded {age:.2f} s after a save"
             print(f"{label:44} {seconds:6.3f} s  {seconds / bare:5.2f}x bare{mark}")
         if inside:
             median = statistics.median(inside)
