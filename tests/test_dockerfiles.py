@@ -62,6 +62,34 @@ def test_component_official_golden() -> None:
     check_golden("component-official.Dockerfile", text)
 
 
+def test_rosdep_stops_the_build_on_a_key_it_cannot_resolve() -> None:
+    """Without ``-r`` (continue despite errors), a key rosdep cannot resolve fails the image's build: with it,
+    rosdep reports the key, exits 0, and the image silently lacks the dependency (seen on the official stand-ins)."""
+    r = robot()
+    texts = [dockerfiles.component_dockerfile(r, r.component("driver"), base_ref="proj-base:latest",
+                                              package_xmls=["rosdep/src/driver/package.xml"]),
+             dockerfiles.base_dockerfile(r, root_image="ros:jazzy-ros-base", has_ca=False, common=["msgs"])]
+    for text in texts:
+        [line] = [line for line in text.splitlines() if "rosdep install" in line]
+        assert " -y " in line and " -r " not in line, line
+
+
+def test_rosdep_unresolved_names_each_package_and_key() -> None:
+    output = [
+        "Step 3/5 : RUN apt-get update && rosdep install ...",
+        "ERROR: the following packages/stacks could not have their rosdep keys resolved",
+        "to system dependencies:",
+        "demo_x: Cannot locate rosdep definition for [robocore_no_such_key]",
+        "demo_y: No definition of [libfoo] for OS version [bookworm]",
+        "demo_x: Cannot locate rosdep definition for [robocore_no_such_key]",
+    ]
+    assert dockerfiles.rosdep_unresolved(output) == [
+        "package demo_x: no rosdep definition of 'robocore_no_such_key'",
+        "package demo_y: no rosdep definition of 'libfoo' for OS version [bookworm]",
+    ]
+    assert dockerfiles.rosdep_unresolved(["#All required rosdeps installed successfully"]) == []
+
+
 def test_component_wheels_golden() -> None:
     r = robot(base={"kind": "wheels"})
     comp = r.component("driver")

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from robocore.errors import BuildError, DockerError, UnsafePath
-from robocore.plan.dockerfiles import ContextEntry, ImagePlan
+from robocore.plan.dockerfiles import ContextEntry, ImagePlan, rosdep_unresolved
 from robocore.plan.inputs import FileDigest, digest_bytes
 
 if TYPE_CHECKING:
@@ -179,6 +179,12 @@ def build_image(
         for chunk in stream:
             if "error" in chunk:
                 detail = str(chunk.get("error", "")).strip()
+                unresolved = rosdep_unresolved(tail)
+                if unresolved:  # one line: the keys, not the build's tail
+                    raise BuildError(f"image {plan.ref}: rosdep cannot install the dependencies: "
+                                     + "; ".join(unresolved),
+                                     hint="correct the key in the package.xml, or name the Debian/Ubuntu package in "
+                                          "the component's apt_packages instead")
                 raise BuildError(
                     f"image {plan.ref}: build failed: {detail}\n" + "\n".join(tail[-25:]),
                     hint="the lines above are the end of the build output",

@@ -20,6 +20,7 @@ Component images never contain user code: only package.xml files are copied, for
 from __future__ import annotations
 
 import json
+import re
 import shlex
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -211,9 +212,31 @@ def _colcon_underlay(source: str, install: str) -> str:
 
 
 def _rosdep(paths: Sequence[str]) -> str:
+    """rosdep install of the package.xml files under ``paths``. Without ``-r``: with it, a key rosdep cannot resolve
+    (a typo, a key its database lacks) is reported and then ignored, rosdep exits 0 and the image silently lacks the
+    dependency; without it the build stops, and :func:`rosdep_unresolved` finds rosdep's lines naming the keys."""
     froms = " ".join(f"--from-paths {p}" for p in paths)
-    return (f"RUN apt-get update && {naming.ENTRYPOINT} rosdep install --rosdistro \"$ROS_DISTRO\" --ignore-src -r -y "
+    return (f"RUN apt-get update && {naming.ENTRYPOINT} rosdep install --rosdistro \"$ROS_DISTRO\" --ignore-src -y "
             f"{froms} && rm -rf /var/lib/apt/lists/*")
+
+
+#: rosdep's lines for a key it cannot resolve: ``<package>: Cannot locate rosdep definition for [<key>]``, or
+#: ``<package>: No definition of [<key>] for OS ...`` (a key its database has, but not for this OS).
+_ROSDEP_UNRESOLVED = re.compile(r"^(?P<package>[^\s:]+): (?:Cannot locate rosdep definition for|No definition of) "
+                                r"\[(?P<key>[^\]]+)\](?P<rest>.*)$")
+
+
+def rosdep_unresolved(lines: Sequence[str]) -> list[str]:
+    """What rosdep could not resolve in a build's output (the lines of the rosdep step :func:`_rosdep` writes), one
+    phrase per key: ``package demo_x: no rosdep definition of 'foo'``; empty when rosdep reported none."""
+    found: list[str] = []
+    for line in lines:
+        match = _ROSDEP_UNRESOLVED.match(line.strip())
+        if match:
+            where = match["rest"].strip()
+            found.append(f"package {match['package']}: no rosdep definition of {match['key']!r}"
+                         + (f" {where}" if where else ""))
+    return list(dict.fromkeys(found))
 
 
 def _debian_lines(distro: str, has_ca: bool) -> list[str]:

@@ -15,7 +15,7 @@ ENV ROS_DISTRO=noetic \
 RUN apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends procps python3-pip python3-pytest python3-colcon-common-extensions && rm -rf /var/lib/apt/lists/* && rosdep update --rosdistro "$ROS_DISTRO"
 COPY entrypoint.sh setup-python /robocore/
 COPY common /tmp/robocore/common
-RUN apt-get update && /robocore/entrypoint.sh rosdep install --rosdistro "$ROS_DISTRO" --ignore-src -r -y --from-paths /tmp/robocore/common && rm -rf /var/lib/apt/lists/*
+RUN apt-get update && /robocore/entrypoint.sh rosdep install --rosdistro "$ROS_DISTRO" --ignore-src -y --from-paths /tmp/robocore/common && rm -rf /var/lib/apt/lists/*
 RUN /robocore/entrypoint.sh colcon --log-base /dev/null build --merge-install --base-paths /tmp/robocore/common --build-base /tmp/robocore/colcon-build --install-base /opt/robocore/common --event-handlers console_start_end+ console_direct+ && rm -rf /tmp/robocore
 ENTRYPOINT ["/robocore/entrypoint.sh"]
 CMD ["bash"]

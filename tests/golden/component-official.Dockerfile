@@ -4,7 +4,7 @@ RUN apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-ins
 RUN python3 -m pip install -- 'pyserial>=3.5' numpy
 COPY repos /tmp/robocore/deps
 COPY rosdep /tmp/robocore/rosdep
-RUN apt-get update && /robocore/entrypoint.sh rosdep install --rosdistro "$ROS_DISTRO" --ignore-src -r -y --from-paths /tmp/robocore/deps --from-paths /tmp/robocore/rosdep && rm -rf /var/lib/apt/lists/*
+RUN apt-get update && /robocore/entrypoint.sh rosdep install --rosdistro "$ROS_DISTRO" --ignore-src -y --from-paths /tmp/robocore/deps --from-paths /tmp/robocore/rosdep && rm -rf /var/lib/apt/lists/*
 RUN /robocore/entrypoint.sh colcon --log-base /dev/null build --merge-install --base-paths /tmp/robocore/deps --build-base /tmp/robocore/colcon-build --install-base /opt/robocore/deps --event-handlers console_start_end+ console_direct+ && rm -rf /tmp/robocore
 RUN ["/robocore/entrypoint.sh", "bash", "-c", "echo 'done' > /etc/driver-ready"]
 RUN ["/robocore/entrypoint.sh", "bash", "-c", "ros2 pkg list | grep -q rclpy"]
