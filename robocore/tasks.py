@@ -394,13 +394,15 @@ def rollback(c: Context, host: str | None = None, dry_run: bool = False) -> None
         "tag": "The release whose images the robots run (robocore release --tag V).",
         "git_repo": "The git repository the GitOps controllers pull the folder from (Argo CD's repoURL).",
         "git_path": "The folder's path inside that repository (default: its top).",
+        "model": "Another project (its robot.yaml and fleet.yaml) to export with this one; repeatable.",
         "dry_run": "Only list the files that would be written.",
         "json": "Machine-readable result on stdout.",
     },
+    iterable=["model"],
 )
 @reported
 def export(c: Context, engine: str, path: str, tag: str = "", git_repo: str = "", git_path: str = "",
-           dry_run: bool = False, json: bool = False) -> None:
+           model: list[str] | None = None, dry_run: bool = False, json: bool = False) -> None:
     """Write the robot, or the fleet of fleet.yaml, as Kubernetes objects for k3s, Rancher Fleet and Argo CD."""
     from robocore.commands import export as command
     from robocore.errors import UsageError
@@ -409,8 +411,9 @@ def export(c: Context, engine: str, path: str, tag: str = "", git_repo: str = ""
         raise UsageError(f"unknown export {engine!r} (known: kubernetes)", hint="robocore export kubernetes DIR")
     options = _options(c, "export", dry_run=dry_run, json=json)
     folder = Path(path)
+    models = [Path(m) for m in model or []]
     _execute(options, lambda: command.export_kubernetes(options, folder, tag=_tag(tag), git_repo=git_repo or None,
-                                                        git_path=git_path))
+                                                        git_path=git_path, models=models))
 
 
 @task(help={"host": "Only this host.", "json": "Machine-readable result on stdout."})

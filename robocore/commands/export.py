@@ -1,29 +1,36 @@
 """export kubernetes: write the robot (or the fleet) as kustomize, Rancher Fleet and Argo CD files into a folder.
 
-The plan is pure (:mod:`robocore.plan.kubernetes`); this module loads the project, refuses what cannot
+The plan is pure (:mod:`robocore.plan.kubernetes`); this module loads the projects, refuses what cannot
 be exported (every problem, one line each, before anything is written), picks the release's images
 and writes the folder with :func:`robocore.files.write_tree`: a new or empty folder, or one a previous
 export wrote, where only robocore's own files are replaced.
 
+Each project is one model (its robot.yaml). Its robots are those of its fleet file, in their waves
+(:func:`robocore.plan.fleet.plan_waves`); a project without a fleet file exports its one robot, named after
+the project, in one wave. ``--model PATH`` adds other projects to the same export; waves of the same name
+merge, in the order they first appear.
+
 Images come from a release: ``--tag V`` names the images ``robocore release --tag V`` pushed
-(``<registry>/<image>:V``, a multi-arch list). Without a fleet file the project's one robot is exported,
-named after the project, in one wave.
+(``<registry>/<image>:V``, a multi-arch list; the registry is the fleet file's, else robot.yaml's).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 from robocore.commands.context import Options
 from robocore.config.loader import located
-from robocore.errors import UsageError
+from robocore.errors import ConfigError, Problem, UsageError
 from robocore.files import PRIVATE, write_tree
 from robocore.plan import naming
 from robocore.plan.kubernetes import ExportOptions, ImageRef, ImageSource, RobotTarget, plan_export, problems
 from robocore.plan.kubernetes.names import is_dns_label, k8s_name
 from robocore.project import Project
+
+if TYPE_CHECKING:
+    from robocore.config.fleet import Fleet
 
 #: The wave of a robot exported without a fleet file.
 ONE_WAVE = "all"
@@ -61,25 +68,89 @@ def tag_images(project: Project, tag: str, registry: str | None) -> ImageSource:
     return image
 
 
-def refuse(project: Project) -> None:
-    """Raise one ConfigError naming every key of robot.yaml the export cannot express."""
-    found = problems(project.robot)
+@dataclass(frozen=True)
+class Model:
+    """One model of the export: its name, its project, and its fleet file when it has one."""
+
+    name: str
+    project: Project
+    fleet: Fleet | None
+
+
+def model_robots(model: Model, tag: str) -> list[RobotTarget]:
+    """The robots of one model: its fleet file's, in wave order, or the project's one robot (no fleet file)."""
+    robot = model.project.robot
+    if model.fleet is None:
+        return [RobotTarget(name=model.name, model=model.name, wave=ONE_WAVE,
+                            images=tag_images(model.project, tag, robot.registry))]
+    from robocore.plan.fleet import plan_waves
+
+    fleet = model.fleet
+    images = tag_images(model.project, tag, fleet.registry_for(robot))
+    targets = []
+    for wave in plan_waves(fleet):
+        for name in wave.robots:
+            member = fleet.robot(name)
+            domain = member.ros_domain_id
+            targets.append(RobotTarget(name=name, model=model.name, wave=wave.name, images=images,
+                                       labels=dict(member.labels),
+                                       ros_domain_id=domain if domain != robot.ros_domain_id else None))
+    return targets
+
+
+def load_models(options: Options, others: list[Path]) -> list[Model]:
+    """The models of the export (the task's project first), each with its fleet file; what any of them cannot
+    export, and any problem of a fleet file, in one ConfigError."""
+    projects = [options.load(), *(Project.load(path) for path in others)]
+    found: list[Problem] = []
+    models: dict[str, Model] = {}
+    for project in projects:
+        refused = problems(project.robot)
+        if refused:
+            found += located(project.robot_file, refused).problems
+        fleet = None
+        if project.has_fleet:
+            try:
+                fleet = project.load_fleet()
+            except ConfigError as error:
+                found += error.problems
+        name = model_name(project)
+        if name in models:
+            raise UsageError(f"{project.root} and {models[name].project.root} are both model {name!r}: the export "
+                             "names each model after its project folder", hint="rename one project folder")
+        models[name] = Model(name, project, fleet)
     if found:
-        raise located(project.robot_file, found)
+        raise ConfigError(found)
+    return list(models.values())
+
+
+def merged(groups: list[list[RobotTarget]]) -> list[RobotTarget]:
+    """Every robot of every model, waves of the same name merged in the order they first appear; a robot name
+    given twice is a UsageError."""
+    order: dict[str, int] = {}
+    seen: dict[str, str] = {}
+    for robots in groups:
+        for robot in robots:
+            order.setdefault(robot.wave, len(order))
+            if robot.name in seen:
+                raise UsageError(f"robot {robot.name!r} is in model {seen[robot.name]!r} and in model {robot.model!r}; "
+                                 "a robot's name is its namespace, so it must be unique in an export")
+            seen[robot.name] = robot.model
+    flat = [robot for robots in groups for robot in robots]
+    return sorted(flat, key=lambda r: order[r.wave])
 
 
 def export_kubernetes(options: Options, folder: Path, *, tag: str | None, git_repo: str | None = None,
-                      git_path: str = "") -> Exported:
-    """Export the project's robot as kustomize and the GitOps controllers' files into ``folder``."""
+                      git_path: str = "", models: list[Path] | None = None) -> Exported:
+    """Export the project's robots (and those of ``models``) as kustomize and the GitOps controllers' files into
+    ``folder``."""
     if tag is None:
         raise UsageError("export kubernetes needs --tag V: the release whose images the robots run",
                          hint="robocore release --tag v1, then robocore export kubernetes DIR --tag v1")
-    project = options.load()
-    refuse(project)
-    model = model_name(project)
-    robots = [RobotTarget(name=model, model=model, wave=ONE_WAVE,
-                          images=tag_images(project, tag, project.robot.registry))]
-    files = plan_export({model: project}, robots, model, ExportOptions(repository=git_repo, path=git_path))
+    loaded = load_models(options, list(models or []))
+    robots = merged([model_robots(model, tag) for model in loaded])
+    projects = {model.name: model.project for model in loaded}
+    files = plan_export(projects, robots, loaded[0].name, ExportOptions(repository=git_repo, path=git_path))
     result = Exported(folder=str(folder), files=sorted(files), robots=[r.name for r in robots],
                       waves=list(dict.fromkeys(r.wave for r in robots)))
     report = options.report
@@ -94,4 +165,3 @@ def export_kubernetes(options: Options, folder: Path, *, tag: str | None, git_re
                   f"{', '.join(result.waves)}; check with: kubectl kustomize {folder}")
     report.add(result)
     return result
-

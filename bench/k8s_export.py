@@ -1,0 +1,152 @@
+"""The Kubernetes export at fleet scale: 1000 robots x 8 components, exported, rendered and checked --strict.
+
+One model (robot.yaml: jazzy, two hosts of which one arm64, 8 components, one Fast DDS discovery server) and a
+fleet of N robots in three waves (a canary, 10 %, the rest), each with a label. Steps, each timed:
+
+1. **export**: ``robocore export kubernetes`` of the fleet into a new folder (planning and writing every file);
+2. **render**: ``kubectl kustomize`` of the root kustomization (every robot's overlay at once), no network;
+3. **strict, base once**: ``kubernetes-validate --strict`` of every object of one robot's overlay, for
+   Kubernetes 1.30 and the newest bundled (each model's base is validated once);
+4. **overlays change only ...**: every object of every robot compared with the same object of the first robot:
+   the only differences allowed are the namespace, the robot's labels, the images and the robot's node pinning.
+   With step 3, every rendered object of the fleet is as valid as the checked ones.
+
+Goals: export + render < 90 s; steps 3 + 4 < 30 s (the alternative to validating all of it, < 5 min).
+
+    python bench/k8s_export.py [--robots 1000] [--keep DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import kubernetes_validate
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from k8s_checks import VERSIONS
+
+COMPONENTS = 8
+ROBOT_YAML = """\
+ros_distro: jazzy
+registry: 10.0.0.2:5000
+hosts:
+  - {{name: main, ip: 10.0.0.10}}
+  - {{name: jetson, ip: 10.0.0.11, arch: arm64}}
+components:
+{components}"""
+#: Paths (from an object's top) whose values may differ between two robots' copies of one object.
+ALLOWED = (("metadata", "namespace"), ("metadata", "labels"), ("spec", "template", "metadata", "labels"),
+           ("spec", "template", "spec", "nodeSelector", "robocore.dev/robot"))
+
+
+def project(root: Path, robots: int) -> Path:
+    """A project folder with robot.yaml (8 components over two hosts) and a fleet of ``robots`` robots."""
+    root.mkdir(parents=True)
+    components = "".join(f"  - {{name: c{i}, folder: c{i}, runs_on: {'jetson' if i % 4 == 3 else 'main'}, "
+                         f"entrypoint: ros2 run pkg{i} node{i}}}\n" for i in range(COMPONENTS))
+    (root / "robot.yaml").write_text(ROBOT_YAML.format(components=components))
+    for i in range(COMPONENTS):
+        (root / f"c{i}").mkdir()
+    lines = ["engine: kubernetes\nrobots:\n"]
+    for n in range(robots):
+        lines.append(f"  - name: r{n}\n    labels: {{site: s{n % 7}}}\n    hosts:\n"
+                     f"      main: {{ip: 10.{n // 256 % 256}.{n % 256}.10}}\n"
+                     f"      jetson: {{ip: 10.{n // 256 % 256}.{n % 256}.11}}\n")
+    lines.append("rollout:\n  waves:\n    - {name: canary, robots: [r0]}\n    - {name: early, percent: 10}\n"
+                 "    - {name: rest}\n")
+    (root / "fleet.yaml").write_text("".join(lines))
+    return root
+
+
+def differences(a: Any, b: Any, path: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
+    """Paths where ``a`` and ``b`` differ (lists compared item by item)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return [p for k in sorted(set(a) | set(b), key=str)
+                for p in (differences(a.get(k), b.get(k), (*path, k)) if k in a and k in b else [(*path, k)])]
+    if isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
+        return [p for i, (x, y) in enumerate(zip(a, b, strict=True)) for p in differences(x, y, (*path, i))]
+    return [] if a == b else [path]
+
+
+def allowed(path: tuple[Any, ...], kind: str) -> bool:
+    """A difference the overlays may make: namespace, labels, an image, the robot's node pinning (and the
+    Namespace object's own name)."""
+    if kind == "Namespace" and path == ("metadata", "name"):
+        return True
+    if any(path[:len(prefix)] == prefix for prefix in ALLOWED):
+        return True
+    return len(path) >= 2 and path[-1] == "image" and any(p in ("containers", "initContainers") for p in path)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", type=int, default=1000)
+    parser.add_argument("--keep", type=Path, help="work in this folder and keep it")
+    args = parser.parse_args()
+    work = args.keep or Path(tempfile.mkdtemp(prefix="robocore-k8s-bench-"))
+    rows: list[tuple[str, float, str, str]] = []
+    try:
+        root = project(work / "fleetbot", args.robots)
+        out = work / "export"
+        started = time.monotonic()
+        done = subprocess.run([sys.executable, "-m", "robocore", "-p", str(root), "export", "kubernetes", str(out),
+                               "--tag", "v1"], capture_output=True, text=True)
+        export_s = time.monotonic() - started
+        if done.returncode != 0:
+            raise SystemExit(f"export failed: {done.stderr}")
+        files = sum(1 for p in out.rglob("*") if p.is_file())
+        rows.append(("export (new process)", export_s, f"{files} files", ""))
+        started = time.monotonic()
+        argv = ["kubectl", "kustomize", str(out)]
+        if shutil.which("unshare"):
+            argv = ["unshare", "-n", *argv]
+        rendered = subprocess.run(argv, capture_output=True, text=True, check=True).stdout
+        docs = [d for d in yaml.safe_load_all(rendered) if d]
+        render_s = time.monotonic() - started
+        rows.append(("render (kubectl kustomize, all)", render_s, f"{len(docs)} objects", ""))
+        rows.append(("export + render", export_s + render_s, "", "< 90 s"))
+        by_robot: dict[str, list[dict[str, Any]]] = {}
+        for doc in docs:
+            ns = doc["metadata"].get("namespace", doc["metadata"]["name"])
+            by_robot.setdefault(ns, []).append(doc)
+        first, *others = by_robot.values()
+        started = time.monotonic()
+        for doc in first:
+            for version in VERSIONS:
+                kubernetes_validate.validate(doc, version, strict=True)
+        strict_s = time.monotonic() - started
+        rows.append((f"strict, one robot ({', '.join(VERSIONS)})", strict_s, f"{len(first)} objects", ""))
+        started = time.monotonic()
+        reference = {(d["kind"], d["metadata"]["name"].rsplit("-", 1)[0] if d["kind"] in ("ConfigMap", "Namespace")
+                      else d["metadata"]["name"]): d for d in first}
+        compared = 0
+        for objects in others:
+            assert len(objects) == len(first), "a robot's overlay has other objects than the first robot's"
+            for doc in objects:
+                key = (doc["kind"], doc["metadata"]["name"].rsplit("-", 1)[0]
+                       if doc["kind"] in ("ConfigMap", "Namespace") else doc["metadata"]["name"])
+                bad = [p for p in differences(reference[key], doc) if not allowed(p, doc["kind"])]
+                assert not bad, f"{key} differs from the first robot's beyond the overlay's fields: {bad[:3]}"
+                compared += 1
+        proof_s = time.monotonic() - started
+        rows.append(("overlays change only ns/labels/images/pinning", proof_s, f"{compared} objects", ""))
+        rows.append(("strict once + proof", strict_s + proof_s, "", "< 30 s"))
+    finally:
+        if args.keep is None:
+            shutil.rmtree(work, ignore_errors=True)
+    print(f"robocore export kubernetes: {args.robots} robots x {COMPONENTS} components")
+    print(f"{'step':48} {'seconds':>8}  {'what':>16}  goal")
+    for name, seconds, what, goal in rows:
+        print(f"{name:48} {seconds:8.1f}  {what:>16}  {goal}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,186 @@
+"""The acceptance fleet on Kubernetes: three robots of two models (one robot.yaml with an arm64 host, one ROS 1
+robot with its master), exported, rendered, validated --strict; the controllers' files follow the waves."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import pytest
+import yaml
+from k8s_checks import by_kind, render, validate
+
+from robocore.commands.context import Options
+from robocore.commands.export import export_kubernetes
+
+AMR = """\
+ros_distro: jazzy
+registry: 10.0.0.2:5000
+hosts:
+  - {name: main, ip: 10.0.0.10}
+  - {name: jetson, ip: 10.0.0.11, arch: arm64}
+components:
+  - {name: driver, folder: driver, runs_on: main, entrypoint: ros2 run driver node}
+  - {name: perception, folder: perception, runs_on: jetson, entrypoint: ros2 run perception node, nvidia: true}
+"""
+AMR_FLEET = """\
+engine: kubernetes
+robots:
+  - name: r1
+    labels: {site: lab}
+    hosts: {main: {ip: 10.1.0.10}, jetson: {ip: 10.1.0.11}}
+  - name: r2
+    labels: {site: b}
+    ros_domain_id: 7
+    hosts: {main: {ip: 10.2.0.10}, jetson: {ip: 10.2.0.11}}
+rollout:
+  waves:
+    - {name: canary, robots: [r1]}
+    - {name: rest}
+"""
+LEGACY = """\
+ros_distro: noetic
+registry: 10.0.0.2:5000
+base: {kind: debian}
+hosts:
+  - {name: base, ip: 10.3.0.10}
+components:
+  - {name: talker, folder: talker, runs_on: base, entrypoint: rosrun demo_talker talker}
+"""
+LEGACY_FLEET = """\
+engine: kubernetes
+robots:
+  - name: r3
+    hosts: {base: {ip: 10.3.0.10}}
+rollout:
+  waves:
+    - {name: rest}
+"""
+
+
+def write(root: Path, robot: str, fleet: str, folders: tuple[str, ...]) -> Path:
+    root.mkdir(parents=True)
+    (root / "robot.yaml").write_text(robot)
+    (root / "fleet.yaml").write_text(fleet)
+    for folder in folders:
+        (root / folder).mkdir()
+    return root
+
+
+@pytest.fixture(scope="module")
+def fleet_export(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    work = tmp_path_factory.mktemp("fleet")
+    amr = write(work / "amr", AMR, AMR_FLEET, ("driver", "perception"))
+    legacy = write(work / "legacy", LEGACY, LEGACY_FLEET, ("talker",))
+    folder = work / "k8s"
+    export_kubernetes(Options(project_dir=amr, task="export", quiet=True), folder, tag="v2",
+                      git_repo="https://git.example.org/fleet.git", git_path="robots-k8s", models=[legacy])
+    return folder
+
+
+@pytest.fixture(scope="module")
+def rendered(fleet_export: Path) -> dict[str, list[dict[str, Any]]]:
+    return {robot: render(fleet_export / "robots" / robot) for robot in ("r1", "r2", "r3")}
+
+
+def test_the_fleet_exports_one_base_per_model_and_one_overlay_per_robot(fleet_export: Path) -> None:
+    assert sorted(p.name for p in (fleet_export / "bases").iterdir()) == ["amr", "legacy"]
+    assert sorted(p.name for p in (fleet_export / "robots").iterdir()) == ["r1", "r2", "r3"]
+    root = yaml.safe_load((fleet_export / "kustomization.yaml").read_text())
+    assert root["resources"] == ["robots/r1", "robots/r2", "robots/r3"]  # wave order: canary, then rest
+
+
+def test_every_object_of_every_robot_validates_strict(rendered: dict[str, list[dict[str, Any]]]) -> None:
+    for robot, docs in rendered.items():
+        for doc in docs:
+            assert doc["metadata"].get("namespace", doc["metadata"]["name"]) == f"robot-{robot}"
+            validate(doc)
+
+
+def test_the_arm64_host_is_pinned_and_gets_its_image(rendered: dict[str, list[dict[str, Any]]]) -> None:
+    for robot in ("r1", "r2"):
+        sets = by_kind(rendered[robot], "DaemonSet")
+        perception = sets["perception"]["spec"]["template"]["spec"]
+        assert perception["nodeSelector"] == {"robocore.dev/host": "jetson", "kubernetes.io/arch": "arm64",
+                                              "robocore.dev/robot": robot}
+        assert perception["containers"][0]["image"] == "10.0.0.2:5000/amr-perception:v2"
+        assert perception["runtimeClassName"] == "nvidia"
+        assert sets["driver"]["spec"]["template"]["spec"]["nodeSelector"]["kubernetes.io/arch"] == "amd64"
+
+
+def test_a_robots_own_domain_and_labels(rendered: dict[str, list[dict[str, Any]]]) -> None:
+    def domains(robot: str) -> set[str]:
+        return {e["value"] for ds in by_kind(rendered[robot], "DaemonSet").values()
+                for e in ds["spec"]["template"]["spec"]["containers"][0]["env"] if e["name"] == "ROS_DOMAIN_ID"}
+
+    assert domains("r1") == {"0"} and domains("r2") == {"7"}
+    labels = by_kind(rendered["r2"], "DaemonSet")["driver"]["spec"]["template"]["metadata"]["labels"]
+    assert labels["site"] == "b" and labels["robocore.dev/robot"] == "r2"
+
+
+def test_the_ros1_robot_reaches_its_master_by_the_services_name(rendered: dict[str, list[dict[str, Any]]]) -> None:
+    docs = rendered["r3"]
+    sets = by_kind(docs, "DaemonSet")
+    master = sets["discovery-0"]["spec"]["template"]["spec"]["containers"][0]
+    assert master["args"][:3] == ["roscore", "-p", "11311"]
+    service = by_kind(docs, "Service")["discovery-base"]
+    assert service["spec"]["ports"] == [{"name": "tcp-11311", "port": 11311, "protocol": "TCP"}]
+    for name in ("discovery-0", "talker"):
+        env = sets[name]["spec"]["template"]["spec"]["containers"][0]["env"]
+        assert {"name": "ROS_MASTER_URI", "value": "http://discovery-base:11311"} in env
+        assert {"name": "ROS_IP", "valueFrom": {"fieldRef": {"fieldPath": "status.hostIP"}}} in env
+        assert not any(e["name"] == "ROS_HOSTNAME" for e in env)
+    assert not by_kind(docs, "ConfigMap")  # ROS 1 has no DDS profiles
+
+
+# ---------------------------------------------------------------- the controllers' files
+
+#: The fields robocore writes in Rancher Fleet's fleet.yaml, as its reference documents them (robocore's own
+#: schema of what it writes: the controllers' CRDs are not on these machines).
+SELECTOR = {"type": "object", "additionalProperties": False, "properties": {
+    "matchLabels": {"type": "object", "additionalProperties": {"type": "string"}},
+    "matchExpressions": {"type": "array", "items": {"type": "object", "additionalProperties": False,
+                                                    "required": ["key", "operator", "values"], "properties": {
+                                                        "key": {"type": "string"}, "operator": {"enum": ["In"]},
+                                                        "values": {"type": "array", "items": {"type": "string"}}}}}}}
+FLEET_SCHEMA = {"type": "object", "additionalProperties": False, "properties": {
+    "labels": {"type": "object", "additionalProperties": {"type": "string"}},
+    "targetCustomizations": {"type": "array", "items": {"type": "object", "additionalProperties": False,
+                                                        "required": ["name", "clusterSelector"], "properties": {
+        "name": {"type": "string"}, "clusterSelector": SELECTOR, "doNotDeploy": {"type": "boolean"},
+        "kustomize": {"type": "object", "additionalProperties": False, "properties": {"dir": {"type": "string"}}}}}},
+    "rolloutStrategy": {"type": "object", "additionalProperties": False, "properties": {
+        "maxUnavailable": {"type": ["integer", "string"]}, "maxUnavailablePartitions": {"type": ["integer", "string"]},
+        "partitions": {"type": "array", "items": {"type": "object", "additionalProperties": False,
+                                                  "required": ["name", "clusterSelector"], "properties": {
+            "name": {"type": "string"}, "maxUnavailable": {"type": ["integer", "string"]},
+            "clusterSelector": SELECTOR}}}}}}}
+
+
+def test_fleet_partitions_are_the_waves(fleet_export: Path) -> None:
+    doc = yaml.safe_load((fleet_export / "fleet.yaml").read_text())
+    jsonschema.validate(doc, FLEET_SCHEMA)
+    partitions = doc["rolloutStrategy"]["partitions"]
+    assert [(p["name"], p["clusterSelector"]["matchExpressions"][0]["values"]) for p in partitions] == [
+        ("canary", ["r1"]), ("rest", ["r2", "r3"])]
+    dirs = {t["name"]: t.get("kustomize", {}).get("dir") for t in doc["targetCustomizations"]}
+    assert dirs == {"r1": "robots/r1", "r2": "robots/r2", "r3": "robots/r3", "not-a-robot": None}
+    assert doc["targetCustomizations"][-1] == {"name": "not-a-robot", "clusterSelector": {}, "doNotDeploy": True}
+
+
+def test_argo_rolling_sync_steps_are_the_waves(fleet_export: Path) -> None:
+    doc = yaml.safe_load((fleet_export / "argocd" / "applicationset.yaml").read_text())
+    assert (doc["apiVersion"], doc["kind"]) == ("argoproj.io/v1alpha1", "ApplicationSet")
+    spec = doc["spec"]
+    steps = spec["strategy"]["rollingSync"]["steps"]
+    assert spec["strategy"]["type"] == "RollingSync"
+    assert [s["matchExpressions"][0]["values"] for s in steps] == [["canary"], ["rest"]]
+    elements = spec["generators"][0]["list"]["elements"]
+    assert [(e["robot"], e["wave"], e["path"]) for e in elements] == [
+        ("r1", "canary", "robots-k8s/robots/r1"), ("r2", "rest", "robots-k8s/robots/r2"),
+        ("r3", "rest", "robots-k8s/robots/r3")]
+    template = spec["template"]
+    assert template["metadata"]["labels"]["robocore.dev/wave"] == "{{.wave}}"
+    assert template["spec"]["source"]["repoURL"] == "https://git.example.org/fleet.git"
+    assert "automated" not in template["spec"].get("syncPolicy", {})  # RollingSync drives the syncs
