@@ -401,8 +401,9 @@ def rollback(c: Context, host: str | None = None, dry_run: bool = False) -> None
     iterable=["model"],
 )
 @reported
-def export(c: Context, engine: str, path: str, tag: str = "", git_repo: str = "", git_path: str = "",
-           model: list[str] | None = None, dry_run: bool = False, json: bool = False) -> None:
+def export(c: Context, engine: str, path: str, tag: str | None = None, git_repo: str | None = None,
+           git_path: str | None = None, model: list[str] | None = None, dry_run: bool = False,
+           json: bool = False) -> None:
     """Write the robot, or the fleet of fleet.yaml, as Kubernetes objects for k3s, Rancher Fleet and Argo CD."""
     from robocore.commands import export as command
     from robocore.errors import UsageError
@@ -412,8 +413,10 @@ def export(c: Context, engine: str, path: str, tag: str = "", git_repo: str = ""
     options = _options(c, "export", dry_run=dry_run, json=json)
     folder = Path(path)
     models = [Path(m) for m in model or []]
-    _execute(options, lambda: command.export_kubernetes(options, folder, tag=_tag(tag), git_repo=git_repo or None,
-                                                        git_path=git_path, models=models))
+    repository = _given(git_repo, "--git-repo")
+    inside = _given(git_path, "--git-path") or ""
+    _execute(options, lambda: command.export_kubernetes(options, folder, tag=_tag(tag), git_repo=repository,
+                                                        git_path=inside, models=models))
 
 
 @task(help={"host": "Only this host.", "json": "Machine-readable result on stdout."})
