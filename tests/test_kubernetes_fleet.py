@@ -184,3 +184,29 @@ def test_argo_rolling_sync_steps_are_the_waves(fleet_export: Path) -> None:
     assert template["metadata"]["labels"]["robocore.dev/wave"] == "{{.wave}}"
     assert template["spec"]["source"]["repoURL"] == "https://git.example.org/fleet.git"
     assert "automated" not in template["spec"].get("syncPolicy", {})  # RollingSync drives the syncs
+
+
+def test_images_by_digest_per_arch(tmp_path: Path) -> None:
+    """What a release record gives (a digest per repository and arch) maps each host's logical image on its own."""
+    from robocore.plan.kubernetes import ImageRef, RobotTarget, plan_export
+    from robocore.project import Project
+
+    amr = write(tmp_path / "amr", AMR, AMR_FLEET, ("driver", "perception"))
+    project = Project.load(amr)
+
+    def digests(repository: str, arch: str) -> ImageRef:
+        digit = "a" if arch == "amd64" else "b"
+        return ImageRef(name=f"10.0.0.2:5000/{repository}", digest="sha256:" + digit * 64)
+
+    files = plan_export({"amr": project}, [RobotTarget(name="r1", model="amr", wave="all", images=digests)], "amr")
+    folder = tmp_path / "out"
+    for name, text in files.items():
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)
+        (folder / name).write_text(text)
+    sets = by_kind(render(folder / "robots" / "r1"), "DaemonSet")
+    image = {name: ds["spec"]["template"]["spec"]["containers"][0]["image"] for name, ds in sets.items()}
+    assert image == {"driver": "10.0.0.2:5000/amr-driver@sha256:" + "a" * 64,
+                     "perception": "10.0.0.2:5000/amr-perception@sha256:" + "b" * 64,
+                     "discovery-0": "10.0.0.2:5000/amr-base@sha256:" + "a" * 64}
+    wait = sets["perception"]["spec"]["template"]["spec"]["initContainers"][0]["image"]
+    assert wait == "10.0.0.2:5000/amr-base@sha256:" + "b" * 64  # the base of the jetson's own arch
