@@ -210,3 +210,29 @@ def test_images_by_digest_per_arch(tmp_path: Path) -> None:
                      "discovery-0": "10.0.0.2:5000/amr-base@sha256:" + "a" * 64}
     wait = sets["perception"]["spec"]["template"]["spec"]["initContainers"][0]["image"]
     assert wait == "10.0.0.2:5000/amr-base@sha256:" + "b" * 64  # the base of the jetson's own arch
+
+
+def test_a_recorded_fleet_release_is_exported_by_digest(tmp_path: Path) -> None:
+    """With ``release --fleet``'s record of the tag, every image is its digest for its host's arch."""
+    from robocore.plan.fleet_release import ReleaseRecord
+
+    amr = write(tmp_path / "amr", AMR, AMR_FLEET, ("driver", "perception"))
+    registry = "10.0.0.2:5000"
+
+    def ref(repo: str, digit: str) -> str:
+        return f"{registry}/{repo}@sha256:" + digit * 64
+
+    record = ReleaseRecord(version="v9", registry=registry,
+                           components={"driver": {"amd64": ref("amr-driver", "1")},
+                                       "perception": {"arm64": ref("amr-perception", "2")}},
+                           base={"amd64": ref("amr-base", "3"), "arm64": ref("amr-base", "4")})
+    (amr / ".robocore" / "releases").mkdir(parents=True)
+    (amr / ".robocore" / "releases" / "v9.json").write_text(record.to_json())
+    folder = tmp_path / "out"
+    export_kubernetes(Options(project_dir=amr, task="export", quiet=True), folder, tag="v9")
+    sets = by_kind(render(folder / "robots" / "r2"), "DaemonSet")
+    image = {name: ds["spec"]["template"]["spec"]["containers"][0]["image"] for name, ds in sets.items()}
+    assert image == {"driver": ref("amr-driver", "1"), "perception": ref("amr-perception", "2"),
+                     "discovery-0": ref("amr-base", "3")}
+    for doc in sets.values():
+        validate(doc)

@@ -10,8 +10,10 @@ Each project is one model (its robot.yaml). Its robots are those of its fleet fi
 the project, in one wave. ``--model PATH`` adds other projects to the same export; waves of the same name
 merge, in the order they first appear.
 
-Images come from a release: ``--tag V`` names the images ``robocore release --tag V`` pushed
-(``<registry>/<image>:V``, a multi-arch list; the registry is the fleet file's, else robot.yaml's).
+Images come from a release: when ``release --fleet --tag V`` recorded it (``.robocore/releases/V.json``), each
+image by its digest for its host's arch (the self-contained fleet images: component image plus its install
+tree); else the images ``robocore release --tag V`` pushed (``<registry>/<image>:V``, a multi-arch list; the
+registry is the fleet file's, else robot.yaml's).
 """
 
 from __future__ import annotations
@@ -77,16 +79,40 @@ class Model:
     fleet: Fleet | None
 
 
+def record_images(project: Project, tag: str) -> ImageSource | None:
+    """The images of the fleet release ``tag`` by digest (``release --fleet --tag V`` recorded them in
+    ``.robocore/releases/V.json``: component image plus its install tree, per arch), None when that release has no
+    record (the images are then named by tag)."""
+    import os
+
+    from robocore.commands.fleet_release import load_release_record, record_path
+
+    if not os.path.lexists(record_path(project, tag)):
+        return None
+    record = load_release_record(project, tag)
+    robot = project.robot
+    base = naming.base_image(robot, project.name)
+    components = {naming.component_image(robot, project.name, c.name): c.name for c in robot.components}
+
+    def image(repository: str, arch: str) -> ImageRef:
+        ref = record.base_ref(arch) if repository == base else record.component_ref(components[repository], arch)
+        name, digest = ref.split("@", 1)
+        return ImageRef(name=name, digest=digest)
+
+    return image
+
+
 def model_robots(model: Model, tag: str) -> list[RobotTarget]:
     """The robots of one model: its fleet file's, in wave order, or the project's one robot (no fleet file)."""
     robot = model.project.robot
+    recorded = record_images(model.project, tag)
     if model.fleet is None:
         return [RobotTarget(name=model.name, model=model.name, wave=ONE_WAVE,
-                            images=tag_images(model.project, tag, robot.registry))]
+                            images=recorded or tag_images(model.project, tag, robot.registry))]
     from robocore.plan.fleet import plan_waves
 
     fleet = model.fleet
-    images = tag_images(model.project, tag, fleet.registry_for(robot))
+    images = recorded or tag_images(model.project, tag, fleet.registry_for(robot))
     targets = []
     for wave in plan_waves(fleet):
         for name in wave.robots:
