@@ -168,3 +168,20 @@ def test_a_matching_memo_without_a_valid_plan_takes_the_ordinary_path(project: P
     memo.current()
     assert memo.keep(plan)
     assert answered(monkeypatch, [document("talker")]) == (False, "")
+
+
+def test_a_resealed_plan_is_read_and_a_broken_seal_is_dropped(project: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """What integration/test_run_local.py does by hand: a plan edited and resealed is the one printed (the memo is
+    read), an edit that breaks the checksum is dropped and the ordinary path runs."""
+    record()
+    memo = status_memo.memo_for(["status"])
+    assert memo is not None
+    plan = noop.unseal(memo.path.read_bytes())
+    assert plan is not None
+    plan["hosts"][0][1].append("ghost")  # type: ignore[index]
+    memo.path.write_text(noop.seal(plan))
+    done, printed = answered(monkeypatch, [document("talker")])
+    assert done and any("ghost" in line and "missing" in line for line in printed.splitlines())
+    memo.path.write_text(noop.seal(plan).replace("ghost", "other"))
+    assert answered(monkeypatch, [document("talker")]) == (False, "")
+    assert not memo.path.exists()
