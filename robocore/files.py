@@ -131,9 +131,9 @@ def make_folder(path: Path, *, private: bool = False, shared: bool = False) -> P
 
     Every folder created under :data:`STATE_DIR` is :data:`PRIVATE_DIR` (0700) whatever the umask, except
     ``path`` itself when ``shared`` (:data:`SHARED_DIR`, 0755: another user reads it). ``private`` makes ``path``
-    0700 even when it exists already, or lies outside the state folder. A folder of this user under the state
-    folder that others may write to (made under a loose umask before) loses those bits. Elsewhere new folders
-    get ``0o777`` less the umask, never writable by others."""
+    0700 even when it exists already, or lies outside the state folder. A folder of this user on the way from the
+    state folder to ``path`` that others may write to (made under a loose umask before) loses those bits.
+    Elsewhere new folders get ``0o777`` less the umask, never writable by others."""
     check_no_links(path)
     anchor = _anchor(path)
     missing = []
@@ -156,12 +156,15 @@ def make_folder(path: Path, *, private: bool = False, shared: bool = False) -> P
             os.chmod(folder, wanted)  # mkdir's mode passes through the umask
     if not path.is_dir():
         raise UnsafePath(f"{path}: is not a folder; robocore keeps its files in it", hint=f"remove {path}")
-    info = os.lstat(path)
-    now = stat.S_IMODE(info.st_mode)
-    if private and now != PRIVATE_DIR:
+    if private and stat.S_IMODE(os.lstat(path).st_mode) != PRIVATE_DIR:
         os.chmod(path, PRIVATE_DIR)
-    elif anchor is not None and now & NEVER and info.st_uid == os.geteuid():
-        os.chmod(path, now & ~NEVER)
+    if anchor is not None:  # state folders of this user made writable by others (a loose umask before) are narrowed
+        for folder in (path, *path.parents):
+            if not folder.is_relative_to(anchor / STATE_DIR):
+                break
+            info = os.lstat(folder)
+            if stat.S_IMODE(info.st_mode) & NEVER and info.st_uid == os.geteuid():
+                os.chmod(folder, stat.S_IMODE(info.st_mode) & ~NEVER)
     return path
 
 

@@ -101,9 +101,11 @@ def test_folders_made_loose_before_are_narrowed(tmp_path: Path) -> None:
     """A state folder made by an older robocore under a loose umask loses the bits that let others write."""
     root = tmp_path / "robot"
     (root / ".robocore" / "history").mkdir(parents=True)
+    os.chmod(root / ".robocore", 0o775)  # umask 002, common with a group per user
     os.chmod(root / ".robocore" / "history", 0o777)
     files.write_atomic(root / ".robocore" / "history" / "pi.json", "[]")
     assert stat.S_IMODE(os.stat(root / ".robocore" / "history").st_mode) == 0o755
+    assert stat.S_IMODE(os.stat(root / ".robocore").st_mode) == 0o755  # the memo trusts no group-writable folder
     assert stat.S_IMODE(os.stat(root / ".robocore" / "history" / "pi.json").st_mode) == files.PRIVATE
 
 
