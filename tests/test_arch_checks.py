@@ -12,7 +12,7 @@ import pytest
 from robocore.commands import arch_checks, build, images, machine
 from robocore.config.model import Host
 from robocore.errors import ArchMismatch
-from robocore.plan import arches, containers, naming
+from robocore.plan import arches, containers, dockerfiles, naming
 from robocore.project import Project
 
 
@@ -154,7 +154,7 @@ def test_the_master_runs_the_base_of_its_hosts_arch(tmp_path: Path, native: str,
     """Wherever the master is, and whatever this machine's arch, the image steps accept the robot and the master
     runs the base prepare-base makes for its host's arch (``latest`` when that is this machine's)."""
     project = dataclasses.replace(_project(tmp_path, master=master), native_arch=native)
-    images.refuse_config_problems(project)
+    dockerfiles.refuse_robot_shape(project)
     arch = {"ipc": "amd64", "jetson": "arm64"}[master]
     assert images.arches(project) == sorted({"arm64", arch})  # the talker's and the master's
     [spec] = [s for s in containers.host_specs(project, master) if s.role == naming.ROLE_DISCOVERY]
@@ -169,7 +169,7 @@ def test_a_robot_with_no_host_of_this_machines_arch_has_only_that_arch(tmp_path:
     (tmp_path / "robot.yaml").write_text(ALL_ARM64)
     (tmp_path / "components" / "talker").mkdir(parents=True)
     project = dataclasses.replace(Project.load(tmp_path), native_arch="amd64")
-    images.refuse_config_problems(project)
+    dockerfiles.refuse_robot_shape(project)
     assert images.arches(project) == ["arm64"]
     specs = containers.host_specs(project, "pi")
     assert [(s.role, s.image) for s in specs] == [

@@ -61,7 +61,7 @@ def _fakes(monkeypatch: pytest.MonkeyPatch, run: Run, *, failing_root: str | Non
     monkeypatch.setattr(base_image, "run_builds", run_builds)
     monkeypatch.setattr(base_image, "decide", lambda state, planned, force: "new")
     monkeypatch.setattr(base_image, "report_outcomes", lambda report, outcomes: None)
-    monkeypatch.setattr(base_image, "refuse_config_problems", lambda project: None)
+    monkeypatch.setattr(base_image.dockerfiles, "refuse_robot_shape", lambda project: None)
     monkeypatch.setattr("robocore.adapters.image_builder.image_state", lambda client, ref: None)
     report = SimpleNamespace(info=lambda text: None)
     return SimpleNamespace(load=lambda: object(), report=report, dry_run=False)

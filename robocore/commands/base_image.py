@@ -17,7 +17,6 @@ from robocore.commands.images import (
     decide,
     fetch_source,
     planned,
-    refuse_config_problems,
     resource_entry,
     run_builds,
     show_plan,
@@ -76,7 +75,7 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
     """The base image plan for ``arch`` (resolves the root image and fetches common packages). Whether this
     machine can run ``arch`` is :func:`prepare_base`'s check, made for every arch before any root is made."""
     robot = project.robot
-    refuse_config_problems(project)
+    dockerfiles.refuse_robot_shape(project)
     native = native_arch()
     root_ref, root_id = _base_parent(project, client, arch, dry_run=dry_run, say=say)
     ca = find_ca_bundle()
@@ -129,7 +128,7 @@ def prepare_base(options: Options, *, force: bool) -> None:
     other (a mixed robot from nothing is ready when the emulated arch is, not after both one by one)."""
     project = options.load()
     report = options.report
-    refuse_config_problems(project)
+    dockerfiles.refuse_robot_shape(project)
     if options.dry_run:
         _show_bases(project, options, force=force)
         return

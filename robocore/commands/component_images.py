@@ -21,7 +21,6 @@ from robocore.commands.images import (
     decide,
     fetch_source,
     planned,
-    refuse_config_problems,
     run_builds,
     show_plan,
     triage,
@@ -138,7 +137,7 @@ def stage(options: Options, *, refresh: bool, component: str | None, force: bool
             _write_compose_files(project, report)
         return
     comps = selected_components(project, component)
-    refuse_config_problems(project)
+    dockerfiles.refuse_robot_shape(project)
     client = None if options.dry_run else local_docker()  # a dry run contacts no daemon
     from robocore.adapters.image_builder import image_state
 

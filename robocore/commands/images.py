@@ -20,24 +20,13 @@ from robocore.commands.machine import MAX_PARALLEL, local_docker, native_arch
 from robocore.commands.reporting import Outcome, Reporter, report_outcomes
 from robocore.config.model import Component
 from robocore.errors import BuildError
-from robocore.plan import discovery, dockerfiles, naming
+from robocore.plan import discovery, naming
 from robocore.plan.dockerfiles import ContextEntry, ImagePlan
 from robocore.plan.inputs import inputs_hash
 from robocore.project import Project
 
 if TYPE_CHECKING:
     from robocore.adapters.image_builder import ContextFile, ImageState
-
-
-def refuse_config_problems(project: Project) -> None:
-    """ConfigError, one line per problem with its line in robot.yaml, when robot.yaml asks for images robocore
-    cannot make for the robot's shape (the wheels base's limits). ``validate`` and every image step call it:
-    the one place these checks are made."""
-    from robocore.config.loader import located
-
-    found = dockerfiles.wheels_problems(project.robot)
-    if found:
-        raise located(project.robot_file, found)
 
 
 def arches(project: Project, components: Sequence[Component] | None = None) -> list[str]:

@@ -61,10 +61,10 @@ def run(options: Options) -> None:
         return
     project = options.load()
     robot = project.robot
-    from robocore.commands.images import refuse_config_problems
     from robocore.config.loader import robot_warnings
+    from robocore.plan.dockerfiles import refuse_robot_shape
 
-    refuse_config_problems(project)  # what prepare-base and stage refuse for the robot's shape
+    refuse_robot_shape(project)  # what prepare-base and stage refuse for the robot's shape
     from robocore.commands.workspace import check_wheels_packages, debian_dependency_warnings
 
     check_wheels_packages(project)

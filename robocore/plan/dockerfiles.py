@@ -25,11 +25,15 @@ import shlex
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
+from typing import TYPE_CHECKING
 
-from robocore.config.loader import ROBOT_FILE
+from robocore.config.loader import ROBOT_FILE, located
 from robocore.config.model import Arch, BaseKind, Component, Repository, Robot
 from robocore.errors import ConfigError, Problem
 from robocore.plan import arches, cmake_packages, colcon, naming
+
+if TYPE_CHECKING:
+    from robocore.project import Project
 
 #: ROS 2 wheels from PyPI, pinned per distro (x86_64, CPython 3.11/3.12). See design.md §5.
 WHEELS: dict[str, tuple[str, ...]] = {
@@ -154,6 +158,15 @@ def wheels_problems(robot: Robot) -> list[tuple[tuple[str | int, ...], str]]:
                                                 "and ROS 2 wheels exist for amd64 only; use base.kind: official "
                                                 "for this robot"))
     return found
+
+
+def refuse_robot_shape(project: Project) -> None:
+    """ConfigError, one line per problem with its line in robot.yaml, when the project's robot asks for images robocore
+    cannot make for its shape (the wheels base's limits). ``validate``, ``prepare-base`` and ``stage`` call it
+    first: the one place these checks are made."""
+    found = wheels_problems(project.robot)
+    if found:
+        raise located(project.robot_file, found)
 
 
 def base_tag(arch: str, native_arch: str) -> str:
