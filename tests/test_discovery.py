@@ -366,7 +366,7 @@ def test_a_replaced_node_gets_the_next_profile_after_its_predecessors_and_the_sa
     old.remove = lambda force: setattr(old, "removed", force)
     client = FakeClient()
     run._apply(client, Action("replace", spec.name, "new image"), spec, old,  # type: ignore[arg-type]
-               project.robot.hosts[0], report=Reporter(quiet=True), kind=kind)
+               project.robot.hosts[0], report=Reporter(quiet=True), kind=kind, ready_timeout=run.SERVER_READY_TIMEOUT)
     [made] = client.created
     assert old.removed and made["environment"]["FASTDDS_DEFAULT_PROFILES_FILE"] == f"/robocore/dds/{new_profile}"
     assert made["labels"] == spec.labels  # a later run compares the spec's hash: it keeps this container

@@ -157,7 +157,7 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
     local = None
     known: dict[str, str] = {}
     try:
-        refuse_daemon_arch(host, str(client.info().get("Architecture", "?")))
+        emulated = refuse_daemon_arch(host, str(client.info().get("Architecture", "?"))).emulated
         if not host.is_local:
             from robocore.adapters.docker_hosts import local_client
 
@@ -177,7 +177,7 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
         by_name = {s.name: s for s in specs}
         for action in actions:
             _apply(client, action, by_name.get(action.name), containers.get(action.name), host, report=report,
-                   kind=kind)
+                   kind=kind, ready_timeout=SERVER_READY_TIMEOUT * (EMULATED_SLOWDOWN if emulated else 1))
     finally:
         client.close()
         if local is not None:
@@ -219,7 +219,7 @@ def _check_name_conflicts(client: docker.DockerClient, specs: Sequence[Container
 
 
 def _apply(client: docker.DockerClient, action: Action, spec: ContainerSpec | None, container: Any, host: Host, *,
-           report: Reporter, kind: discovery.Discovery) -> None:
+           report: Reporter, kind: discovery.Discovery, ready_timeout: float) -> None:
     from docker.errors import APIError
     from rich.markup import escape
 
@@ -246,7 +246,7 @@ def _apply(client: docker.DockerClient, action: Action, spec: ContainerSpec | No
             created = client.containers.create(**kwargs)
             created.start()
             if spec.role == ROLE_DISCOVERY:
-                wait_server_ready(created, spec, host, kind.readiness)
+                wait_server_ready(created, spec, host, kind.readiness, ready_timeout)
             say(f"{'recreated' if action.verb == 'replace' else 'created'} {action.name}"
                 + (f" ({action.reason})" if action.reason else ""))
     except APIError as exc:
@@ -264,6 +264,10 @@ def environment_of(container: Any) -> dict[str, str]:
 
 
 SERVER_READY_TIMEOUT = 20.0
+#: How much longer a discovery server may take to serve on a host whose daemon runs its arch through qemu:
+#: emulated Python runs 4-5 times slower than native, and a ROS master is Python (an arm64 master under qemu
+#: on a busy 2-core machine took more than the native 20 s to serve).
+EMULATED_SLOWDOWN = 5
 
 
 def wait_server_ready(container: Any, spec: ContainerSpec, host: Host, check: discovery.ReadinessCheck,
