@@ -186,3 +186,11 @@ hosts:
 components:
   - {name: talker, folder: components/talker, runs_on: pi}
 """
+
+
+def test_a_step_on_an_emulated_daemon_may_take_longer() -> None:
+    """A discovery server gets the native 20 s on a daemon of its arch, five times that under qemu."""
+    from robocore.commands.run import SERVER_READY_TIMEOUT
+
+    assert arch_checks.allowing_emulation(SERVER_READY_TIMEOUT, emulated=False) == 20.0
+    assert arch_checks.allowing_emulation(SERVER_READY_TIMEOUT, emulated=True) == 100.0

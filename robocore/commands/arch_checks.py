@@ -127,3 +127,14 @@ def refuse_daemon_arch(host: Host, daemon_machine: str) -> HostArch:
     if found.problem:
         raise ArchMismatch(found.problem, hint=found.hint)
     return found
+
+
+#: How much longer a step may take on a daemon that runs its host's arch through qemu: emulated Python runs 4-5
+#: times slower than native (a ROS master is Python: an arm64 one under qemu on a busy 2-core machine took more
+#: than the native 20 s to serve).
+EMULATED_SLOWDOWN = 5
+
+
+def allowing_emulation(seconds: float, *, emulated: bool) -> float:
+    """``seconds`` (what a step may take natively), stretched when the daemon runs the arch ``emulated``."""
+    return seconds * (EMULATED_SLOWDOWN if emulated else 1)

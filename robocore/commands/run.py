@@ -17,7 +17,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from robocore.commands.arch_checks import refuse_daemon_arch
+from robocore.commands.arch_checks import allowing_emulation, refuse_daemon_arch
 from robocore.commands.composefiles import write_compose_files
 from robocore.commands.context import DRY_RUN_UNKNOWN, Options
 from robocore.commands.hosts import connect, for_each_host, managed_containers, select_hosts, short_error
@@ -177,7 +177,7 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
         by_name = {s.name: s for s in specs}
         for action in actions:
             _apply(client, action, by_name.get(action.name), containers.get(action.name), host, report=report,
-                   kind=kind, ready_timeout=SERVER_READY_TIMEOUT * (EMULATED_SLOWDOWN if emulated else 1))
+                   kind=kind, ready_timeout=allowing_emulation(SERVER_READY_TIMEOUT, emulated=emulated))
     finally:
         client.close()
         if local is not None:
@@ -264,10 +264,6 @@ def environment_of(container: Any) -> dict[str, str]:
 
 
 SERVER_READY_TIMEOUT = 20.0
-#: How much longer a discovery server may take to serve on a host whose daemon runs its arch through qemu:
-#: emulated Python runs 4-5 times slower than native, and a ROS master is Python (an arm64 master under qemu
-#: on a busy 2-core machine took more than the native 20 s to serve).
-EMULATED_SLOWDOWN = 5
 
 
 def wait_server_ready(container: Any, spec: ContainerSpec, host: Host, check: discovery.ReadinessCheck,

@@ -384,7 +384,8 @@ def bring_up(project_dir: Path, *, build: bool = True, servers: bool = True, gra
 def _start(robot: RobotUnderTest, source: Project, *, servers: bool) -> None:
     from testcontainers.core.network import Network
 
-    from robocore.commands.run import wait_server_ready
+    from robocore.commands.arch_checks import allowing_emulation
+    from robocore.commands.run import SERVER_READY_TIMEOUT, wait_server_ready
 
     run = robot.run
     network = Network(docker_network_kw={"labels": run.labels, "driver": "bridge"})
@@ -411,8 +412,9 @@ def _start(robot: RobotUnderTest, source: Project, *, servers: bool) -> None:
             robot.containers[spec.service] = wrapper
             robot.specs[spec.service] = spec
             wrapper.start()
-            wait_server_ready(wrapper.get_wrapped_container(), spec, robot.project.robot.host(spec.host),
-                              kind.readiness)
+            on = robot.project.robot.host(spec.host)  # this machine's daemon runs every host's containers
+            timeout = allowing_emulation(SERVER_READY_TIMEOUT, emulated=on.arch.value != robot.project.native_arch)
+            wait_server_ready(wrapper.get_wrapped_container(), spec, on, kind.readiness, timeout)
     for name, spec in testrun.component_specs(run, robot.project, str(dds_dir)).items():
         wrapper = _testcontainer(spec)
         robot.containers[name] = wrapper
