@@ -3,14 +3,12 @@
 The arm64 stand-in of ``ros:noetic-ros-base`` (:mod:`official_standins`) is built FROM the arm64 Debian root the
 arm64 suites bootstrap (:mod:`arm64_project`; this module runs after them, ``RUN_LAST``), and takes the name
 ``ros:noetic-ros-base`` as ``docker pull --platform linux/arm64`` would. robocore's ``prepare-base`` then resolves
-the arm64 root from that name (its per-arch name ``robocore/arm64/ros:noetic-ros-base`` removed first) and keeps
-the amd64 one it pinned before.
+the arm64 root from that name (its per-arch name ``robocore/arm64/ros:noetic-ros-base`` removed first).
 
-The template's noetic project (named as in ``test_official_base.py``: its amd64 base is reused) with its talker on an
-arm64 host (the master and the listener on this machine):
-``prepare-base`` makes an arm64 base on the stand-in (colcon from the stand-in's ROS apt repository, rosdep's
-offline database, the common package built under emulation), ``stage`` the talker's arm64 image through rosdep,
-``build`` compiles the roscpp talker for arm64: its install tree holds an aarch64 ELF.
+The template's noetic project on one arm64 host (its ROS master there too): ``prepare-base`` makes the arm64 base on
+the stand-in (colcon from the stand-in's ROS apt repository, rosdep's offline database, the common package built
+under emulation), ``stage`` the talker's arm64 image through rosdep, ``build`` compiles the roscpp talker for arm64:
+its install tree holds an aarch64 ELF.
 """
 
 from __future__ import annotations
@@ -35,20 +33,14 @@ if TYPE_CHECKING:
 
 pytestmark = [pytest.mark.docker, pytest.mark.timeout(3000)]
 
-NAME = "robocore-it-official-noetic"
+NAME = "robocore-it-official-arm64"
 #: The arm64 host's address: prepare-base, stage and build contact no host (TEST-NET-1).
 ARM_HOST = "192.0.2.211"
-#: The talker's component name here.
-TALKER = "armtalker"
 
 
 @pytest.fixture(scope="module")
 def arm64_official(arm64_images: None, docker_client: Any, run_robocore: RobocoreCli) -> Iterator[Path]:
-    """The noetic project (base: official) with its talker on an arm64 host, after prepare-base, stage, build."""
-    amd64 = official_standins.Standin("noetic", "amd64")
-    official_standins.ensure(docker_client, amd64, say=print)
-    if docker_client.images.list(name=amd64.pinned) == []:  # this module alone: the amd64 root as pulled before
-        docker_client.images.get(amd64.reference).tag(amd64.pinned)
+    """The noetic project (base: official) on one arm64 host, after prepare-base, and stage and build of the talker."""
     arm64 = official_standins.Standin("noetic", "arm64")
     arm64_id = official_standins.ensure(docker_client, arm64, say=print)
     official_standins.forget_pinned(docker_client, arm64)
@@ -57,16 +49,14 @@ def arm64_official(arm64_images: None, docker_client: Any, run_robocore: Robocor
     run_robocore(None, "init", str(root), "--defaults", "--distro", "noetic")
     data = yaml.safe_load((root / "robot.yaml").read_text())
     data["ros_domain_id"] = random.randint(100, 230)
-    local = data["hosts"][0]["name"]
-    data["hosts"].append({"name": "robot-arm", "ip": ARM_HOST, "user": "root", "arch": "arm64"})
-    data["discovery"] = {"servers": [{"host": local, "port": free_tcp_port()}]}
+    data["hosts"] = [{"name": "robot-arm", "ip": ARM_HOST, "user": "root", "arch": "arm64"}]
+    data["discovery"] = {"servers": [{"host": "robot-arm", "port": free_tcp_port()}]}
     for comp in data["components"]:
-        comp["runs_on"] = local
-        if comp["name"] == "talker":  # a name of its own: the amd64 suite's talker image keeps its arch
-            comp.update(name=TALKER, runs_on="robot-arm")
+        comp["runs_on"] = "robot-arm"
     (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
     timings = {}
-    for step, extra in (("prepare-base", ()), ("stage", ("--component", TALKER)), ("build", ("--component", TALKER))):
+    for step, extra in (("prepare-base", ()), ("stage", ("--component", "talker")),
+                        ("build", ("--component", "talker"))):
         started = time.monotonic()
         run_robocore(root, step, "--quiet", *extra)
         timings[step] = round(time.monotonic() - started, 1)
@@ -79,14 +69,14 @@ def arm64_official(arm64_images: None, docker_client: Any, run_robocore: Robocor
 
 def test_the_arm64_talker_is_built_on_the_official_arm64_base(arm64_official: Path, docker_client: Any) -> None:
     images = {ref: docker_client.images.get(ref).attrs["Architecture"] for ref in (
-        "robocore/arm64/ros:noetic-ros-base", f"{NAME}-base:latest-arm64", f"{NAME}-{TALKER}:latest")}
+        "robocore/arm64/ros:noetic-ros-base", f"{NAME}-base:latest-arm64", f"{NAME}-talker:latest")}
     assert set(images.values()) == {"arm64"}, images
     labels = docker_client.images.get(f"{NAME}-base:latest-arm64").attrs["Config"]["Labels"]
     assert labels.get(official_standins.LABEL), labels  # built FROM the stand-in
-    machine = docker_client.containers.run(f"{NAME}-{TALKER}:latest", ["uname", "-m"], remove=True,
+    machine = docker_client.containers.run(f"{NAME}-talker:latest", ["uname", "-m"], remove=True,
                                            platform="linux/arm64").decode().strip()
     assert machine == "aarch64"
-    install = arm64_official / ".robocore" / "build" / TALKER / "install"
+    install = arm64_official / ".robocore" / "build" / "talker" / "install"
     elves = [p for p in install.rglob("talker") if p.is_file() and not p.is_symlink()
              and arches.elf_arch(p.read_bytes()[:20]) is not None]
     assert [arches.elf_arch(p.read_bytes()[:20]) for p in elves] == ["arm64"], elves

@@ -7,14 +7,15 @@ them; its per-arch name of the root (``robocore/amd64/ros:<distro>-ros-base``) i
 ``prepare-base`` resolves the root from the upstream name as on a machine that has just pulled it.
 
 For each of jazzy and noetic, the project of ``robocore init --defaults`` (its listener's package.xml also asks for
-the rosdep key ``tinyxml2``):
+a rosdep key: ``tinyxml2`` on jazzy, ``std_srvs`` on noetic, :data:`SYSTEM_DEPENDENCY`):
 
-- ``prepare-base``, ``stage``, ``build``: the base is built on the stand-in; rosdep resolves ``tinyxml2`` through the
-  offline database to Debian's ``libtinyxml2-dev``, which is then in the listener's image and not in the base or
-  the talker's (negative control); a package that depends on a key the database lacks fails ``stage`` with that key
-  named in one line;
+- ``prepare-base``, ``stage``, ``build``: the base is built on the stand-in; rosdep resolves the key through the
+  offline database to a Debian package (jazzy: ``libtinyxml2-dev``), which is then in the listener's image and not in
+  the base or the talker's (negative control); a package that depends on a key the database lacks fails ``stage``
+  with that key named in one line;
 - ``run``: the listener hears the talker; once the talker is stopped, nothing more is heard (negative control);
-- ``test``: the template packages' own tests pass inside the component images;
+- ``test``: the template packages' own tests pass inside the component images (counted for noetic only: see
+  docs/official-base.md);
 - ``shell --cmd``: a command in a component's dev shell sees the distro's ROS.
 
 What only the real images can show (Ubuntu, the ROS apt packages, the real rosdep database) is in
@@ -43,8 +44,10 @@ if TYPE_CHECKING:
 pytestmark = [pytest.mark.docker, pytest.mark.timeout(2400)]
 
 TALKER_TEXT = {"jazzy": "hello", "noetic": "hello from talker #"}
-#: A rosdep key of the stand-ins' database and the Debian package it resolves to (not in the stand-ins).
-SYSTEM_KEY, SYSTEM_DEB = "tinyxml2", "libtinyxml2-dev"
+#: Per distro, a rosdep key of the stand-in's offline database and a Debian package it resolves to that the stand-in
+#: lacks. jazzy: a system key of the stand-ins' own list; noetic: a key of Debian's own map of its ROS 1 packages
+#: (``10-debian.list``), since the ROS 1 root already has libtinyxml2-dev (librospack-dev depends on it).
+SYSTEM_DEPENDENCY = {"jazzy": ("tinyxml2", "libtinyxml2-dev"), "noetic": ("std_srvs", "python3-std-srvs")}
 #: A key no database has.
 MISSING_KEY = "robocore_it_no_such_rosdep_key"
 
@@ -91,7 +94,7 @@ def official(request: pytest.FixtureRequest, docker_client: Any, run_robocore: R
     port = free_tcp_port() if distro == "noetic" else free_udp_port()
     data["discovery"] = {"servers": [{"host": data["hosts"][0]["name"], "port": port}]}
     (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
-    _depend(_package_xml(root, "listener"), SYSTEM_KEY)
+    _depend(_package_xml(root, "listener"), SYSTEM_DEPENDENCY[distro][0])
     timings = {}
     for step in ("prepare-base", "stage", "build"):
         started = time.monotonic()
@@ -123,10 +126,11 @@ def test_the_base_is_built_on_the_official_image_resolved_locally(official: Offi
 
 
 def test_rosdep_installs_a_system_dependency_of_a_package(official: Official, docker_client: Any) -> None:
-    assert _has_package(docker_client, f"{official.name}-listener:latest", SYSTEM_DEB)
+    deb = SYSTEM_DEPENDENCY[official.distro][1]
+    assert _has_package(docker_client, f"{official.name}-listener:latest", deb)
     # negative control: neither the base nor the talker (whose package.xml does not ask for it) has it
-    assert not _has_package(docker_client, f"{official.name}-base:latest", SYSTEM_DEB)
-    assert not _has_package(docker_client, f"{official.name}-talker:latest", SYSTEM_DEB)
+    assert not _has_package(docker_client, f"{official.name}-base:latest", deb)
+    assert not _has_package(docker_client, f"{official.name}-talker:latest", deb)
 
 
 def test_a_rosdep_key_the_database_lacks_fails_stage_in_one_line(official: Official, run_robocore: RobocoreCli,
@@ -162,8 +166,12 @@ def test_package_tests_pass_in_the_component_images(official: Official, run_robo
     done = run_robocore(official.root, "test")
     print(done.stdout)
     for package in ("demo_talker", "demo_listener"):
-        rows = [line for line in done.stdout.splitlines() if package in line]
-        assert rows and "passed" in rows[0], done.stdout
+        rows = [line.replace("│", " ").split() for line in done.stdout.splitlines() if package in line]
+        assert rows and rows[0][-1] == "passed", done.stdout
+        # noetic: each package's 2 tests counted. jazzy: Debian 12's colcon 0.12 (the stand-in's) runs the ament_python
+        # packages' tests but leaves no JUnit file where robocore reads it, so none are counted (docs/official-base.md)
+        if official.distro == "noetic":
+            assert rows[0][2] == "2", done.stdout
 
 
 def test_shell_cmd_runs_in_the_component_environment(official: Official, run_robocore: RobocoreCli) -> None:
