@@ -7,7 +7,7 @@ them; its per-arch name of the root (``robocore/amd64/ros:<distro>-ros-base``) i
 ``prepare-base`` resolves the root from the upstream name as on a machine that has just pulled it.
 
 For each of jazzy and noetic, the project of ``robocore init --defaults`` (its listener's package.xml also asks for
-a rosdep key: ``tinyxml2`` on jazzy, ``std_srvs`` on noetic, :data:`SYSTEM_DEPENDENCY`):
+a rosdep key: ``tinyxml2`` on jazzy, ``apriltag`` on noetic, :data:`SYSTEM_DEPENDENCY`):
 
 - ``prepare-base``, ``stage``, ``build``: the base is built on the stand-in; rosdep resolves the key through the
   offline database to a Debian package (jazzy: ``libtinyxml2-dev``), which is then in the listener's image and not in
@@ -45,9 +45,10 @@ pytestmark = [pytest.mark.docker, pytest.mark.timeout(2400)]
 
 TALKER_TEXT = {"jazzy": "hello", "noetic": "hello from talker #"}
 #: Per distro, a rosdep key of the stand-in's offline database and a Debian package it resolves to that the stand-in
-#: lacks. jazzy: a system key of the stand-ins' own list; noetic: a key of Debian's own map of its ROS 1 packages
-#: (``10-debian.list``), since the ROS 1 root already has libtinyxml2-dev (librospack-dev depends on it).
-SYSTEM_DEPENDENCY = {"jazzy": ("tinyxml2", "libtinyxml2-dev"), "noetic": ("std_srvs", "python3-std-srvs")}
+#: lacks. jazzy: a system key of the stand-ins' own list; noetic: a system library in Debian's own map
+#: (``10-debian.list``): the ROS 1 root already has libtinyxml2-dev (librospack-dev depends on it), and a ROS package
+#: key of that map is skipped when the package is on ROS_PACKAGE_PATH (``--ignore-src``).
+SYSTEM_DEPENDENCY = {"jazzy": ("tinyxml2", "libtinyxml2-dev"), "noetic": ("apriltag", "libapriltag-dev")}
 #: A key no database has.
 MISSING_KEY = "robocore_it_no_such_rosdep_key"
 
