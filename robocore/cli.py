@@ -228,6 +228,33 @@ def _run_recording(memo: Any, args: list[str]) -> None:
         memo.record(out.kept.getvalue(), err.kept.getvalue())
 
 
+#: ``robocore fleet join|rollout|status|rollback ...``: the two words name the task ``fleet-<verb>``.
+FLEET_WORD = "fleet"
+FLEET_VERBS = ("join", "rollout", "status", "rollback")
+
+
+def fleet_task(rest: list[str]) -> list[str]:
+    """``fleet VERB ...`` as the task ``fleet-VERB ...``: ``rollout VERSION`` becomes ``--version VERSION`` and
+    ``rollback ROBOT...`` one ``--robot ROBOT`` each (operands after ``--`` too). Other command lines are kept."""
+    if len(rest) < 2 or rest[0] != FLEET_WORD:
+        return rest
+    verb, args = rest[1], rest[2:]
+    if verb not in FLEET_VERBS:
+        raise CommandLineError(f"unknown fleet command {verb!r} (fleet {'|'.join(FLEET_VERBS)})")
+    out = [f"fleet-{verb}"]
+    operand_flag = {"rollout": "--version", "rollback": "--robot"}.get(verb)
+    operands_only = False
+    for arg in args:
+        if arg == "--" and not operands_only:
+            operands_only = True
+            continue
+        if operand_flag is not None and (operands_only or not arg.startswith("-")):
+            out += [operand_flag, arg]
+        else:
+            out.append(arg)
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     """Entry point of the ``robocore`` console script."""
     args = list(sys.argv[1:] if argv is None else argv)
@@ -252,9 +279,10 @@ def main(argv: Sequence[str] | None = None) -> None:
         return
     from robocore.tasks import cli_namespace
 
-    names = set(cli_namespace.task_names) | {n.replace("_", "-") for n in cli_namespace.task_names}
+    names = set(cli_namespace.task_names) | {n.replace("_", "-") for n in cli_namespace.task_names} | {FLEET_WORD}
     try:
         project, rest = split_project(args, names)
+        rest = fleet_task(rest)
     except CommandLineError as error:
         from robocore.ui import bounded, clean
 

@@ -1,0 +1,270 @@
+"""Docker Swarm through docker-py: the one place robocore talks to a swarm (manager and joining nodes).
+
+Thin wrappers: the swarm's state in and out as plain data, :class:`~robocore.plan.swarm_services.ServiceSpec`
+turned into docker-py arguments, docker-py's errors turned into :class:`~robocore.errors.DockerError` naming
+what failed. Clients come from :mod:`robocore.adapters.docker_hosts` (ssh, TLS, local), as for robot hosts.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from robocore.errors import DockerError
+from robocore.plan.swarm_services import ConfigFile, ServiceSpec
+
+if TYPE_CHECKING:
+    import docker
+
+#: Port of the swarm's manager API (Docker's default).
+SWARM_PORT = 2377
+#: Nanoseconds a task has to stop before it is killed (Docker's default, given explicitly: see service_kwargs).
+STOP_GRACE_NS = 10_000_000_000
+#: Swarm task states after which a task never runs again.
+ENDED = frozenset({"complete", "failed", "shutdown", "rejected", "orphaned", "remove"})
+
+
+@contextmanager
+def swarm_errors(what: str) -> Iterator[None]:
+    """Turn docker-py's API errors during ``what`` into a DockerError that says what failed."""
+    from docker.errors import APIError
+
+    try:
+        yield
+    except APIError as exc:
+        text = str(getattr(exc, "explanation", None) or exc).strip().splitlines()
+        raise DockerError(f"{what}: {text[0] if text else type(exc).__name__}") from None
+
+
+@dataclass(frozen=True)
+class SwarmState:
+    """A daemon's view of swarm membership (``docker info``'s Swarm part)."""
+
+    state: str  # inactive | pending | active | error | locked
+    node_id: str
+    cluster_id: str
+    is_manager: bool
+
+
+def swarm_state(client: docker.DockerClient) -> SwarmState:
+    """Whether the daemon of ``client`` is in a swarm, which node it is and of which cluster."""
+    with swarm_errors("docker info"):
+        info = client.info().get("Swarm") or {}
+    cluster = info.get("Cluster") or {}
+    return SwarmState(state=str(info.get("LocalNodeState") or "inactive"), node_id=str(info.get("NodeID") or ""),
+                      cluster_id=str(cluster.get("ID") or ""), is_manager=bool(info.get("ControlAvailable")))
+
+
+def init_swarm(client: docker.DockerClient, advertise: str) -> None:
+    """Make the daemon of ``client`` the first manager of a new swarm, advertised at ``advertise``."""
+    with swarm_errors(f"docker swarm init --advertise-addr {advertise}"):
+        client.swarm.init(advertise_addr=advertise, listen_addr=f"0.0.0.0:{SWARM_PORT}")
+
+
+def worker_token(client: docker.DockerClient) -> str:
+    """The swarm's worker join token (read from the manager)."""
+    with swarm_errors("reading the swarm's join token"):
+        client.swarm.reload()
+        return str(client.swarm.attrs["JoinTokens"]["Worker"])
+
+
+def join_swarm(client: docker.DockerClient, manager: str, token: str, advertise: str) -> None:
+    """Join the daemon of ``client`` to the swarm whose manager is at ``manager`` as a worker."""
+    with swarm_errors(f"docker swarm join {manager}"):
+        client.swarm.join(remote_addrs=[f"{manager}:{SWARM_PORT}"], join_token=token, advertise_addr=advertise,
+                          listen_addr=f"0.0.0.0:{SWARM_PORT}")
+
+
+@dataclass(frozen=True)
+class NodeInfo:
+    """One node of the swarm as the manager sees it."""
+
+    id: str
+    hostname: str
+    labels: dict[str, str]
+    state: str  # ready | down | unknown | disconnected
+    availability: str  # active | pause | drain
+    addr: str
+
+
+def nodes(client: docker.DockerClient) -> list[NodeInfo]:
+    """Every node of the swarm."""
+    with swarm_errors("docker node ls"):
+        found = client.nodes.list()
+    return [_node(n.attrs) for n in found]
+
+
+def _node(attrs: dict[str, Any]) -> NodeInfo:
+    spec = attrs.get("Spec") or {}
+    status = attrs.get("Status") or {}
+    return NodeInfo(id=str(attrs.get("ID")), hostname=str((attrs.get("Description") or {}).get("Hostname") or ""),
+                    labels=dict(spec.get("Labels") or {}), state=str(status.get("State") or "unknown"),
+                    availability=str(spec.get("Availability") or "active"), addr=str(status.get("Addr") or ""))
+
+
+def update_node(client: docker.DockerClient, node_id: str, *, labels: dict[str, str] | None = None,
+                availability: str | None = None) -> None:
+    """Set a node's labels (all of them) and/or availability."""
+    with swarm_errors(f"docker node update {node_id}"):
+        node = client.nodes.get(node_id)
+        spec = dict(node.attrs["Spec"])
+        if labels is not None:
+            spec["Labels"] = labels
+        if availability is not None:
+            spec["Availability"] = availability
+        node.update(spec)
+
+
+def ensure_configs(client: docker.DockerClient, files: tuple[ConfigFile, ...]) -> dict[str, str]:
+    """Create the Swarm configs of ``files`` that do not exist yet (they are immutable and named by content);
+    return config name -> id."""
+    from docker.errors import APIError, NotFound
+
+    ids: dict[str, str] = {}
+    for file in files:
+        if file.name in ids:
+            continue
+        with swarm_errors(f"docker config create {file.name}"):
+            try:
+                ids[file.name] = str(client.configs.get(file.name).id)
+            except NotFound:
+                try:
+                    ids[file.name] = str(client.configs.create(name=file.name, data=file.text.encode()).id)
+                except APIError as exc:  # made meanwhile by another run
+                    if getattr(exc, "status_code", None) != 409:
+                        raise
+                    ids[file.name] = str(client.configs.get(file.name).id)
+    return ids
+
+
+def service_kwargs(spec: ServiceSpec, config_ids: dict[str, str]) -> dict[str, Any]:
+    """docker-py ``services.create``/``update`` keyword arguments of ``spec``."""
+    from docker.types import ConfigReference, DNSConfig, Mount, Resources, RestartPolicy, ServiceMode, UpdateConfig
+
+    mounts = [Mount(m.target, m.source, type="volume" if m.is_named_volume else "bind", read_only=m.read_only)
+              for m in spec.mounts]
+    configs = [ConfigReference(config_ids[c.name], c.name, filename=c.target, mode=0o444) for c in spec.configs]
+    return {
+        "image": spec.image,
+        "name": spec.name,
+        "command": list(spec.command) if spec.command is not None else None,
+        "args": list(spec.args) if spec.args is not None else None,
+        "env": [f"{key}={value}" for key, value in spec.environment],
+        "mounts": mounts,
+        "configs": configs,
+        "networks": ["host"],
+        "constraints": list(spec.constraints),
+        "restart_policy": RestartPolicy(condition=spec.restart, delay=int(1e9)),  # type: ignore[arg-type]
+        # stop-first: never two copies of one ROS node; robocore rolls whole robots back itself
+        "update_config": UpdateConfig(parallelism=1, order="stop-first", failure_action="continue", monitor=int(1e9)),
+        "labels": spec.label_map,
+        "mode": ServiceMode("replicated", 1),
+        "init": spec.role != "discovery",
+        # what the daemon fills in on an update when absent: given from the start, the first update of an
+        # unchanged service replaces no task
+        "stop_grace_period": STOP_GRACE_NS,
+        "resources": Resources(),
+        "dns_config": DNSConfig(),
+    }
+
+
+@dataclass(frozen=True)
+class TaskInfo:
+    """One task of a service."""
+
+    id: str
+    node_id: str
+    state: str
+    desired: str
+    image: str
+    created: str
+    error: str
+    exit_code: int | None
+
+
+@dataclass(frozen=True)
+class ServiceInfo:
+    """One service as the manager holds it: its labels, image, and version (for updates)."""
+
+    id: str
+    name: str
+    labels: dict[str, str]
+    image: str
+    version: int
+    attrs: dict[str, Any]
+
+
+def services(client: docker.DockerClient, label: str) -> list[ServiceInfo]:
+    """The services carrying ``label`` (``key=value``)."""
+    with swarm_errors("docker service ls"):
+        found = client.services.list(filters={"label": label})
+    return [_service(s.attrs) for s in found]
+
+
+def _service(attrs: dict[str, Any]) -> ServiceInfo:
+    spec = attrs.get("Spec") or {}
+    container = ((spec.get("TaskTemplate") or {}).get("ContainerSpec")) or {}
+    return ServiceInfo(id=str(attrs.get("ID")), name=str(spec.get("Name")), labels=dict(spec.get("Labels") or {}),
+                       image=str(container.get("Image") or ""), version=int((attrs.get("Version") or {}).get("Index")
+                                                                            or 0), attrs=attrs)
+
+
+def apply_service(client: docker.DockerClient, spec: ServiceSpec, config_ids: dict[str, str]) -> str:
+    """Create ``spec``'s service, or update it in place when it exists (stop-first); return the service id."""
+    from docker.errors import NotFound
+
+    kwargs = service_kwargs(spec, config_ids)
+    with swarm_errors(f"docker service update {spec.name}"):
+        try:
+            service = client.services.get(spec.name)  # type: ignore[no-untyped-call]
+        except NotFound:
+            service = client.services.create(**kwargs)  # type: ignore[no-untyped-call]
+            # The daemon fills defaults into a service's first update (an empty Resources), which would make the
+            # first update of an unchanged service replace its task: that update is made now, at creation.
+            service.reload()
+        name = kwargs.pop("name")
+        service.update(name=name, **kwargs)
+        return str(service.id)
+
+
+def remove_service(client: docker.DockerClient, name: str) -> None:
+    """Remove a service (nothing when it is gone)."""
+    from docker.errors import NotFound
+
+    with swarm_errors(f"docker service rm {name}"):
+        try:
+            client.services.get(name).remove()  # type: ignore[no-untyped-call]
+        except NotFound:
+            return
+
+
+def tasks(client: docker.DockerClient, service: str) -> list[TaskInfo]:
+    """The tasks of ``service`` (by name), newest first."""
+    from docker.errors import NotFound
+
+    with swarm_errors(f"docker service ps {service}"):
+        try:
+            found = client.api.tasks(filters={"service": service})  # type: ignore[no-untyped-call]
+        except NotFound:
+            return []
+    out = [_task(t) for t in found]
+    return sorted(out, key=lambda t: t.created, reverse=True)
+
+
+def _task(attrs: dict[str, Any]) -> TaskInfo:
+    status = attrs.get("Status") or {}
+    container = (((attrs.get("Spec") or {}).get("ContainerSpec")) or {})
+    code = (status.get("ContainerStatus") or {}).get("ExitCode")
+    return TaskInfo(id=str(attrs.get("ID")), node_id=str(attrs.get("NodeID") or ""), state=str(status.get("State")),
+                    desired=str(attrs.get("DesiredState")), image=str(container.get("Image") or ""),
+                    created=str(attrs.get("CreatedAt") or ""), error=str(status.get("Err") or ""),
+                    exit_code=int(code) if isinstance(code, int) else None)
+
+
+def service_logs(client: docker.DockerClient, service: str) -> str:
+    """What ``service``'s tasks printed (stdout and stderr), read through the manager."""
+    with swarm_errors(f"docker service logs {service}"):
+        chunks = client.api.service_logs(service, stdout=True, stderr=True, follow=False)
+        return b"".join(chunks).decode(errors="replace")

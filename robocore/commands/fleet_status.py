@@ -1,0 +1,89 @@
+"""``fleet status``: one row per robot of the fleet, read from the manager only.
+
+Release running: the release whose images every component's current task runs (``mixed`` while they differ,
+``-`` when nothing runs); target: the release its services are set to; health: the last gate's verdict; state:
+``online``, ``offline`` (a node of it is not ready) and ``pending`` (it does not run its target yet); last
+change: when the target last changed. All of it comes from the services' labels and tasks and the nodes' states.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from robocore.adapters import swarm
+from robocore.commands.context import Options
+from robocore.commands.fleet_swarm import load, manager_client, offline, project_label, robot_nodes
+from robocore.plan import naming
+from robocore.plan import swarm_services as plan
+
+
+@dataclass(frozen=True)
+class FleetRobotRow:
+    """One robot in ``fleet status``."""
+
+    kind: ClassVar[str] = "fleet_robot"
+    robot: str
+    running: str
+    target: str
+    health: str
+    state: str  # online | offline | pending | offline, pending
+    changed: str
+
+
+def _running(services: list[swarm.ServiceInfo], tasks: dict[str, list[swarm.TaskInfo]]) -> str:
+    """The release every component service's running task runs, ``mixed`` or ``-``."""
+    found = set()
+    for service in services:
+        if service.labels.get(naming.LABEL_ROLE) != naming.ROLE_COMPONENT:
+            continue
+        live = [t for t in tasks.get(service.name, []) if t.state == "running"]
+        if not live:
+            return "-"
+        image = live[0].image
+        if image == service.image:
+            found.add(service.labels.get(plan.LABEL_RELEASE, "?"))
+        elif image and image == service.labels.get(plan.LABEL_PREVIOUS_IMAGE):
+            found.add(service.labels.get(plan.LABEL_PREVIOUS, "?"))
+        else:
+            found.add("?")
+    if not found:
+        return "-"
+    return found.pop() if len(found) == 1 else "mixed"
+
+
+def status(options: Options) -> list[FleetRobotRow]:
+    """The table of every robot of the fleet (see the module)."""
+    fleet = load(options)
+    client = manager_client(fleet)
+    try:
+        by_robot = robot_nodes(swarm.nodes(client), fleet)
+        services = [s for s in swarm.services(client, project_label(fleet)) if plan.LABEL_PROBE not in s.labels]
+        tasks = {s.name: swarm.tasks(client, s.name) for s in services}
+    finally:
+        client.close()
+    rows = []
+    for robot in fleet.instances:
+        mine = [s for s in services if s.labels.get(plan.LABEL_ROBOT) == robot]
+        targets = {s.labels.get(plan.LABEL_RELEASE, "") for s in mine}
+        target = (targets.pop() if len(targets) == 1 else "mixed") if mine else "-"
+        running = _running(mine, tasks)
+        healths = {s.labels.get(plan.LABEL_HEALTH, "") for s in mine} - {""}
+        health = (healths.pop() if len(healths) == 1 else "mixed") if healths else "-"
+        states = ["offline" if offline(robot, by_robot, fleet) else "online"]
+        if mine and running != target:
+            states.append("pending")
+        changed = max((s.labels.get(plan.LABEL_CHANGED, "") for s in mine), default="") or "-"
+        rows.append(FleetRobotRow(robot=robot, running=running, target=target, health=health,
+                                  state=", ".join(states), changed=changed))
+    _print(options, rows)
+    options.report.add(*rows)
+    return rows
+
+
+def _print(options: Options, rows: list[FleetRobotRow]) -> None:
+    header = ("ROBOT", "RUNNING", "TARGET", "HEALTH", "STATE", "LAST CHANGE")
+    table = [header] + [(r.robot, r.running, r.target, r.health, r.state, r.changed) for r in rows]
+    widths = [max(len(row[i]) for row in table) for i in range(len(header))]
+    for row in table:
+        options.report.out("  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True)).rstrip())
