@@ -212,7 +212,10 @@ def _service(attrs: dict[str, Any]) -> ServiceInfo:
 
 
 def apply_service(client: docker.DockerClient, spec: ServiceSpec, config_ids: dict[str, str]) -> str:
-    """Create ``spec``'s service, or update it in place when it exists (stop-first); return the service id."""
+    """Create ``spec``'s service, or update it in place when it exists (stop-first); return the service id.
+
+    A one-shot service (restart condition ``none``, such as a probe) is only ever created: its one task is its
+    result."""
     from docker.errors import NotFound
 
     kwargs = service_kwargs(spec, config_ids)
@@ -221,6 +224,8 @@ def apply_service(client: docker.DockerClient, spec: ServiceSpec, config_ids: di
             service = client.services.get(spec.name)  # type: ignore[no-untyped-call]
         except NotFound:
             service = client.services.create(**kwargs)  # type: ignore[no-untyped-call]
+            if spec.restart == "none":
+                return str(service.id)
             # The daemon fills defaults into a service's first update (an empty Resources), which would make the
             # first update of an unchanged service replace its task: that update is made now, at creation.
             service.reload()

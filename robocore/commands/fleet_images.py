@@ -15,7 +15,7 @@ from robocore.project import Project
 
 #: An image reference pinned by digest.
 BY_DIGEST = re.compile(r"^[^\s@]+@sha256:[0-9a-f]{64}$")
-#: The record's key for the base image.
+#: The key of the base image (discovery servers and the health probe run it).
 BASE = "base"
 
 
@@ -28,11 +28,12 @@ def release_images(project: Project, version: str) -> Release:
         raise UsageError(f"no release record {path}", hint=f"robocore release --tag {version} --fleet") from None
     except (OSError, ValueError) as exc:
         raise UsageError(f"{path}: not a release record ({exc})") from None
-    images = data.get("images") if isinstance(data, dict) else None
-    if not isinstance(images, dict):
-        raise UsageError(f"{path}: not a release record (no images)")
+    images = data.get("components") if isinstance(data, dict) else None
+    base_images = data.get("base") if isinstance(data, dict) else None
+    if not isinstance(images, dict) or not isinstance(base_images, dict):
+        raise UsageError(f"{path}: not a release record (no components or base)")
     components: dict[str, dict[str, str]] = {}
-    for name, arches in images.items():
+    for name, arches in {**images, BASE: base_images}.items():
         if not isinstance(arches, dict) or not all(isinstance(r, str) and BY_DIGEST.match(r) for r in arches.values()):
             raise UsageError(f"{path}: images.{name}: each arch needs an image by digest (repo@sha256:...)")
         components[str(name)] = {str(a): str(r) for a, r in arches.items()}

@@ -32,8 +32,11 @@ class FleetRobotRow:
 
 
 def _running(services: list[swarm.ServiceInfo], tasks: dict[str, list[swarm.TaskInfo]]) -> str:
-    """The release every component service's running task runs, ``mixed`` or ``-``."""
-    found = set()
+    """The release whose images every component service's running task runs (its target first, then the one
+    before it, as an unchanged component has both), ``mixed`` when no one release has them all, ``-`` when a
+    component runs nothing."""
+    common: set[str] | None = None
+    order: list[str] = []
     for service in services:
         if service.labels.get(naming.LABEL_ROLE) != naming.ROLE_COMPONENT:
             continue
@@ -41,15 +44,20 @@ def _running(services: list[swarm.ServiceInfo], tasks: dict[str, list[swarm.Task
         if not live:
             return "-"
         image = live[0].image
-        if image == service.image:
-            found.add(service.labels.get(plan.LABEL_RELEASE, "?"))
-        elif image and image == service.labels.get(plan.LABEL_PREVIOUS_IMAGE):
-            found.add(service.labels.get(plan.LABEL_PREVIOUS, "?"))
-        else:
-            found.add("?")
-    if not found:
+        target, previous = service.labels.get(plan.LABEL_RELEASE, ""), service.labels.get(plan.LABEL_PREVIOUS, "")
+        matches = set()
+        if image == service.image and target:
+            matches.add(target)
+        if image and image == service.labels.get(plan.LABEL_PREVIOUS_IMAGE) and previous:
+            matches.add(previous)
+        order += [target, previous]
+        common = matches if common is None else common & matches
+    if common is None:
         return "-"
-    return found.pop() if len(found) == 1 else "mixed"
+    for release in order:
+        if release in common:
+            return release
+    return "mixed"
 
 
 def status(options: Options) -> list[FleetRobotRow]:

@@ -1,0 +1,160 @@
+"""The Swarm services of a fleet (pure): what each robot's services carry, and the adapter's docker-py arguments."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from robocore.adapters.swarm import service_kwargs
+from robocore.cli import CommandLineError, fleet_task
+from robocore.config.fleet import parse_fleet_text
+from robocore.config.loader import parse_robot_text
+from robocore.plan import naming
+from robocore.plan import swarm_services as plan
+from robocore.plan.fleet import fleet_instances
+from robocore.project import Project
+
+ROBOT = """\
+ros_distro: jazzy
+ros_domain_id: 7
+hosts:
+  - {name: main, ip: 127.0.0.1, user: me}
+  - {name: arm, ip: 127.0.0.1, arch: arm64}
+components:
+  - {name: talker, folder: components/talker, runs_on: main, entrypoint: ros2 run demo_talker talker,
+     environment: {GREETING: hi}, restart: on-failure}
+  - {name: listener, folder: components/listener, runs_on: arm, volumes: ["logs:/logs"]}
+"""
+FLEET = """\
+manager: {ip: 10.0.0.2}
+registry: 10.0.0.2:5000
+robots:
+  - {name: r1, hosts: {main: {ip: 10.1.1.1}, arm: {ip: 10.1.1.2}}}
+  - {name: r2, hosts: {main: {ip: 10.1.2.1}, arm: {ip: 10.1.2.2}}, ros_domain_id: 9}
+"""
+DIGEST = "@sha256:" + "a" * 64
+RELEASE = plan.Release(
+    version="v1",
+    components={"talker": {"amd64": "10.0.0.2:5000/p-talker" + DIGEST},
+                "listener": {"arm64": "10.0.0.2:5000/p-listener" + DIGEST}},
+    base={"amd64": "10.0.0.2:5000/p-base" + DIGEST, "arm64": "10.0.0.2:5000/p-base-arm" + DIGEST},
+)
+
+
+@pytest.fixture
+def fleet_robots(tmp_path: Path) -> tuple[Project, dict[str, object]]:
+    robot = parse_robot_text(ROBOT)
+    fleet = parse_fleet_text(FLEET, robot)
+    return Project(root=tmp_path / "proj", robot=robot), dict(fleet_instances(robot, fleet))
+
+
+def services(fleet_robots: tuple[Project, dict[str, object]], name: str) -> dict[str, plan.ServiceSpec]:
+    project, instances = fleet_robots
+    from robocore.config.model import Robot
+
+    instance = instances[name]
+    assert isinstance(instance, Robot)
+    return {s.component: s for s in plan.robot_services(project, name, instance, RELEASE)}
+
+
+def test_one_service_per_component_and_discovery_server_pinned_to_the_robots_host(fleet_robots) -> None:  # type: ignore[no-untyped-def]
+    found = services(fleet_robots, "r1")
+    assert list(found) == ["discovery-0", "talker", "listener"]  # servers first, then file order
+    talker = found["talker"]
+    assert talker.name == "proj-r1-talker" and talker.image == RELEASE.components["talker"]["amd64"]
+    assert talker.constraints == ("node.labels.dev.robocore.project==proj", "node.labels.dev.robocore.robot==r1",
+                                  "node.labels.dev.robocore.host==main", "node.labels.dev.robocore.arch==amd64")
+    assert found["listener"].image.endswith("p-listener" + DIGEST)  # its host's arch
+    assert "node.labels.dev.robocore.arch==arm64" in found["listener"].constraints
+    assert found["discovery-0"].image == RELEASE.base["amd64"] and found["discovery-0"].role == naming.ROLE_DISCOVERY
+
+
+def test_each_robot_gets_its_own_addresses_domain_and_dds_profiles(fleet_robots) -> None:  # type: ignore[no-untyped-def]
+    one, two = services(fleet_robots, "r1")["talker"], services(fleet_robots, "r2")["talker"]
+    env1, env2 = dict(one.environment), dict(two.environment)
+    assert env1["ROS_DISCOVERY_SERVER"].startswith("10.1.1.1:") and env2["ROS_DISCOVERY_SERVER"].startswith("10.1.2.1:")
+    assert (env1["ROS_DOMAIN_ID"], env2["ROS_DOMAIN_ID"]) == ("7", "9")
+    assert env1["GREETING"] == "hi"
+    files1 = {c.target: c for c in one.configs}
+    super_client = files1[f"{naming.CONTAINER_DDS}/super_client.xml"].text
+    assert f"{naming.CONTAINER_DDS}/client.xml" in files1 and "10.1.1.1" in super_client
+    names1, names2 = {c.name for c in one.configs}, {c.name for c in two.configs}
+    assert not names1 & names2  # per robot and per content: a robot's profile never changes another's
+
+
+def test_swarm_has_no_ipc_so_shm_is_bind_mounted_and_nothing_comes_from_sync(fleet_robots) -> None:  # type: ignore[no-untyped-def]
+    found = services(fleet_robots, "r1")
+    for spec in found.values():
+        targets = [m.target for m in spec.mounts]
+        assert "/dev/shm" in targets, spec.component  # same-host containers share memory through the host's /dev/shm
+        assert naming.CONTAINER_INSTALL not in targets and naming.CONTAINER_DDS not in targets  # image + configs
+    assert any(m.source == "logs" and m.is_named_volume for m in found["listener"].mounts)
+    assert (found["talker"].restart, found["listener"].restart) == ("on-failure", "any")
+    assert found["talker"].args == ("ros2", "run", "demo_talker", "talker")
+    assert found["talker"].command == (naming.ENTRYPOINT,)
+
+
+def test_docker_py_arguments_are_host_network_one_replica_stop_first(fleet_robots) -> None:  # type: ignore[no-untyped-def]
+    talker = services(fleet_robots, "r1")["talker"]
+    kwargs = service_kwargs(talker, {c.name: f"id-{c.name}" for c in talker.configs})
+    assert kwargs["networks"] == ["host"]
+    assert kwargs["mode"] == {"replicated": {"Replicas": 1}}
+    assert kwargs["update_config"]["Order"] == "stop-first"
+    assert kwargs["restart_policy"]["Condition"] == "on-failure"
+    assert kwargs["env"][0].startswith("FASTDDS_DEFAULT_PROFILES_FILE=")
+    assert {c["File"]["Name"] for c in kwargs["configs"]} == {c.target for c in talker.configs}
+    assert {m["Target"] for m in kwargs["mounts"]} == {"/dev/shm"}
+
+
+def test_a_release_without_an_image_of_a_component_is_a_key_error(fleet_robots) -> None:  # type: ignore[no-untyped-def]
+    project, instances = fleet_robots
+    partial = plan.Release(version="v0", components={"talker": RELEASE.components["talker"]}, base=RELEASE.base)
+    with pytest.raises(KeyError, match="listener for arm64"):
+        plan.robot_services(project, "r1", instances["r1"], partial)  # type: ignore[arg-type]
+
+
+def test_release_labels_keep_target_previous_and_when(fleet_robots) -> None:  # type: ignore[no-untyped-def]
+    talker = services(fleet_robots, "r1")["talker"]
+    labelled = plan.release_labels(talker, version="v2", previous="v1", previous_image="old" + DIGEST,
+                                   changed="2026-01-01T00:00:00Z", health="")
+    labels = labelled.label_map
+    assert labels[plan.LABEL_RELEASE] == "v2" and labels[plan.LABEL_IMAGE] == talker.image
+    assert (labels[plan.LABEL_PREVIOUS], labels[plan.LABEL_PREVIOUS_IMAGE]) == ("v1", "old" + DIGEST)
+    assert plan.replace_label(labelled, plan.LABEL_HEALTH, "healthy").label_map[plan.LABEL_HEALTH] == "healthy"
+    assert labels[naming.LABEL_PROJECT] == "proj" and labels[plan.LABEL_ROBOT] == "r1"
+
+
+def test_long_names_stay_dns_labels() -> None:
+    name = plan.service_name("p" * 40, "r" * 40, "listener")
+    assert len(name) <= plan.MAX_SERVICE_NAME and name != plan.service_name("p" * 40, "r" * 40, "talker")
+    assert plan.service_name("proj", "r1", "talker") == "proj-r1-talker"
+
+
+def test_probe_runs_on_the_robots_server_host_as_an_observer(fleet_robots) -> None:  # type: ignore[no-untyped-def]
+    project, instances = fleet_robots
+    check = plan.GateCheck(nodes=("/talker",), heard=("/chatter",), timeout=20)
+    probe = plan.probe_service(project, "r2", instances["r2"], RELEASE, check, "print(1)\n", "abc")  # type: ignore[arg-type]
+    assert probe.restart == "none" and probe.image == RELEASE.base["amd64"]
+    assert "node.labels.dev.robocore.robot==r2" in probe.constraints
+    assert probe.args == ("python3", plan.PROBE_SCRIPT, "--timeout", "20", "--node", "/talker", "--heard", "/chatter")
+    env = dict(probe.environment)
+    assert env.get("ROS_SUPER_CLIENT") == "TRUE" and env["ROS_DOMAIN_ID"] == "9"
+    assert plan.PROBE_SCRIPT in {c.target for c in probe.configs}
+
+
+def test_probe_verdict_is_the_last_json_line_of_its_logs() -> None:
+    logs = ("probe.1.x@node    | starting\n"
+            'probe.1.x@node    | {"ok": false, "missing": ["/talker"]}\n')
+    assert plan.probe_verdict(logs) == {"ok": False, "missing": ["/talker"]}
+    assert plan.probe_verdict("nothing here\n") is None
+
+
+def test_fleet_words_become_the_fleet_tasks() -> None:
+    assert fleet_task(["fleet", "rollout", "v2", "--json"]) == ["fleet-rollout", "--version", "v2", "--json"]
+    assert fleet_task(["fleet", "rollback", "r1", "r2"]) == ["fleet-rollback", "--robot", "r1", "--robot", "r2"]
+    assert fleet_task(["fleet", "rollback", "--", "-odd"]) == ["fleet-rollback", "--robot", "-odd"]
+    assert fleet_task(["fleet", "status"]) == ["fleet-status"]
+    assert fleet_task(["status"]) == ["status"]
+    with pytest.raises(CommandLineError, match="unknown fleet command"):
+        fleet_task(["fleet", "explode"])
