@@ -24,7 +24,7 @@ hosts:
 components:
   - {name: talker, folder: components/talker, runs_on: main, entrypoint: ros2 run demo_talker talker,
      environment: {GREETING: hi}, restart: on-failure}
-  - {name: listener, folder: components/listener, runs_on: arm, volumes: ["logs:/logs"]}
+  - {name: listener, folder: components/listener, runs_on: arm, volumes: ["logs:/logs", "./config:/params:ro"]}
 """
 FLEET = """\
 manager: {ip: 10.0.0.2}
@@ -90,16 +90,17 @@ def test_swarm_has_no_ipc_so_shm_is_bind_mounted_and_nothing_comes_from_sync(fle
         assert "/dev/shm" in targets, spec.component  # same-host containers share memory through the host's /dev/shm
         assert naming.CONTAINER_INSTALL not in targets and naming.CONTAINER_DDS not in targets  # image + configs
     assert any(m.source == "logs" and m.is_named_volume for m in found["listener"].mounts)
+    assert "/params" not in [m.target for m in found["listener"].mounts]  # read-only project files: in the image
     assert (found["talker"].restart, found["listener"].restart) == ("on-failure", "any")
     assert found["talker"].args == ("ros2", "run", "demo_talker", "talker")
     assert found["talker"].command == (naming.ENTRYPOINT,)
 
 
-def test_docker_py_arguments_are_host_network_one_replica_stop_first(fleet_robots) -> None:  # type: ignore[no-untyped-def]
+def test_docker_py_arguments_are_host_network_one_global_task_stop_first(fleet_robots) -> None:  # type: ignore[no-untyped-def]
     talker = services(fleet_robots, "r1")["talker"]
     kwargs = service_kwargs(talker, {c.name: f"id-{c.name}" for c in talker.configs})
     assert kwargs["networks"] == ["host"]
-    assert kwargs["mode"] == {"replicated": {"Replicas": 1}}
+    assert kwargs["mode"] == {"global": {}}  # pinned to one node by the constraints: one task, never replaced elsewhere
     assert kwargs["update_config"]["Order"] == "stop-first"
     assert kwargs["restart_policy"]["Condition"] == "on-failure"
     assert kwargs["env"][0].startswith("FASTDDS_DEFAULT_PROFILES_FILE=")

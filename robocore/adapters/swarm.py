@@ -160,7 +160,10 @@ def service_kwargs(spec: ServiceSpec, config_ids: dict[str, str]) -> dict[str, A
         # stop-first: never two copies of one ROS node; robocore rolls whole robots back itself
         "update_config": UpdateConfig(parallelism=1, order="stop-first", failure_action="continue", monitor=int(1e9)),
         "labels": spec.label_map,
-        "mode": ServiceMode("replicated", 1),
+        # global, pinned to one node: at most one task, on that node only; a node that is down keeps its task
+        # (no replacement waits elsewhere, which Swarm's scheduler may leave pending after the node is back) and
+        # gets the service's current spec when it returns. A one-shot probe is one replica.
+        "mode": ServiceMode("replicated", 1) if spec.restart == "none" else ServiceMode("global"),
         "init": spec.role != "discovery",
         # what the daemon fills in on an update when absent: given from the start, the first update of an
         # unchanged service replaces no task

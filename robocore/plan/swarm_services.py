@@ -4,7 +4,7 @@ Each robot of a fleet is an instance of robot.yaml (:func:`robocore.plan.fleet.r
 are the ones ``run`` would start (:mod:`robocore.plan.containers`, the one description of a container), turned
 into Swarm services with what Swarm allows in place of what it does not:
 
-* one replica, pinned by robocore's node labels (project, robot, host; the arch is a label too, as a simulated
+* one task, pinned by robocore's node labels (project, robot, host; the arch is a label too, as a simulated
   arm64 host reports x86_64 as ``node.platform.arch``), updated stop-first: never two copies of a ROS node;
 * host networking (DDS discovery and data need the host's addresses; the kernel here has no IPVS either);
 * ``/dev/shm`` bind-mounted from the host instead of ``ipc: host`` (Swarm has no ``ipc``): Fast DDS' shared
@@ -27,7 +27,8 @@ import hashlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
-from robocore.config.model import Robot
+from robocore.config.mappings import read_only_project_path
+from robocore.config.model import Component, Robot
 from robocore.plan import discovery, naming
 from robocore.plan.containers import ContainerSpec, Mount, component_spec, discovery_spec
 from robocore.plan.discovery.base import in_folder
@@ -145,10 +146,16 @@ def _config_name(project: str, robot: str, file: str, digest: str) -> str:
     return f"{hashlib.sha256(name.encode()).hexdigest()[:40]}-{digest}"
 
 
-def _swarm_mounts(spec: ContainerSpec) -> tuple[Mount, ...]:
-    """A container's mounts on Swarm: the install tree and DDS folder come from the image and configs, not from
-    ``sync``; ``/dev/shm`` is shared with the host when the container would have had ``ipc: host``."""
-    dropped = {naming.CONTAINER_INSTALL, naming.CONTAINER_DDS}
+def baked_targets(component: Component) -> set[str]:
+    """Where ``component``'s read-only project volumes are mounted: a fleet release carries them in the image."""
+    return {volume.split(":")[1] for volume in component.volumes if read_only_project_path(volume) is not None}
+
+
+def _swarm_mounts(spec: ContainerSpec, baked: set[str]) -> tuple[Mount, ...]:
+    """A container's mounts on Swarm: the install tree, the read-only project files (``baked``) and the DDS
+    folder come from the image and configs, not from ``sync``; ``/dev/shm`` is shared with the host when the
+    container would have had ``ipc: host``."""
+    dropped = {naming.CONTAINER_INSTALL, naming.CONTAINER_DDS, *baked}
     mounts = [m for m in spec.mounts if m.target not in dropped]
     if spec.ipc_mode == "host":
         mounts.append(Mount("/dev/shm", "/dev/shm"))
@@ -156,7 +163,7 @@ def _swarm_mounts(spec: ContainerSpec) -> tuple[Mount, ...]:
 
 
 def _service(spec: ContainerSpec, *, project: str, robot: str, arch: str, image: str, role: str,
-             configs: tuple[ConfigFile, ...]) -> ServiceSpec:
+             configs: tuple[ConfigFile, ...], baked: set[str] | None = None) -> ServiceSpec:
     return ServiceSpec(
         name=service_name(project, robot, spec.service),
         robot=robot,
@@ -166,7 +173,7 @@ def _service(spec: ContainerSpec, *, project: str, robot: str, arch: str, image:
         command=spec.entrypoint,
         args=spec.command,
         environment=spec.environment,
-        mounts=_swarm_mounts(spec),
+        mounts=_swarm_mounts(spec, baked or set()),
         configs=configs,
         constraints=constraints(project, robot, spec.host, arch),
         restart=RESTART_CONDITIONS.get(spec.restart, "any"),
@@ -195,7 +202,8 @@ def robot_services(project: Project, robot: str, instance: Robot, release: Relea
         if image is None:
             raise KeyError(f"{component.name} for {arch}")
         services.append(_service(component_spec(here, component), project=project.name, robot=robot, arch=arch,
-                                 image=image, role=naming.ROLE_COMPONENT, configs=configs))
+                                 image=image, role=naming.ROLE_COMPONENT, configs=configs,
+                                 baked=baked_targets(component)))
     return services
 
 
