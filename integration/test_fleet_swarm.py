@@ -117,10 +117,11 @@ def test_offline_robot_is_pending_then_converges_alone(fleet_project: Path, swar
         proc = run_robocore(fleet_project, "fleet", "rollout", "v2", "--json")
         took = time.monotonic() - started
         verdicts = {o["robot"]: o["verdict"] for o in json.loads(proc.stdout)["results"]}
-        assert verdicts == {**{f"r{i}": "healthy" for i in range(1, ROBOTS)}, f"r{ROBOTS}": "pending"}
+        assert verdicts == {**{f"r{i}": "healthy" for i in range(1, ROBOTS)}, f"r{ROBOTS}": "pending"}, proc.stdout
         assert took < 240, took
         row = status_rows(run_robocore, fleet_project)[f"r{ROBOTS}"]
-        assert (row["running"], row["target"], row["state"]) == ("v1", "v2", "offline, pending")
+        # the manager drops a down node's tasks: what it runs is unknown until it is back
+        assert (row["running"], row["target"], row["state"]) == ("?", "v2", "offline, pending"), row
         # its containers were left alone: still the v1 talker, still running
         container = swarm_hosts.hosts[ROBOTS].container.get_wrapped_container()
         code, out = container.exec_run(["docker", "ps", "--filter",
@@ -147,7 +148,8 @@ def test_canary_that_crashes_stops_the_rollout_and_goes_back(fleet_project: Path
     assert "stopped in wave canary" in proc.stderr and "r1" in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr
     rows = status_rows(run_robocore, fleet_project)
-    assert (rows["r1"]["running"], rows["r1"]["target"], rows["r1"]["health"]) == ("v2", "v2", "rolled-back")
+    assert (rows["r1"]["running"], rows["r1"]["target"], rows["r1"]["health"]) == ("v2", "v2", "rolled-back"), \
+        proc.stderr
     assert all(rows[f"r{i}"]["target"] == "v2" for i in range(2, ROBOTS + 1))
     assert {f"r{i}": service_tasks(swarm_hosts, f"r{i}") for i in range(2, ROBOTS + 1)} == before  # untouched
     assert wait_for(lambda: any("hello v2" in line for line in listener_lines(swarm_hosts, 1, PROJECT)), 30)

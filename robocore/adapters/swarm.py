@@ -185,6 +185,7 @@ class TaskInfo:
     created: str
     error: str
     exit_code: int | None
+    container: str  # the task's container id ("" until one was made)
 
 
 @dataclass(frozen=True)
@@ -225,6 +226,9 @@ def apply_service(client: docker.DockerClient, spec: ServiceSpec, config_ids: di
     with swarm_errors(f"docker service update {spec.name}"):
         try:
             service = client.services.get(spec.name)  # type: ignore[no-untyped-call]
+            if set((service.attrs.get("Spec") or {}).get("Mode") or {}) != set(kwargs["mode"]):
+                service.remove()  # Swarm never changes a service's mode (replicated, global): made anew
+                raise NotFound(spec.name)
         except NotFound:
             service = client.services.create(**kwargs)  # type: ignore[no-untyped-call]
             if spec.restart == "none":
@@ -268,7 +272,8 @@ def _task(attrs: dict[str, Any]) -> TaskInfo:
     return TaskInfo(id=str(attrs.get("ID")), node_id=str(attrs.get("NodeID") or ""), state=str(status.get("State")),
                     desired=str(attrs.get("DesiredState")), image=str(container.get("Image") or ""),
                     created=str(attrs.get("CreatedAt") or ""), error=str(status.get("Err") or ""),
-                    exit_code=int(code) if isinstance(code, int) else None)
+                    exit_code=int(code) if isinstance(code, int) else None,
+                    container=str((status.get("ContainerStatus") or {}).get("ContainerID") or ""))
 
 
 def service_logs(client: docker.DockerClient, service: str) -> str:

@@ -17,6 +17,9 @@ from robocore.commands.fleet_swarm import load, manager_client, offline, project
 from robocore.plan import naming
 from robocore.plan import swarm_services as plan
 
+#: What an offline robot runs when the manager no longer keeps its tasks (it drops them when a node goes down).
+UNKNOWN = "?"
+
 
 @dataclass(frozen=True)
 class FleetRobotRow:
@@ -31,18 +34,19 @@ class FleetRobotRow:
     changed: str
 
 
-def _running(services: list[swarm.ServiceInfo], tasks: dict[str, list[swarm.TaskInfo]]) -> str:
+def _running(services: list[swarm.ServiceInfo], tasks: dict[str, list[swarm.TaskInfo]], *, offline: bool) -> str:
     """The release whose images every component service's running task runs (its target first, then the one
     before it, as an unchanged component has both), ``mixed`` when no one release has them all, ``-`` when a
-    component runs nothing."""
+    component runs nothing. On an ``offline`` robot, its last task that had a container (what the robot ran when
+    it was last heard of) is taken while the manager keeps it, else the release is :data:`UNKNOWN`."""
     common: set[str] | None = None
     order: list[str] = []
     for service in services:
         if service.labels.get(naming.LABEL_ROLE) != naming.ROLE_COMPONENT:
             continue
-        live = [t for t in tasks.get(service.name, []) if t.state == "running"]
+        live = [t for t in tasks.get(service.name, []) if t.state == "running" or (offline and t.container)]
         if not live:
-            return "-"
+            return UNKNOWN if offline else "-"
         image = live[0].image
         target, previous = service.labels.get(plan.LABEL_RELEASE, ""), service.labels.get(plan.LABEL_PREVIOUS, "")
         matches = set()
@@ -75,10 +79,11 @@ def status(options: Options) -> list[FleetRobotRow]:
         mine = [s for s in services if s.labels.get(plan.LABEL_ROBOT) == robot]
         targets = {s.labels.get(plan.LABEL_RELEASE, "") for s in mine}
         target = (targets.pop() if len(targets) == 1 else "mixed") if mine else "-"
-        running = _running(mine, tasks)
+        away = bool(offline(robot, by_robot, fleet))
+        running = _running(mine, tasks, offline=away)
         healths = {s.labels.get(plan.LABEL_HEALTH, "") for s in mine} - {""}
         health = (healths.pop() if len(healths) == 1 else "mixed") if healths else "-"
-        states = ["offline" if offline(robot, by_robot, fleet) else "online"]
+        states = ["offline" if away else "online"]
         if mine and running != target:
             states.append("pending")
         changed = max((s.labels.get(plan.LABEL_CHANGED, "") for s in mine), default="") or "-"
