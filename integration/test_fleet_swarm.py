@@ -147,9 +147,14 @@ def test_canary_that_crashes_stops_the_rollout_and_goes_back(fleet_project: Path
     assert proc.returncode != 0
     assert "stopped in wave canary" in proc.stderr and "r1" in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr
+    assert "r1: back on v2: healthy" in proc.stderr, proc.stderr  # gated again: running, nodes present, heard
+
+    def back() -> dict[str, Any] | None:
+        row = status_rows(run_robocore, fleet_project)["r1"]
+        return row if (row["running"], row["target"], row["health"]) == ("v2", "v2", "rolled-back") else None
+
+    assert wait_for(back, 30, interval=1), status_rows(run_robocore, fleet_project)["r1"]
     rows = status_rows(run_robocore, fleet_project)
-    assert (rows["r1"]["running"], rows["r1"]["target"], rows["r1"]["health"]) == ("v2", "v2", "rolled-back"), \
-        proc.stderr
     assert all(rows[f"r{i}"]["target"] == "v2" for i in range(2, ROBOTS + 1))
     assert {f"r{i}": service_tasks(swarm_hosts, f"r{i}") for i in range(2, ROBOTS + 1)} == before  # untouched
     assert wait_for(lambda: any("hello v2" in line for line in listener_lines(swarm_hosts, 1, PROJECT)), 30)
