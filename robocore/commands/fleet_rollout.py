@@ -283,6 +283,12 @@ def _roll_back(client: docker.DockerClient, fleet: FleetProject, changes: list[_
                 swarm.remove_service(client, spec.name)
             continue
         gate.releases[previous.version] = previous
+        for spec in change.specs:
+            before = live.get(spec.name)
+            if before is not None and before.image != spec.image:
+                # made anew rather than updated: Swarm's restart of a crashing task, already scheduled, would race
+                # the update and start a second task that the orchestrator then stops again
+                swarm.remove_service(client, spec.name)
         # the labels as they were before the change: the failed release is not recorded as the previous one
         back.append(_change(client, fleet, change.robot, change.wave, previous, live, ROLLED_BACK))
     gate.run(back)
