@@ -228,20 +228,21 @@ def _run_recording(memo: Any, args: list[str]) -> None:
         memo.record(out.kept.getvalue(), err.kept.getvalue())
 
 
-#: ``robocore fleet join|rollout|status|rollback ...``: the two words name the task ``fleet-<verb>``.
+#: ``robocore fleet join|rollout|status|rollback ...``: the ``fleet`` task, its verb a flag.
 FLEET_WORD = "fleet"
 FLEET_VERBS = ("join", "rollout", "status", "rollback")
 
 
 def fleet_task(rest: list[str]) -> list[str]:
-    """``fleet VERB ...`` as the task ``fleet-VERB ...``: ``rollout VERSION`` becomes ``--version VERSION`` and
-    ``rollback ROBOT...`` one ``--robot ROBOT`` each (operands after ``--`` too). Other command lines are kept."""
-    if len(rest) < 2 or rest[0] != FLEET_WORD:
+    """``fleet VERB ...`` as the ``fleet`` task's flags: ``--verb VERB``; ``rollout VERSION`` gives ``--version
+    VERSION`` and ``rollback ROBOT...`` one ``--robot ROBOT`` each (operands after ``--`` too). Other command
+    lines are kept."""
+    if len(rest) < 2 or rest[0] != FLEET_WORD or rest[1].startswith("-"):
         return rest
     verb, args = rest[1], rest[2:]
     if verb not in FLEET_VERBS:
         raise CommandLineError(f"unknown fleet command {verb!r} (fleet {'|'.join(FLEET_VERBS)})")
-    out = [f"fleet-{verb}"]
+    out = [FLEET_WORD, "--verb", verb]
     operand_flag = {"rollout": "--version", "rollback": "--robot"}.get(verb)
     operands_only = False
     for arg in args:
@@ -279,7 +280,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         return
     from robocore.tasks import cli_namespace
 
-    names = set(cli_namespace.task_names) | {n.replace("_", "-") for n in cli_namespace.task_names} | {FLEET_WORD}
+    names = set(cli_namespace.task_names) | {n.replace("_", "-") for n in cli_namespace.task_names}
     try:
         project, rest = split_project(args, names)
         rest = fleet_task(rest)

@@ -439,59 +439,31 @@ def desktop_password(c: Context) -> None:
     print(_execute(options, lambda: displays.desktop_password(options.load())))
 
 
-@task(name="fleet-join", help={"dry_run": "Print what would be joined.", "json": "Machine-readable result on stdout."})
+@task(iterable=["robot"], help={"verb": "join | rollout | status | rollback", "version": "rollout: the release "
+                                "(release --tag V --fleet).", "robot": "rollback: only this robot (repeatable).",
+                                "dry_run": "Print what would be done.", "json": "Machine-readable result on stdout."})
 @reported
-def fleet_join(c: Context, dry_run: bool = False, json: bool = False) -> None:
-    """Make (or reuse) the fleet's swarm, join every host of every robot and label its node."""
-    from robocore.commands import fleet_join as command
+def fleet(c: Context, verb: str = "", version: str = "", robot: list[str] | None = None, dry_run: bool = False,
+          json: bool = False) -> None:
+    """The fleet on Docker Swarm: join (the swarm, the robots' nodes labelled), rollout VERSION (wave by wave behind
+    the health gate), status (a row per robot), rollback [ROBOT...] (to the release each ran before)."""
+    from robocore.commands import fleet_join, fleet_rollout, fleet_status
+    from robocore.errors import UsageError
 
-    options = _options(c, "fleet-join", dry_run=dry_run, json=json)
-    _execute(options, lambda: command.join(options))
-
-
-@task(name="fleet-rollout", help={"version": "The release to roll out (robocore release --tag VERSION --fleet).",
-                                  "dry_run": "Print the waves only.", "json": "Machine-readable result on stdout."})
-@reported
-def fleet_rollout(c: Context, version: str = "", dry_run: bool = False, json: bool = False) -> None:
-    """Roll a release out to the fleet wave by wave, each robot behind the health gate."""
-    from robocore.commands import fleet_rollout as command
-
-    options = _options(c, "fleet-rollout", dry_run=dry_run, json=json)
-    tag = _tag(version)
-    if tag is None:
-        from robocore.errors import UsageError
-
-        raise UsageError("fleet-rollout needs --version VERSION", hint="robocore fleet rollout v2")
-    _execute(options, lambda: command.rollout(options, version=tag))
+    steps: dict[str, Callable[[Options], Any]] = {
+        "join": fleet_join.join, "status": fleet_status.status,
+        "rollout": lambda o: fleet_rollout.rollout(o, version=_tag(version) or ""),
+        "rollback": lambda o: fleet_rollout.rollback(o, robots=list(robot or []))}
+    if verb not in steps:
+        raise UsageError(f"fleet needs one of {', '.join(steps)}", hint="robocore fleet status")
+    options = _options(c, f"fleet-{verb}", dry_run=dry_run, json=json)
+    _execute(options, lambda: steps[verb](options))
 
 
-@task(name="fleet-status", help={"json": "Machine-readable output."})
-@reported
-def fleet_status(c: Context, json: bool = False) -> None:
-    """One row per robot of the fleet: release running, target, health, offline/pending, last change."""
-    from robocore.commands import fleet_status as command
-
-    options = _options(c, "fleet-status", json=json)
-    _execute(options, lambda: command.status(options))
-
-
-@task(name="fleet-rollback", iterable=["robot"],
-      help={"robot": "Only this robot (repeatable; default: every robot).", "dry_run": "Print what would be done.",
-            "json": "Machine-readable result on stdout."})
-@reported
-def fleet_rollback(c: Context, robot: list[str] | None = None, dry_run: bool = False, json: bool = False) -> None:
-    """Return robots of the fleet to the release each ran before, behind the health gate."""
-    from robocore.commands import fleet_rollout as command
-
-    options = _options(c, "fleet-rollback", dry_run=dry_run, json=json)
-    _execute(options, lambda: command.rollback(options, robots=list(robot or [])))
-
-
-FLEET_TASKS = (fleet_join, fleet_rollout, fleet_status, fleet_rollback)
 
 
 PROJECT_TASKS = (validate, prepare_base, stage, build, test, dev, sync, run, down, status, logs, shell, connect,
-                 release, rollback, export, doctor, desktop_password, *FLEET_TASKS)
+                 release, rollback, export, doctor, desktop_password, fleet)
 
 #: The collection a project's tasks.py re-exports (``from robocore.tasks import namespace``).
 namespace = Collection(*PROJECT_TASKS)

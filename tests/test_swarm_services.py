@@ -152,10 +152,12 @@ def test_probe_verdict_is_the_last_json_line_of_its_logs() -> None:
 
 
 def test_fleet_words_become_the_fleet_tasks() -> None:
-    assert fleet_task(["fleet", "rollout", "v2", "--json"]) == ["fleet-rollout", "--version", "v2", "--json"]
-    assert fleet_task(["fleet", "rollback", "r1", "r2"]) == ["fleet-rollback", "--robot", "r1", "--robot", "r2"]
-    assert fleet_task(["fleet", "rollback", "--", "-odd"]) == ["fleet-rollback", "--robot", "-odd"]
-    assert fleet_task(["fleet", "status"]) == ["fleet-status"]
+    assert fleet_task(["fleet", "rollout", "v2", "--json"]) == ["fleet", "--verb", "rollout", "--version", "v2",
+                                                                "--json"]
+    assert fleet_task(["fleet", "rollback", "r1", "r2"]) == ["fleet", "--verb", "rollback", "--robot", "r1",
+                                                             "--robot", "r2"]
+    assert fleet_task(["fleet", "rollback", "--", "-odd"]) == ["fleet", "--verb", "rollback", "--robot", "-odd"]
+    assert fleet_task(["fleet", "status"]) == ["fleet", "--verb", "status"]
     assert fleet_task(["status"]) == ["status"]
     with pytest.raises(CommandLineError, match="unknown fleet command"):
         fleet_task(["fleet", "explode"])

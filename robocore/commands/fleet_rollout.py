@@ -299,6 +299,8 @@ def rollout(options: Options, *, version: str) -> list[RobotOutcome]:
     """Roll ``version`` out wave by wave behind the health gate (see the module)."""
     from robocore.plan.fleet import plan_waves
 
+    if not version:
+        raise UsageError("fleet rollout needs the version of a release", hint="robocore fleet rollout v2")
     fleet = load(options)
     release = load_release(fleet, version)
     waves = plan_waves(fleet.fleet)
