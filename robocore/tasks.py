@@ -1,15 +1,12 @@
 """The invoke task collection: ``invoke <task>`` in a project, ``robocore <task>`` anywhere.
 
-Tasks are thin: parse flags, load the project, hand over to :mod:`robocore.commands`.
-Every :class:`~robocore.errors.RobocoreError` is translated here, and only here, into
-one line per problem on stderr and a non-zero exit code (and, with ``--json``, the one
-JSON document on stdout says so too). Heavy imports (pydantic, docker-py, copier) happen
-inside the task bodies so that ``robocore --help`` stays fast.
-
-The project folder is invoke's ``robocore.project`` setting, which ``robocore -p DIR`` sets;
-a project's own ``invoke`` runs on the current folder. The command line (which steps follow,
-for the ssh warm-up) is the ``robocore.argv`` setting that ``robocore`` sets; under a plain
-``invoke`` it is invoke's own command line.
+Tasks are thin: parse flags, load the project, hand over to :mod:`robocore.commands`. Every
+:class:`~robocore.errors.RobocoreError` is translated here, and only here, into one line per problem on stderr and a
+non-zero exit code (and, with ``--json``, the one JSON document on stdout says so too). Heavy imports (pydantic,
+docker-py, copier) happen inside the task bodies so that ``robocore --help`` stays fast. The project folder is
+invoke's ``robocore.project`` setting, which ``robocore -p DIR`` sets; a project's own ``invoke`` runs on the current
+folder. The command line (which steps follow, for the ssh warm-up) is the ``robocore.argv`` setting that ``robocore``
+sets; under a plain ``invoke`` it is invoke's own command line.
 """
 
 from __future__ import annotations
@@ -439,27 +436,15 @@ def desktop_password(c: Context) -> None:
     print(_execute(options, lambda: displays.desktop_password(options.load())))
 
 
-@task(iterable=["robot"], help={"verb": "join | rollout | status | rollback", "version": "rollout: the release "
-                                "(release --tag V --fleet).", "robot": "rollback: only this robot (repeatable).",
-                                "dry_run": "Print what would be done.", "json": "Machine-readable result on stdout."})
+@task(iterable=["robot"], help={"verb": "join | rollout | status | rollback", "version": "rollout: the release.",
+                                "robot": "rollback: only this robot (repeatable).", "json": "Machine-readable."})
 @reported
 def fleet(c: Context, verb: str = "", version: str = "", robot: list[str] | None = None, dry_run: bool = False,
           json: bool = False) -> None:
-    """The fleet on Docker Swarm: join (the swarm, the robots' nodes labelled), rollout VERSION (wave by wave behind
-    the health gate), status (a row per robot), rollback [ROBOT...] (to the release each ran before)."""
-    from robocore.commands import fleet_join, fleet_rollout, fleet_status
-    from robocore.errors import UsageError
-
-    steps: dict[str, Callable[[Options], Any]] = {
-        "join": fleet_join.join, "status": fleet_status.status,
-        "rollout": lambda o: fleet_rollout.rollout(o, version=_tag(version) or ""),
-        "rollback": lambda o: fleet_rollout.rollback(o, robots=list(robot or []))}
-    if verb not in steps:
-        raise UsageError(f"fleet needs one of {', '.join(steps)}", hint="robocore fleet status")
+    """The fleet on Docker Swarm: join, rollout VERSION (waves, health gate), status, rollback [ROBOT...]."""
+    from robocore.commands import fleet as command
     options = _options(c, f"fleet-{verb}", dry_run=dry_run, json=json)
-    _execute(options, lambda: steps[verb](options))
-
-
+    _execute(options, lambda: command.fleet(options, verb=verb, version=_tag(version), robots=robot or []))
 
 
 PROJECT_TASKS = (validate, prepare_base, stage, build, test, dev, sync, run, down, status, logs, shell, connect,
