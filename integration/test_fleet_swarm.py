@@ -66,10 +66,13 @@ def status_rows(run_robocore: RobocoreCli, root: Path) -> dict[str, dict[str, An
 
 
 def service_tasks(hosts: RobotFleet, robot: str) -> dict[str, str]:
-    """Service -> its task ids of ``robot`` (to prove a robot was not touched)."""
+    """``robot``'s running tasks (ids) and its services' spec versions: unchanged means the robot was not touched
+    (ended tasks are left out: Swarm prunes its task history on its own)."""
     out = hosts.hosts[0].ssh(hosts, "sh", "-c", f"docker service ls -q --filter label=dev.robocore.robot={robot} | "
-                             "xargs -r docker service ps -q --no-trunc")
-    return {robot: " ".join(sorted(out.split()))}
+                             "xargs -r docker service ps -q --no-trunc --filter desired-state=running")
+    versions = hosts.hosts[0].ssh(hosts, "sh", "-c", f"docker service ls -q --filter label=dev.robocore.robot={robot}"
+                                  " | xargs -r docker service inspect --format '{{.Version.Index}}'")
+    return {"tasks": " ".join(sorted(out.split())), "versions": " ".join(sorted(versions.split()))}
 
 
 def test_join_labels_every_robot_node_and_is_idempotent(fleet_project: Path, swarm_hosts: RobotFleet,
