@@ -439,8 +439,8 @@ def desktop_password(c: Context) -> None:
 @task(iterable=["robot"], help={"verb": "join | rollout | status | rollback", "version": "rollout: the release.",
                                 "robot": "rollback: only this robot (repeatable).", "json": "Machine-readable."})
 @reported
-def fleet(c: Context, verb: str = "", version: str = "", robot: list[str] | None = None, dry_run: bool = False,
-          json: bool = False) -> None:
+def fleet(c: Context, verb: str = "", version: str | None = None, robot: list[str] | None = None,
+          dry_run: bool = False, json: bool = False) -> None:
     """The fleet on Docker Swarm: join, rollout VERSION (waves, health gate), status, rollback [ROBOT...]."""
     from robocore.commands import fleet as command
     options = _options(c, f"fleet-{verb}", dry_run=dry_run, json=json)
