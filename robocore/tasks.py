@@ -1,13 +1,8 @@
-"""The invoke task collection: ``invoke <task>`` in a project, ``robocore <task>`` anywhere.
-
-Tasks are thin: parse flags, load the project, hand over to :mod:`robocore.commands`. Every
-:class:`~robocore.errors.RobocoreError` is translated here, and only here, into one line per problem on stderr and a
-non-zero exit code (and, with ``--json``, the one JSON document on stdout says so too). Heavy imports (pydantic,
-docker-py, copier) happen inside the task bodies so that ``robocore --help`` stays fast. The project folder is
-invoke's ``robocore.project`` setting, which ``robocore -p DIR`` sets; a project's own ``invoke`` runs on the current
-folder. The command line (which steps follow, for the ssh warm-up) is the ``robocore.argv`` setting that ``robocore``
-sets; under a plain ``invoke`` it is invoke's own command line.
-"""
+"""The invoke task collection: ``invoke <task>`` in a project, ``robocore <task>`` anywhere. Tasks are thin: flags,
+load, then :mod:`robocore.commands`; every :class:`~robocore.errors.RobocoreError` becomes one line per problem on
+stderr and an exit code here only (and in the ``--json`` document); heavy imports stay in the task bodies (a fast
+``--help``). The project folder is the ``robocore.project`` setting (``-p DIR``), else the current folder; the
+command line (for the ssh warm-up) is ``robocore.argv``, else invoke's own."""
 
 from __future__ import annotations
 
@@ -436,15 +431,14 @@ def desktop_password(c: Context) -> None:
     print(_execute(options, lambda: displays.desktop_password(options.load())))
 
 
-@task(iterable=["robot"], help={"verb": "join | rollout | status | rollback", "version": "rollout: the release.",
-                                "robot": "rollback: only this robot (repeatable).", "json": "Machine-readable."})
+@task(iterable=["robot"], help={"verb": "join | rollout | status | rollback", "robot": "rollback: only this robot."})
 @reported
 def fleet(c: Context, verb: str = "", version: str | None = None, robot: list[str] | None = None,
           dry_run: bool = False, json: bool = False) -> None:
     """The fleet on Docker Swarm: join, rollout VERSION (waves, health gate), status, rollback [ROBOT...]."""
-    from robocore.commands import fleet as command
-    options = _options(c, f"fleet-{verb}", dry_run=dry_run, json=json)
-    _execute(options, lambda: command.fleet(options, verb=verb, version=_tag(version), robots=robot or []))
+    from robocore.commands.fleet import fleet as run
+    _execute(options := _options(c, f"fleet-{verb}", dry_run=dry_run, json=json),
+             lambda: run(options, verb=verb, version=_tag(version), robots=robot or []))
 
 
 PROJECT_TASKS = (validate, prepare_base, stage, build, test, dev, sync, run, down, status, logs, shell, connect,
