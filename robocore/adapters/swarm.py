@@ -241,6 +241,18 @@ def apply_service(client: docker.DockerClient, spec: ServiceSpec, config_ids: di
         return str(service.id)
 
 
+def updating(client: docker.DockerClient, name: str) -> bool:
+    """True while Swarm is still rolling ``name``'s last update out (its UpdateStatus is ``updating``)."""
+    from docker.errors import NotFound
+
+    with swarm_errors(f"docker service inspect {name}"):
+        try:
+            attrs = client.api.inspect_service(name)  # type: ignore[no-untyped-call]
+        except NotFound:
+            return False
+    return str((attrs.get("UpdateStatus") or {}).get("State") or "") in ("updating", "rollback_started")
+
+
 def remove_service(client: docker.DockerClient, name: str) -> None:
     """Remove a service (nothing when it is gone)."""
     from docker.errors import NotFound

@@ -170,8 +170,9 @@ class Gate:
             live = [t for t in found if t.desired == "running" and t.image == spec.image]
             if live:
                 current[spec.name] = live[0]
+        # a service whose update Swarm is still rolling out may yet replace the task seen running
         waiting = [s.component for s in change.specs if s.name not in current
-                   or current[s.name].state != "running"]
+                   or current[s.name].state != "running" or swarm.updating(self.client, s.name)]
         if waiting:
             change.running_since = None
             if clock > change.deadline:
