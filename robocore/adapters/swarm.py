@@ -253,6 +253,15 @@ def updating(client: docker.DockerClient, name: str) -> bool:
     return str((attrs.get("UpdateStatus") or {}).get("State") or "") in ("updating", "rollback_started")
 
 
+def set_labels(client: docker.DockerClient, name: str, labels: dict[str, str]) -> None:
+    """Set ``name``'s service labels only: the stored task template is sent back as it is, so no task changes."""
+    with swarm_errors(f"docker service update --label-add {name}"):
+        attrs = client.api.inspect_service(name)  # type: ignore[no-untyped-call]
+        merged = {**((attrs.get("Spec") or {}).get("Labels") or {}), **labels}
+        client.api.update_service(attrs["ID"], attrs["Version"]["Index"], labels=merged,
+                                  fetch_current_spec=True)
+
+
 def remove_service(client: docker.DockerClient, name: str) -> None:
     """Remove a service (nothing when it is gone)."""
     from docker.errors import NotFound

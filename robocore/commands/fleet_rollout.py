@@ -114,9 +114,7 @@ def _apply(client: docker.DockerClient, specs: Sequence[plan.ServiceSpec]) -> di
 def _set_health(client: docker.DockerClient, specs: Sequence[plan.ServiceSpec], health: str) -> None:
     """Record the gate's verdict in the services' labels (a label-only update restarts nothing)."""
     for spec in specs:
-        labelled = plan.replace_label(spec, plan.LABEL_HEALTH, health)
-        ids = swarm.ensure_configs(client, labelled.configs)
-        swarm.apply_service(client, labelled, ids)
+        swarm.set_labels(client, spec.name, {plan.LABEL_HEALTH: health})
 
 
 class Gate:
