@@ -10,6 +10,8 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from pydantic import BaseModel
+
 from robocore.config.fleet import Fleet
 from robocore.config.model import Robot
 
@@ -22,27 +24,26 @@ DRAFT = "https://json-schema.org/draft/2020-12/schema"
 
 def robot_schema() -> dict[str, Any]:
     """The JSON Schema (draft 2020-12) of robot.yaml."""
-    schema = Robot.model_json_schema()
-    schema["$schema"] = DRAFT
-    schema["$id"] = SCHEMA_ID
-    schema["title"] = "robocore robot.yaml"
-    schema["description"] = (
-        "One robot: ROS 2 distro, hosts, common packages and components. "
-        "Cross-field rules are checked by 'robocore validate'."
-    )
-    return schema
+    return _document(Robot, SCHEMA_ID, "robocore robot.yaml",
+                     "One robot: ROS 2 distro, hosts, common packages and components. "
+                     "Cross-field rules are checked by 'robocore validate'.")
 
 
 def fleet_schema() -> dict[str, Any]:
     """The JSON Schema (draft 2020-12) of fleet.yaml."""
-    schema = Fleet.model_json_schema()
+    return _document(Fleet, FLEET_SCHEMA_ID, "robocore fleet.yaml",
+                     "Many robots of one robot.yaml: each robot's host addresses, the engine and its manager, the "
+                     "rollout policy (waves, health gate, timeouts). Checks against robot.yaml are made by "
+                     "'robocore validate'.")
+
+
+def _document(model: type[BaseModel], schema_id: str, title: str, description: str) -> dict[str, Any]:
+    """``model``'s JSON Schema as a document of its own: the draft, its id, a title and a description."""
+    schema = model.model_json_schema()
     schema["$schema"] = DRAFT
-    schema["$id"] = FLEET_SCHEMA_ID
-    schema["title"] = "robocore fleet.yaml"
-    schema["description"] = (
-        "Many robots of one robot.yaml: each robot's host addresses, the engine and its manager, the rollout "
-        "policy (waves, health gate, timeouts). Checks against robot.yaml are made by 'robocore validate'."
-    )
+    schema["$id"] = schema_id
+    schema["title"] = title
+    schema["description"] = description
     return schema
 
 
