@@ -110,7 +110,14 @@ def official(request: pytest.FixtureRequest, docker_client: Any, run_robocore: R
 def _has_package(docker_client: Any, image: str, package: str) -> bool:
     # dpkg-query exits 1 for a package it does not know: the status is then empty
     query = "dpkg-query -W -f '${Status}' \"$1\" 2>/dev/null || true"
-    out = docker_client.containers.run(image, ["sh", "-c", query, "sh", package], remove=True, entrypoint=[])
+    # run, wait, then read the whole log (not a followed stream, which can come back empty for a container
+    # that exits at once)
+    container = docker_client.containers.run(image, ["sh", "-c", query, "sh", package], detach=True, entrypoint=[])
+    try:
+        container.wait(timeout=120)
+        out = container.logs(stdout=True, stderr=False)
+    finally:
+        container.remove(force=True)
     return bool(out.decode().strip() == "install ok installed")
 
 
