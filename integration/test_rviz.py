@@ -171,7 +171,12 @@ def _until(count: Any, test: Any, timeout: float, what: str, docker_client: Any)
     seen: list[int] = []
 
     def check() -> bool:
-        seen.append(count())
+        # a VNC server that does not answer yet (the desktop still starting on a busy machine) is "not yet",
+        # counted -1, which no test accepts
+        try:
+            seen.append(count())
+        except TimeoutError:
+            seen.append(-1)
         return bool(test(seen[-1]))
 
     if not wait_for(check, timeout, interval=1):
