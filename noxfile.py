@@ -46,5 +46,5 @@ def integration(session: nox.Session) -> None:
     session.env["TESTCONTAINERS_RYUK_DISABLED"] = "true"
     # a test that hangs fails after 25 minutes (its fixtures' image builds included) instead of stalling CI;
     # the 25 slowest tests are printed on every run (and on an interrupted one), so time growth is seen early
-    session.run("pytest", "integration", "-p", "no:cacheprovider", "--timeout=1500", "--durations=25",
+    session.run("pytest", "integration", "-p", "no:cacheprovider", "--timeout=1500", "--durations=60",
                 *session.posargs, interrupt_timeout=INTERRUPT_GRACE)

@@ -16,6 +16,7 @@ import secrets
 import socket
 import struct
 import subprocess
+import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -58,18 +59,42 @@ def free_display(numbers: range = range(20, 64)) -> tuple[int, int, int]:
     raise RuntimeError("no free X display and ports")
 
 
+class VncRefused(Exception):
+    """The VNC client got no screen: the server refused it, hung up or did not answer in time."""
+
+
+# vncdotool runs a Twisted reactor in a thread, and a reactor stopped once cannot start again in that process:
+# two suites that each shut it down at their end leave the second one with a client that never connects. Each
+# screenshot is therefore taken by a short-lived Python process of its own (the password goes on its stdin).
+_CAPTURE = """
+import sys
+from vncdotool import api
+port, shot, timeout = sys.argv[2], sys.argv[3], float(sys.argv[4])  # argv[1] is "--"
+password = sys.stdin.read() or None
+client = api.connect("127.0.0.1::" + port, password=password, timeout=timeout)
+try:
+    client.captureScreen(shot)
+finally:
+    try:
+        client.disconnect()
+    finally:
+        api.shutdown()
+"""
+
+
 def vnc_screenshot(vnc_port: int, shot: Path, password: str | None, timeout: float = 30) -> Any:
     """The desktop on ``vnc_port`` (127.0.0.1) as an RGB PIL image, through vncdotool (a real RFB client, with the
-    VNC password if one is given); also saved to ``shot``. The caller's module shuts vncdotool's reactor down
-    once, at its end (``api.shutdown()``)."""
+    VNC password if one is given), run in a process of its own; also saved to ``shot``. Raises
+    :class:`VncRefused` when no screen came back (refused, hung up, or nothing within ``timeout``)."""
     from PIL import Image
-    from vncdotool import api
 
-    client = api.connect(f"127.0.0.1::{vnc_port}", password=password, timeout=timeout)
     try:
-        client.captureScreen(str(shot))
-    finally:
-        client.disconnect()
+        done = subprocess.run([sys.executable, "-c", _CAPTURE, "--", str(vnc_port), str(shot), str(timeout)],
+                              input=password or "", capture_output=True, text=True, timeout=timeout + 30)
+    except subprocess.TimeoutExpired as error:
+        raise VncRefused(f"no screen from VNC port {vnc_port} within {timeout + 30:.0f} s") from error
+    if done.returncode != 0 or not shot.exists():
+        raise VncRefused(f"no screen from VNC port {vnc_port}: {done.stderr.strip()[-500:]}")
     return Image.open(shot).convert("RGB")
 
 

@@ -24,7 +24,7 @@ from typing import Any
 import pytest
 import yaml
 from deploy_helpers import copy_project, log_lines, remove_project_containers, wait_for
-from screens import display_taken, free_display
+from screens import VncRefused, display_taken, free_display, vnc_screenshot
 
 from robocore.plan import gui
 
@@ -72,26 +72,9 @@ def magenta_pixels(vnc_port: int, shot: Path, password: str | None,
                    timeout: float = 30) -> tuple[int, tuple[int, int]]:
     """Screenshot the desktop through VNC (vncdotool, a real RFB client, with the VNC password if one is given);
     the count of MAGENTA pixels and the size."""
-    from PIL import Image
-    from vncdotool import api
-
-    client = api.connect(f"127.0.0.1::{vnc_port}", password=password, timeout=timeout)
-    try:
-        client.captureScreen(str(shot))
-    finally:
-        client.disconnect()
-    image = Image.open(shot).convert("RGB")
+    image = vnc_screenshot(vnc_port, shot, password, timeout)
     colours = image.getcolors(maxcolors=image.width * image.height) or []
     return sum(count for count, colour in colours if colour == MAGENTA), image.size
-
-
-@pytest.fixture(scope="module")
-def vnc_client() -> Iterator[None]:
-    """vncdotool runs a Twisted reactor in a thread; it can be stopped only once, at the end."""
-    yield
-    from vncdotool import api
-
-    api.shutdown()
 
 
 @pytest.fixture(scope="module")
@@ -128,7 +111,7 @@ def desktop_robot(demo_project: Path, tmp_path_factory: pytest.TempPathFactory, 
                 volume.remove(force=True)
 
 
-def test_the_desktop_shows_the_window_of_another_containers_x_client(desktop_robot: dict[str, Any], vnc_client: None,
+def test_the_desktop_shows_the_window_of_another_containers_x_client(desktop_robot: dict[str, Any],
                                                                        docker_client: Any, tmp_path: Path) -> None:
     port, password = desktop_robot["vnc_port"], desktop_robot["password"]
     clock = docker_client.containers.get(f"{desktop_robot['name']}-clock")
@@ -190,7 +173,7 @@ def test_novnc_serves_its_page_and_reaches_the_vnc_server(desktop_robot: dict[st
 
 
 def test_the_desktop_asks_for_the_projects_password_and_refuses_a_client_without_it(
-        desktop_robot: dict[str, Any], vnc_client: None, docker_client: Any, tmp_path: Path) -> None:
+        desktop_robot: dict[str, Any], docker_client: Any, tmp_path: Path) -> None:
     import stat
 
     port, password = desktop_robot["vnc_port"], desktop_robot["password"]
@@ -206,7 +189,7 @@ def test_the_desktop_asks_for_the_projects_password_and_refuses_a_client_without
     assert types == [2], types
     assert result != 0, result  # no "OK" security result: failed, or hung up
     # a real RFB client with a wrong password is refused; with the project's password it gets the screen
-    with pytest.raises(Exception):  # noqa: B017 - vncdotool raises its own or a timeout, both mean refused
+    with pytest.raises(VncRefused):
         magenta_pixels(port, tmp_path / "wrong.png", "wrong123", timeout=10)
     assert not (tmp_path / "wrong.png").exists()
     assert wait_for(lambda: log_lines(desktop, "Authentication failure"), 10), \
@@ -215,7 +198,7 @@ def test_the_desktop_asks_for_the_projects_password_and_refuses_a_client_without
 
 
 def test_a_desktop_opened_in_robot_yaml_serves_a_client_without_a_password(
-        desktop_robot: dict[str, Any], vnc_client: None, docker_client: Any, run_robocore: Any,
+        desktop_robot: dict[str, Any], docker_client: Any, run_robocore: Any,
         tmp_path: Path) -> None:
     root, port = desktop_robot["root"], desktop_robot["vnc_port"]
     robot_yaml = root / "robot.yaml"
