@@ -38,6 +38,9 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+import harness
+from harness import Figure, record
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "integration"))
 
@@ -56,16 +59,13 @@ PROFILE: dict[str, Any] = {"dir": None, "count": 0}
 
 
 def robocore(project: Path, *args: str, timed: bool = False) -> subprocess.CompletedProcess[str]:
-    python = [sys.executable]
+    """``robocore -p PROJECT ARGS``; ``timed`` (a measured command) runs under cProfile with ``--profile``."""
+    python: list[str] = []
     if timed and PROFILE["dir"] is not None:
         PROFILE["count"] += 1
         name = f"{PROFILE['count']:02d}-{'-'.join(a for a in args if not a.startswith('-'))}.prof"
         python += ["-m", "cProfile", "-o", str(Path(PROFILE["dir"]) / name)]
-    proc = subprocess.run([*python, "-m", "robocore", "-p", str(project), *args],
-                          capture_output=True, text=True, timeout=3600)
-    if proc.returncode != 0:
-        raise SystemExit(f"robocore {' '.join(args)} failed ({proc.returncode}):\n{proc.stdout}\n{proc.stderr}")
-    return proc
+    return harness.robocore(project, *args, timeout=3600, python=python)
 
 
 def make_project(parent: Path, ip: str) -> Path:
@@ -402,12 +402,15 @@ def main() -> int:
     print(f"{'link':<22} {'path':<9} {'best':>6} {'median':>7} {'bytes moved':>14}   steps of the best "
           f"(of {args.rounds} rounds)")
     verdicts = []
+    figures: list[Figure] = []
     for mbit, (fast, naive) in results.items():
         if not fast or not naive:  # --rounds 0: only the watch mode was timed
             if mbit in watched:
                 dev_median = statistics.median(r[0] for r in watched[mbit])
                 verdicts.append(f"{describe_link(mbit)}: robocore dev, save to heard {dev_median:.2f} s median of "
                                 f"{len(watched[mbit])} (goal < 1.0 s) -> {'met' if dev_median < 1.0 else 'NOT met'}")
+                figures.append(Figure(f"{describe_link(mbit)}: robocore dev, save to heard (median)", dev_median, "s",
+                                      "< 1 s", met=dev_median < 1.0, detail=f"{len(watched[mbit])} rounds"))
             continue
         best_fast = min(fast, key=lambda r: r[0])
         best_naive = min(naive, key=lambda r: r[0])
@@ -415,6 +418,8 @@ def main() -> int:
         for label, (secs, moved, steps) in (("robocore", best_fast), ("naive", best_naive)):
             detail = ", ".join(f"{k} {v:.1f}s" for k, v in steps.items())
             print(f"{describe_link(mbit):<22} {label:<9} {secs:>6.1f} {medians[label]:>7.1f} {moved:>14,}   {detail}")
+            figures.append(Figure(f"{describe_link(mbit)}: {label}, edit to heard (median)", medians[label], "s",
+                                  detail=f"best {secs:.1f} s ({detail}); {moved:,} bytes moved"))
         if mbit in watched:
             dev = watched[mbit]
             best_dev = min(dev, key=lambda r: r[0])
@@ -424,12 +429,19 @@ def main() -> int:
             verdicts.append(f"{describe_link(mbit)}: robocore dev, save to heard {dev_median:.2f} s median of "
                             f"{len(dev)} (goal < 1.0 s) -> {'met' if dev_median < 1.0 else 'NOT met'}; "
                             f"naive/dev {statistics.median(r[0] for r in naive) / dev_median:.1f}x median to median")
+            figures.append(Figure(f"{describe_link(mbit)}: robocore dev, save to heard (median)", dev_median, "s",
+                                  "< 1 s", statistics.median(r[0] for r in naive) / dev_median, "naive / dev",
+                                  dev_median < 1.0, f"best {best_dev[0]:.2f} s ({detail}); {len(dev)} rounds"))
         ratio = best_naive[0] / best_fast[0]
         median_ratio = medians["naive"] / medians["robocore"]
         verdicts.append(f"{describe_link(mbit)}: ratio naive/robocore {ratio:.1f}x best to best, {median_ratio:.1f}x "
                         f"median to median (goal >= 10x) -> {'met' if min(ratio, median_ratio) >= 10 else 'NOT met'}; "
                         f"sync moved {best_fast[1]:,} bytes (goal < 50 KB) -> "
                         f"{'met' if best_fast[1] < 50_000 else 'NOT met'}")
+        figures.append(Figure(f"{describe_link(mbit)}: naive / robocore (median to median)", median_ratio, "x",
+                              ">= 10x", met=min(ratio, median_ratio) >= 10, detail=f"best to best {ratio:.1f}x"))
+        figures.append(Figure(f"{describe_link(mbit)}: bytes sync moved for the edit", best_fast[1], "bytes",
+                              "< 50 KB", met=best_fast[1] < 50_000))
     if floors:
         best_floor = min(floors, key=lambda r: r[0])
         floor_median = statistics.median(r[0] for r in floors)
@@ -437,8 +449,15 @@ def main() -> int:
         print(f"{describe_link(0):<22} {'floor':<9} {best_floor[0]:>6.2f} {floor_median:>7.2f} {0:>14,}   {detail}")
         verdicts.append(f"floor (the container restarted in place by Docker, code already there): "
                         f"{floor_median:.2f} s median of {len(floors)}; no deploy of this talker is heard sooner")
+        figures.append(Figure("floor: the talker restarted in place by Docker (median)", floor_median, "s",
+                              detail=f"best {best_floor[0]:.2f} s ({detail}); no deploy is heard sooner"))
     print()
     print("\n".join(verdicts))
+    record("deploy", figures, goals=["naive / robocore >= 10x", "sync moves < 50 KB for a one-line edit",
+                                     "robocore dev: save to heard < 1 s"],
+           notes=[f"{args.rounds} rounds per link, robocore as "
+                  f"{'three commands' if args.separate else 'one command, build sync run'}; one simulated robot "
+                  "host (Docker-in-Docker + sshd) over ssh://"])
     return 0
 
 

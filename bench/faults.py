@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from harness import Figure, record
 
 PUBLISH = """
 import sys, time
@@ -186,6 +187,13 @@ def scenario_process(name: str, project: Path) -> dict[str, list[float]]:
     return {}
 
 
+def verdict(name: str, heard: list[float]) -> bool | None:
+    """Whether the median of ``heard`` meets the figure's goal (None: it has none)."""
+    limit = {"lost_s0": 0.5, "lost_s1": 0.5, "late_during_s0_outage": 2.0, "late_during_s1_outage": 2.0,
+             "late_after_single_restart": 5.0, "reconnect_to_message": 5.0}.get(name)
+    return None if limit is None else statistics.median(heard) < limit
+
+
 def show(value: float, unit: str) -> str:
     return "nan" if math.isnan(value) else f"{value:.1f}" if unit else f"{value:.0f}"
 
@@ -209,11 +217,20 @@ def main() -> int:
                     figures[key] += values
     print(f"\n| figure (median of {args.repeat} runs, one process each; shared 2-core machine) | value | runs | goal |")
     print("|---|---|---|---|")
+    rows = []
     for name, values in figures.items():
         unit = "" if name.startswith("lost") else " s"
         heard = [v for v in values if not math.isnan(v)]  # nan: not heard within the wait
         median = show(statistics.median(heard), unit) + unit if heard else "-"
-        print(f"| {name} | {median} | {', '.join(show(v, unit) for v in values)} | {GOALS[name]} |")
+        runs = ", ".join(show(v, unit) for v in values)
+        print(f"| {name} | {median} | {runs} | {GOALS[name]} |")
+        rows.append(Figure(name, statistics.median(heard) if heard else None, unit.strip() or "messages",
+                           GOALS[name] if GOALS[name] != "-" else None, met=verdict(name, heard) if heard else None,
+                           detail=f"runs: {runs}"))
+    record("faults", rows, goals=["no message lost while one of two servers is down", "a node started during an "
+                                  "outage heard in < 2 s", "a node started after a single server's restart heard "
+                                  "in < 5 s", "reconnection to the next message < 5 s"],
+           notes=[f"median of {args.repeat} runs, one process each (nan: not heard within the wait)"])
     return 0
 
 

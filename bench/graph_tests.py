@@ -23,6 +23,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from harness import Figure, record, robocore
+
 PYTEST = [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q"]
 FIRST_MESSAGE = '''
 import time
@@ -47,11 +49,6 @@ import pytest
 def test_plain(n):
     assert n >= 0
 '''
-
-
-def robocore(project: Path, *args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "robocore", "-p", str(project), *args], capture_output=True,
-                          text=True, check=True)
 
 
 def images_since(start: float) -> int:
@@ -150,6 +147,21 @@ def main() -> int:
     seconds, proc = timed_pytest([sys.executable, "-m", "nox", "--no-venv", "-s", "graph"], project)
     status = "ok" if proc.returncode == 0 else f"FAILED\n{proc.stdout[-2000:]}{proc.stderr[-2000:]}"
     print(f"nox --no-venv -s graph, warm: {seconds:.1f} s (goal < 60 s): {status}")
+    record("graph_tests", [
+        Figure("bring-up to the first message: robocore.testing", ours_median, "s", "< 5 s warm",
+               met=ours_median < 5, detail=f"runs {', '.join(f'{t:.2f}' for t, _ in ours)}; images built "
+                                           f"{', '.join(str(n) for _, n in ours)}"),
+        Figure("bring-up to the first message: robocore run + polling robocore logs", theirs_median, "s",
+               ratio=theirs_median / ours_median, ratio_of="x robocore.testing",
+               detail=f"runs {', '.join(f'{t:.2f}' for t in theirs)}"),
+        Figure("per-test overhead of robot", per_test * 1000, "ms",
+               detail=f"20 tests {with_robot:.2f} s, 1 test {single:.2f} s, 20 plain tests {plain:.2f} s"),
+        Figure(f"template tests/graph x{args.repeat}: failures", failures, "", "0", met=failures == 0,
+               detail=f"median {statistics.median(durations):.2f} s, max {max(durations):.2f} s"),
+        Figure("nox --no-venv -s graph, warm", seconds, "s", "< 60 s", met=seconds < 60 and proc.returncode == 0,
+               detail="ok" if proc.returncode == 0 else "FAILED"),
+    ], goals=["bring-up < 5 s warm", "nox -s graph < 60 s warm on 2 cores", f"0 failures in {args.repeat} runs"],
+        notes=[f"bring-up: median of {args.rounds} rounds per way"])
     return 1 if failures or proc.returncode else 0
 
 

@@ -29,6 +29,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from harness import Figure, record
+
 GOAL_S = 5.0
 GOOD = """\
 ros_distro: jazzy
@@ -132,6 +134,7 @@ def main() -> int:
     print(f"{'case':50} {'exit':>4} {'wall s':>7} {'cpu s':>6} {'/ goal':>6} {'/ ref':>6}  first line")
     worst = 0.0
     reference = None
+    figures: list[Figure] = []
     with tempfile.TemporaryDirectory(prefix="robocore-hostile-bench-") as tmp:
         env = dict(os.environ, DOCKER_HOST=f"unix://{tmp}/nobody.sock")
         for index, (name, setup, task) in enumerate(CASES):
@@ -150,8 +153,14 @@ def main() -> int:
             worst = max(worst, seconds)
             print(f"{name:50} {code:>4} {seconds:7.2f} {cpu:6.2f} {seconds / GOAL_S:6.2f} {seconds / reference:6.2f}  "
                   f"{(first or [''])[0][:100]}", flush=True)
+            figures.append(Figure(name, seconds, "s", f"< {GOAL_S:g} s", seconds / reference, "x reference",
+                                  seconds < GOAL_S and code != -1, f"exit {code}, CPU {cpu:.2f} s"))
     print(f"worst: {worst:.2f} s wall ({worst / GOAL_S:.2f} of the {GOAL_S:.0f} s goal); load average "
           f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (a shared machine inflates wall times)")
+    record("hostile_limits", figures, goals=[f"each hostile project refused in under {GOAL_S:g} s on 2 cores, "
+                                             "start-up included"],
+           notes=[f"worst {worst:.2f} s wall; the reference is a plain validate of a small good project, measured "
+                  "first in the same run"])
     return 0 if worst < GOAL_S else 1
 
 

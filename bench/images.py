@@ -24,21 +24,17 @@ import time
 from pathlib import Path
 
 import docker
+from harness import Figure, record, robocore
 
 NAME = "robocore-bench-img"
 PLAIN = f"{NAME}-plain-docker:latest"
 
 
-def robocore(project: Path | None, *args: str) -> float:
-    argv = [sys.executable, "-m", "robocore"]
-    if project is not None:
-        argv += ["-p", str(project)]
+def timed(project: Path | None, *args: str) -> float:
+    """Seconds of ``robocore [-p PROJECT] ARGS`` (a failure stops the bench)."""
     start = time.perf_counter()
-    proc = subprocess.run([*argv, *args], capture_output=True, text=True)
-    elapsed = time.perf_counter() - start
-    if proc.returncode != 0:
-        sys.exit(f"robocore {' '.join(args)} failed ({proc.returncode}):\n{proc.stdout}\n{proc.stderr}")
-    return elapsed
+    robocore(project, *args)
+    return time.perf_counter() - start
 
 
 def goal(value: float, limit: float, unit: str) -> str:
@@ -113,33 +109,43 @@ def main() -> int:
     parent = Path(tempfile.mkdtemp(prefix="robocore-bench-"))
     project = parent / NAME
     rows: list[tuple[str, str, str]] = []
+    figures: list[Figure] = []
     try:
         remove_own_images(client)
-        robocore(None, "init", str(project), "--defaults", "--base", "wheels")
+        timed(None, "init", str(project), "--defaults", "--base", "wheels")
         from robocore.plan import naming
         from robocore.project import Project
 
         proj = Project.load(project)
         base = f"{naming.base_image(proj.robot, proj.name)}:latest"
         if not args.skip_scratch:
-            rows.append(("base from scratch (no layer cache)", f"{scratch_base(project):7.1f} s", ""))
-        t_base = robocore(project, "prepare-base", "--quiet")
-        t_stage = robocore(project, "stage", "--quiet")
-        t_build = robocore(project, "build", "--quiet")
+            scratch = scratch_base(project)
+            rows.append(("base from scratch (no layer cache)", f"{scratch:7.1f} s", ""))
+            figures.append(Figure("base from scratch (no layer cache)", scratch, "s"))
+        t_base = timed(project, "prepare-base", "--quiet")
+        t_stage = timed(project, "stage", "--quiet")
+        t_build = timed(project, "build", "--quiet")
         rows.append(("cold project: prepare-base", f"{t_base:7.1f} s", ""))
         rows.append(("cold project: stage", f"{t_stage:7.1f} s", ""))
         rows.append(("cold project: build", f"{t_build:7.1f} s", ""))
         rows.append(("cold project: total", f"{t_base + t_stage + t_build:7.1f} s", ""))
-        noop_stage = min(robocore(project, "stage", "--quiet") for _ in range(3))
-        noop_build = min(robocore(project, "build", "--quiet") for _ in range(3))
+        figures += [Figure("cold project: prepare-base", t_base, "s"), Figure("cold project: stage", t_stage, "s"),
+                    Figure("cold project: build", t_build, "s"),
+                    Figure("cold project: total", t_base + t_stage + t_build, "s")]
+        noop_stage = min(timed(project, "stage", "--quiet") for _ in range(3))
+        noop_build = min(timed(project, "build", "--quiet") for _ in range(3))
         rows.append(("no-op stage (best of 3)", f"{noop_stage:7.2f} s", goal(noop_stage, 2, "s")))
         rows.append(("no-op build (best of 3)", f"{noop_build:7.2f} s", goal(noop_build, 3, "s")))
+        figures += [Figure("no-op stage (best of 3)", noop_stage, "s", "< 2 s", noop_stage / 2, "of the goal",
+                           noop_stage < 2),
+                    Figure("no-op build (best of 3)", noop_build, "s", "< 3 s", noop_build / 3, "of the goal",
+                           noop_build < 3)]
 
         source = talker_source(project)
         edits = []
         for i in range(3):
             source.write_text(source.read_text() + f"\n# bench edit {i}\n")
-            edits.append(robocore(project, "build", "--quiet"))
+            edits.append(timed(project, "build", "--quiet"))
             installed = list((proj.build_dir("talker") / "install").rglob(source.name))
             assert any(f"# bench edit {i}" in p.read_text() for p in installed), "edit not in the install tree"
         edit = min(edits)
@@ -148,11 +154,19 @@ def main() -> int:
         rows.append(("plain docker build, code in image: first build", f"{first:7.2f} s", ""))
         rows.append(("plain docker build, code in image: one-line edit", f"{plain:7.2f} s",
                      f"robocore is {plain / edit:.1f}x faster"))
+        figures += [Figure("one-line edit -> rebuilt install tree (best of 3)", edit, "s", "< 5 s", edit / 5,
+                           "of the goal", edit < 5),
+                    Figure("plain docker build, code in image: first build", first, "s"),
+                    Figure("plain docker build, code in image: one-line edit", plain, "s", ratio=plain / edit,
+                           ratio_of="x robocore's edit")]
         for comp in ("base", "talker", "listener"):
             ref = base if comp == "base" else f"{naming.component_image(proj.robot, proj.name, comp)}:latest"
             size = client.images.get(ref).attrs["Size"] / 1e6
             note = goal(size, 550, "MB") if comp == "base" else "shares the base layers"
             rows.append((f"image size: {comp}", f"{size:7.0f} MB", note))
+            figures.append(Figure(f"image size: {comp}", size, "MB", "<= 550 MB" if comp == "base" else None,
+                                  met=size <= 550 if comp == "base" else None,
+                                  detail="" if comp == "base" else "shares the base layers"))
     finally:
         remove_own_images(client)
         shutil.rmtree(parent, ignore_errors=True)
@@ -160,6 +174,9 @@ def main() -> int:
     print(f"{'measure':<{width}}  {'value':>10}  note")
     for what, value, note in rows:
         print(f"{what:<{width}}  {value:>10}  {note}")
+    record("images", figures, goals=["no-op stage < 2 s", "no-op build < 3 s", "one-line edit to rebuilt artifacts "
+                                     "< 5 s", "wheels base image <= 550 MB"],
+           notes=["the template project (wheels base); the cold project may reuse Docker's layer cache"])
     return 0
 
 

@@ -33,6 +33,7 @@ from typing import Any
 
 import docker
 from docker.errors import ImageNotFound, NotFound
+from harness import Figure, record
 
 from robocore.config.model import Robot
 from robocore.plan.discovery import fastdds
@@ -161,10 +162,15 @@ def main() -> int:
         f"same GUID, hold {args.hold // 3} s": dict(backup=False, hold=args.hold // 3, stop_timeout=0),
     }
     print(f"{'restart':40} {'listener before':16} {'listener after the restart':56} server after")
+    figures = []
     for label, kwargs in rows.items():
         with contextlib.suppress(NotFound):
             done = scenario(client, args.image, args.wait, dds, **kwargs)  # type: ignore[arg-type]
             print(f"{label:40} {done['before']:16} {done['after']:56} {done['server']}", flush=True)
+            figures.append(Figure(label, done["after"], detail=f"listener before: {done['before']}; server after: "
+                                                               f"{done['server']}"))
+    record("server_restart", figures, notes=[f"image {args.image}; a listener waits {args.wait:g} s (plus the hold) "
+                                             "to hear the talker after the restart"])
     return 0
 
 

@@ -15,6 +15,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from harness import Figure, record
+
 CANDIDATES = ("robocore/debian:bookworm", "debian:bookworm", "robocore-test/debian:bookworm")
 ROUNDS = 5
 
@@ -74,6 +76,15 @@ def main() -> int:
     print(f"{'docker exec CONTAINER true':<44}{docker_exec:7.2f} s")
     print(f"{'robocore shell --cmd true (join running)':<44}{join:7.2f} s   x{join / docker_exec:.1f} of docker exec")
     print(f"{'joining vs new container':<44}{'':7} x{fresh / join:.1f} faster")
+    record("shell_start", [
+        Figure("docker run --rm IMAGE true", docker_run, "s"),
+        Figure("robocore shell --cmd true (new container)", fresh, "s", ratio=fresh / docker_run,
+               ratio_of="x docker run"),
+        Figure("docker exec CONTAINER true", docker_exec, "s"),
+        Figure("robocore shell --cmd true (join running)", join, "s", ratio=join / docker_exec,
+               ratio_of="x docker exec"),
+        Figure("joining vs new container", fresh / join, "x faster"),
+    ], notes=[f"image {image}; median of {ROUNDS} runs each"])
     return 0
 
 

@@ -12,12 +12,12 @@ from __future__ import annotations
 import argparse
 import os
 import resource
-import shutil
 import statistics
 import subprocess
 import sys
 import time
-from pathlib import Path
+
+from harness import Figure, record, robocore_command
 
 TARGET_S = 0.3
 HEAVY = ("pydantic", "docker", "copier", "rich", "paramiko")
@@ -37,15 +37,6 @@ def timed(argv: list[str], runs: int) -> tuple[list[float], list[float]]:
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
     return wall, cpu
-
-
-def robocore_command() -> list[str]:
-    """The installed console script next to this python, else ``python -m robocore``."""
-    script = Path(sys.executable).with_name("robocore")
-    if script.exists():
-        return [str(script)]
-    found = shutil.which("robocore")
-    return [found] if found else [sys.executable, "-m", "robocore"]
 
 
 def heavy_imports() -> list[str]:
@@ -75,10 +66,16 @@ def main() -> int:
     bare_cpu = statistics.median(results["python -c pass"][1])
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; n={args.runs}; seconds")
     print(f"{'command':<28} {'median':>8} {'min':>8} {'max':>8} {'x bare':>7} {'cpu med':>8} {'cpu x bare':>10}")
+    figures = []
     for name, (wall, cpu) in results.items():
         median, cpu_median = statistics.median(wall), statistics.median(cpu)
         print(f"{name:<28} {median:8.3f} {min(wall):8.3f} {max(wall):8.3f} {median / bare:7.2f} "
               f"{cpu_median:8.3f} {cpu_median / bare_cpu:10.2f}")
+        target = name == "robocore --help"
+        figures.append(Figure(f"{name}, median", median, "s", f"< {TARGET_S:g} s" if target else None,
+                              median / bare, "x bare python", median < TARGET_S if target else None,
+                              f"min {min(wall):.3f} s, max {max(wall):.3f} s; CPU {cpu_median:.3f} s, "
+                              f"{cpu_median / bare_cpu:.2f}x bare"))
     help_median = statistics.median(results["robocore --help"][0])
     verdict = "ok" if help_median < TARGET_S else "over target (check the load average above)"
     print(f"robocore --help median {help_median:.3f} s vs target {TARGET_S:.1f} s: {verdict} "
@@ -86,6 +83,10 @@ def main() -> int:
           f"{help_median - bare:.3f} s)")
     heavy = heavy_imports()
     print("heavy modules imported by --help: " + (", ".join(heavy) if heavy else "none"))
+    figures.append(Figure("heavy modules imported by --help", ", ".join(heavy) or "none", goal="none",
+                          met=not heavy, detail=f"of {', '.join(HEAVY)}"))
+    record("startup", figures, goals=[f"robocore --help median under {TARGET_S:g} s", "no heavy module imported"],
+           notes=[f"{args.runs} runs of each command"])
     # timing is reported, not enforced (a loaded machine inflates it); importing a heavy library is a bug
     return 1 if heavy else 0
 

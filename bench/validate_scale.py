@@ -25,6 +25,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from harness import Figure, record, robocore_command
+
 GOAL_S = 5.0
 MEGABYTE = 1_000_000
 HEAD = "ros_distro: jazzy\n"
@@ -123,12 +125,6 @@ CASES: dict[str, Callable[[], str]] = {
 }
 
 
-def robocore_command() -> list[str]:
-    """The installed console script next to this python, else ``python -m robocore``."""
-    script = Path(sys.executable).with_name("robocore")
-    return [str(script)] if script.exists() else [sys.executable, "-m", "robocore"]
-
-
 def run_case(root: Path, name: str, make: Callable[[], str]) -> tuple[int, str, float, int]:
     """Validate the case's file; returns exit code, first output line, seconds and the file size."""
     project = root / f"case-{abs(hash(name))}"
@@ -153,6 +149,7 @@ def main() -> int:
     args = parser.parse_args()
     root = args.keep or Path(tempfile.mkdtemp(prefix="robocore-validate-scale-"))
     failed = 0
+    figures: list[Figure] = []
     print(f"{'case':<50} {'size':>10} {'exit':>4} {'time':>8} {'goal':>6} {'goal/time':>9}  first line")
     try:
         for name, make in CASES.items():
@@ -161,9 +158,13 @@ def main() -> int:
             failed += not ok
             print(f"{name:<50} {size:>10,} {code:>4} {seconds:>7.2f}s {GOAL_S:>5.1f}s {GOAL_S / seconds:>8.1f}x  "
                   f"{first[:110]}{'' if ok else '   <-- over the goal or not a clean refusal'}", flush=True)
+            figures.append(Figure(name, seconds, "s", f"< {GOAL_S:g} s, a clean exit", GOAL_S / seconds, "goal / time",
+                                  ok, f"{size:,} bytes, exit {code}"))
     finally:
         if args.keep is None:
             shutil.rmtree(root, ignore_errors=True)
+    record("validate_scale", figures, goals=[f"each case refused or accepted (exit 0 or 2, no traceback) in under "
+                                             f"{GOAL_S:g} s, start-up included"])
     return 1 if failed else 0
 
 
