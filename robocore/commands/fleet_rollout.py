@@ -77,10 +77,12 @@ class _Change:
 
 
 def load_release(fleet: FleetProject, version: str) -> plan.Release:
-    """The release record of ``version`` (what ``robocore release`` pushed, by digest)."""
-    from robocore.commands.fleet_images import release_images
+    """The images of release ``version``, from the record ``release --fleet --tag VERSION`` wrote (by digest; a
+    missing, linked-out or malformed record is refused in one line by ``load_release_record``)."""
+    from robocore.commands.fleet_release import load_release_record
 
-    return release_images(fleet.project, version)
+    record = load_release_record(fleet.project, version)
+    return plan.Release(version=record.version, components=record.components, base=record.base)
 
 
 def _live(client: docker.DockerClient, fleet: FleetProject) -> dict[str, swarm.ServiceInfo]:
@@ -132,13 +134,19 @@ class Gate:
         self.report = options.report
         self.script = resources.read("fleet-probe").decode()
 
-    def run(self, changes: list[_Change]) -> None:
-        """Decide every change (healthy, failed or pending)."""
+    def run(self, changes: list[_Change], deadline: float | None = None) -> None:
+        """Decide every change (healthy, failed or pending); a change still undecided at ``deadline`` (a
+        ``time.monotonic()`` value: the wave's ``timeouts.wave``) fails as a failed gate does."""
         while any(c.verdict is None for c in changes):
             by_robot = robot_nodes(swarm.nodes(self.client), self.fleet)
             for change in changes:
                 if change.verdict is None:
                     self._step(change, by_robot)
+            if deadline is not None and time.monotonic() > deadline:
+                for change in changes:
+                    if change.verdict is None:
+                        self._decide(change, FAILED, f"wave {change.wave} not decided within "
+                                                     f"{self.timeouts.wave:g} s (timeouts.wave)")
             if any(c.verdict is None for c in changes):
                 time.sleep(POLL)
 
@@ -322,11 +330,12 @@ def rollout(options: Options, *, version: str) -> list[RobotOutcome]:
             live = _live(client, fleet)
             by_robot = robot_nodes(swarm.nodes(client), fleet)
             report.info(f"wave {wave.name}: {', '.join(wave.robots)}")
+            deadline = time.monotonic() + fleet.fleet.rollout.timeouts.wave
             changes = []
             for robot in wave.robots:
                 health = PENDING if offline(robot, by_robot, fleet) else ""
                 changes.append(_change(client, fleet, robot, wave.name, release, live, health))
-            gate.run(changes)
+            gate.run(changes, deadline)
             for change in changes:
                 _set_health(client, change.specs, change.verdict or "")
                 report.info(f"  {change.robot}: {change.verdict}" + (f" ({change.reason})" if change.reason else ""))

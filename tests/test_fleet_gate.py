@@ -1,0 +1,123 @@
+"""The rollout's health gate against a fake swarm: ``timeouts.wave`` bounds a whole wave's gate.
+
+No Docker: the swarm adapter's reads are replaced by a swarm whose robot nodes are ready and whose tasks never
+(or at once) run, and the gate's clock is a fake one advanced by its own sleeps.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from robocore.adapters import swarm
+from robocore.commands import fleet_rollout
+from robocore.commands.context import Options
+from robocore.commands.fleet_rollout import FAILED, HEALTHY, Gate, _Change
+from robocore.commands.fleet_swarm import FleetProject
+from robocore.config.fleet import parse_fleet_text
+from robocore.config.loader import parse_robot_text
+from robocore.plan import swarm_services as plan
+from robocore.plan.fleet import fleet_instances
+from robocore.project import Project
+
+ROBOT = """\
+ros_distro: jazzy
+hosts:
+  - {name: main, ip: 127.0.0.1, user: me}
+components:
+  - {name: talker, folder: components/talker, runs_on: main, entrypoint: ros2 run demo_talker talker}
+"""
+FLEET = """\
+manager: {ip: 10.0.0.2}
+registry: 10.0.0.2:5000
+robots:
+  - {name: r1, hosts: {main: {ip: 10.1.1.1}}}
+  - {name: r2, hosts: {main: {ip: 10.1.2.1}}}
+rollout:
+  health: {running: 2}
+  timeouts: {robot: 1000, wave: 30}
+"""
+DIGEST = "@sha256:" + "a" * 64
+RELEASE = plan.Release(version="v2", components={"talker": {"amd64": "10.0.0.2:5000/p-talker" + DIGEST}},
+                       base={"amd64": "10.0.0.2:5000/p-base" + DIGEST})
+
+
+class Clock:
+    """``time`` for the gate: ``monotonic()`` is what its ``sleep``s added up to."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def monotonic(self) -> float:
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        self.now += seconds
+
+
+@pytest.fixture
+def gate(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[Gate, FleetProject, Clock, dict[str, str]]:
+    """A gate over a fake swarm where both robots' nodes are ready; ``states[robot]`` is the state of the new task
+    of each of that robot's services ("" : none yet)."""
+    robot = parse_robot_text(ROBOT)
+    fleet = parse_fleet_text(FLEET, robot)
+    project = Project(root=tmp_path / "p", robot=robot)
+    fleet_project = FleetProject(project=project, fleet=fleet, instances=fleet_instances(robot, fleet))
+    clock = Clock()
+    states = {"r1": "", "r2": ""}
+    nodes = [swarm.NodeInfo(id=f"n{r}", hostname=r, labels=plan.node_labels(project.name, r, "main", "amd64"),
+                            state="ready", availability="active", addr="") for r in states]
+
+    def tasks(_client: Any, service: str) -> list[swarm.TaskInfo]:
+        robot_name = next(r for r in states if f"-{r}-" in service)
+        state = states[robot_name]
+        image = RELEASE.components["talker"]["amd64"] if "talker" in service else RELEASE.base["amd64"]
+        return [swarm.TaskInfo(id=f"t-{service}", node_id=f"n{robot_name}", state=state, desired="running",
+                               image=image, created="1", error="", exit_code=None, container="c")] if state else []
+
+    monkeypatch.setattr(fleet_rollout, "time", clock)
+    monkeypatch.setattr(swarm, "nodes", lambda _client: nodes)
+    monkeypatch.setattr(swarm, "tasks", tasks)
+    monkeypatch.setattr(swarm, "updating", lambda _client, _name: False)
+    the_gate = Gate(object(), fleet_project, RELEASE, {"v2": RELEASE},  # type: ignore[arg-type]
+                    Options(project_dir=project.root))
+    return the_gate, fleet_project, clock, states
+
+
+def changes(fleet_project: FleetProject, clock: Clock) -> list[_Change]:
+    out = []
+    for robot in ("r1", "r2"):
+        specs = plan.robot_services(fleet_project.project, robot, fleet_project.instances[robot], RELEASE)
+        out.append(_Change(robot=robot, wave="half", release="v2", specs=specs, before={s.name: set() for s in specs},
+                           started=clock.now, deadline=clock.now + fleet_project.fleet.rollout.timeouts.robot))
+    return out
+
+
+def test_a_wave_not_decided_within_its_timeout_fails_like_a_failed_gate(gate: Any) -> None:
+    the_gate, fleet_project, clock, states = gate
+    states["r1"] = "running"  # r1 passes its gate (no nodes or topics to check); r2's tasks never start
+    wave = changes(fleet_project, clock)
+    started = clock.now
+    the_gate.run(wave, started + fleet_project.fleet.rollout.timeouts.wave)
+    assert [c.verdict for c in wave] == [HEALTHY, FAILED]
+    assert wave[1].reason == "wave half not decided within 30 s (timeouts.wave)"
+    assert 30 <= clock.now - started <= 31  # decided at the wave's deadline, long before the robot's own (1000 s)
+
+
+def test_a_wave_decided_in_time_is_not_cut_short(gate: Any) -> None:
+    the_gate, fleet_project, clock, states = gate
+    states.update(r1="running", r2="running")
+    wave = changes(fleet_project, clock)
+    the_gate.run(wave, clock.now + fleet_project.fleet.rollout.timeouts.wave)
+    assert [c.verdict for c in wave] == [HEALTHY, HEALTHY]
+    assert clock.now - wave[0].started < 30
+
+
+def test_without_a_wave_deadline_only_the_robots_own_timeout_applies(gate: Any) -> None:
+    the_gate, fleet_project, clock, _ = gate
+    wave = changes(fleet_project, clock)
+    the_gate.run(wave)
+    assert [c.verdict for c in wave] == [FAILED, FAILED]
+    assert all(c.reason.startswith("not running after 1000 s") for c in wave), [c.reason for c in wave]
