@@ -118,7 +118,7 @@ fi
 if [ -n "$debs_pid" ]; then
   wait "$debs_pid"
 fi
-# arm64 on an amd64 test machine (design.md section 8): Debian's qemu-user-static puts qemu-aarch64.conf on disk
+# arm64 on an amd64 test machine (docs/arm64.md): Debian's qemu-user-static puts qemu-aarch64.conf on disk
 # but registers nothing where no init system runs. As root: mount binfmt_misc if needed, then write that line to
 # its register file (flags POF: F opens the interpreter now, so arm64 binaries run in any container, Docker in
 # Docker included). robocore itself never changes the kernel: without this it says what to run.

@@ -1,8 +1,8 @@
-"""The robot.yaml examples of seed 002, reconstructed verbatim, and documents built from them.
+"""robot.yaml examples written as a user meets them, in fragments, and the whole documents built from them.
 
-Seed 002 shows robot.yaml in fragments (top-level keys, hosts, common packages, components).
-A fragment that has no top-level section is completed with the seed's own top-level
-fragment; the fragment text itself is never changed.
+The fragments are top-level keys, hosts, common packages and components (a micro-ROS agent, a VNC desktop on the
+robot or on the dev machine, a moveit planner, Jetsons). A fragment that has no top-level section is completed
+with the top-level fragment; the fragment text itself is never changed.
 """
 
 from __future__ import annotations
@@ -111,7 +111,7 @@ components:
     runs_on: raspberrypi5
 """
 
-#: Not in the seed: the host that the seed's "runs_on: raspberrypi5" fragment refers to.
+#: Not among the fragments: the host that the "runs_on: raspberrypi5" fragment refers to.
 HOST_RASPBERRYPI5 = """\
 hosts:
   - name: raspberrypi5
@@ -156,7 +156,7 @@ components:
 
 @dataclass(frozen=True)
 class Example:
-    """A whole robot.yaml made of seed fragments, and the folders it needs."""
+    """A whole robot.yaml made of the example fragments, and the folders it needs."""
 
     name: str
     text: str

@@ -209,7 +209,7 @@ def test_init_in_project(rest: list[str], expected: list[str]) -> None:
 
 
 def test_seed_form_init_creates_the_project_in_dir(tmp_path: Path) -> None:
-    """The seed's `robocore-cli <project_folder> init`."""
+    """`robocore <project_folder> init`, the folder before the task."""
     target = tmp_path / "myrobot"
     done = robocore(str(target), "init", "--defaults", cwd=tmp_path)
     assert done.returncode == 0, done.stderr

@@ -125,7 +125,7 @@ def test_write_compose_files(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_libyamls_text_is_pyyamls_and_the_spec_hash_is_asdicts(case: str) -> None:
-    """The fast paths of a 10,000-component compose file (issue 37) change no byte and no container's hash."""
+    """The fast paths of a 10,000-component compose file change no byte and no container's hash."""
     import dataclasses
     import hashlib
     import json

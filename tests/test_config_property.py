@@ -1,6 +1,6 @@
 """Property: whatever robot.yaml holds, loading ends in a Robot or a ConfigError, never another exception.
 
-Documents are valid seed examples mutated at random (keys dropped, renamed or added, values
+Documents are valid robot.yaml examples mutated at random (keys dropped, renamed or added, values
 replaced by values of other types), random YAML values, YAML token soup, random text and
 random bytes, and deeply nested structures.
 """
@@ -27,7 +27,7 @@ FILE = "robot.yaml"
 EXAMPLES = 500
 PROPERTY = settings(max_examples=EXAMPLES, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
-# One project folder for the whole module: the seed examples' folders exist in it, so mutated
+# One project folder for the whole module: the examples' folders exist in it, so mutated
 # documents also exercise the file-system checks. (A function-scoped tmp_path would be shared by
 # every hypothesis example anyway.)
 _ROOT = Path(tempfile.mkdtemp(prefix="robocore-property-"))
@@ -103,7 +103,7 @@ def _get(node: Any, path: tuple[Any, ...]) -> Any:
 
 @st.composite
 def mutated_documents(draw: st.DrawFn) -> Any:
-    """A seed example with 1-4 random mutations."""
+    """A robot.yaml example with 1-4 random mutations."""
     doc = copy.deepcopy(draw(st.sampled_from(VALID_DOCS)))
     for _ in range(draw(st.integers(min_value=1, max_value=4))):
         paths = _paths(doc)
@@ -203,7 +203,7 @@ def test_load_robot_from_disk(data: bytes) -> None:
 
 
 def test_the_mutation_strategy_reaches_both_outcomes() -> None:
-    """A negative control: the seed documents are valid, and garbage is rejected, through the same helper."""
+    """A negative control: the example documents are valid, and garbage is rejected, through the same helper."""
     assert all(isinstance(parse(yaml.safe_dump(doc)), Robot) for doc in VALID_DOCS)
     assert isinstance(parse("hosts: 1\n"), ConfigError)
     assert all(c in string.printable for c in FILE)

@@ -1,4 +1,4 @@
-"""Every robot.yaml example of seed 002 validates unchanged once its folders exist."""
+"""Every robot.yaml example of ``config_examples`` validates unchanged once its folders exist."""
 
 from __future__ import annotations
 
@@ -97,7 +97,7 @@ def test_jetson_example_maps_components_to_hosts(make_project: MakeProject) -> N
 
 
 def test_moving_a_component_is_one_line(make_project: MakeProject) -> None:
-    """The seed's moveit example: changing runs_on moves the component; a wrong name is reported."""
+    """The moveit example: changing runs_on moves the component; a wrong name is reported."""
     text = SEED_EXAMPLES[3].text
     assert load_robot(make_project(text)).component("moveit_planner").runs_on == "devmachine"
     with pytest.raises(ConfigError) as caught:

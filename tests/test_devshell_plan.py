@@ -260,7 +260,7 @@ def test_exec_argv_interactive_and_command(project: Project) -> None:
     command = plan.exec_argv(spec, cmd="xdpyinfo | head -1", stdin_tty=True)
     assert "-t" not in command and "-it" not in command and "-i" not in command
     assert command[-3:] == ["bash", "-lc", "xdpyinfo | head -1"]
-    # robocore on a terminal: the command gets one too (seed 001's `--cmd tmux`)
+    # robocore on a terminal: the command gets one too (`--cmd tmux`, as hand-made run scripts allow)
     tmux = plan.exec_argv(spec, cmd="tmux", stdin_tty=True, stdout_tty=True)
     assert tmux[:3] == ["docker", "exec", "-it"] and tmux[-3:] == ["bash", "-lc", "tmux"]
     assert "TERM=xterm" in tmux

@@ -1,4 +1,4 @@
-"""`robocore schema` prints a JSON Schema that accepts the seed examples and rejects malformed files."""
+"""`robocore schema` prints a JSON Schema that accepts the robot.yaml examples and rejects malformed files."""
 
 from __future__ import annotations
 
@@ -115,7 +115,7 @@ TRICKY = st.one_of(
 
 @st.composite
 def restrung_documents(draw: st.DrawFn) -> Any:
-    """A seed example whose string values are replaced by tricky strings: the shape stays, the content varies."""
+    """A robot.yaml example whose string values are replaced by tricky strings: the shape stays, the content varies."""
     doc = copy.deepcopy(draw(st.sampled_from(VALID_DOCS)))
     leaves = [path for path in _paths(doc) if path and isinstance(_get(doc, path), str)]
     for path in draw(st.lists(st.sampled_from(leaves), min_size=1, max_size=3)):

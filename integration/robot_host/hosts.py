@@ -1,7 +1,7 @@
 """Simulated robot hosts for the integration suites: Docker-in-Docker containers with sshd.
 
 Each host runs Debian's dockerd and sshd (image from :mod:`robot_host.build`) on a private
-user-defined bridge network, started with design.md section 5's settings (all capabilities but
+user-defined bridge network, started with the settings Docker-in-Docker needs (all capabilities but
 SYS_RESOURCE, seccomp/apparmor unconfined, /sys/fs/cgroup bind, exec tmpfs on /var/lib/docker;
 ``--privileged`` does not work on these machines). A fresh ed25519 key is generated per fleet,
 its public half injected through ``AUTHORIZED_KEY``, and the host keys are collected with

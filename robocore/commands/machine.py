@@ -25,7 +25,7 @@ def native_arch() -> str:
 
 
 def emulation_hint(arch: str) -> str:
-    """What to run, as root, so that a Linux machine runs ``arch`` binaries through qemu (design.md section 8)."""
+    """What to run, as root, so that a Linux machine runs ``arch`` binaries through qemu (docs/arm64.md)."""
     qemu = f"qemu-{machine_arch(arch)}"
     return (f"as root: apt-get install qemu-user-static, then mount -t binfmt_misc binfmt_misc {BINFMT_DIR} "
             f"(if {BINFMT_DIR}/register is missing) and grep '^:{qemu}:' /usr/lib/binfmt.d/{qemu}.conf > "

@@ -35,7 +35,7 @@ from robocore.plan import arches, cmake_packages, colcon, naming
 if TYPE_CHECKING:
     from robocore.project import Project
 
-#: ROS 2 wheels from PyPI, pinned per distro (x86_64, CPython 3.11/3.12). See design.md §5.
+#: ROS 2 wheels from PyPI, pinned per distro (x86_64, CPython 3.11/3.12): the wheels base.
 WHEELS: dict[str, tuple[str, ...]] = {
     "jazzy": ("ros-rclpy==7.1.6", "ros-std-msgs==5.3.6", "ros-rmw-fastrtps-cpp==8.4.3"),
     "kilted": ("ros-rclpy==9.1.2", "ros-std-msgs==5.5.1", "ros-rmw-fastrtps-cpp==9.3.3"),

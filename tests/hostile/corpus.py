@@ -328,7 +328,7 @@ CASES: list[Case] = [
              "robot.yaml:2"),
     rejected("over-a-megabyte", _doc() + "#" + "x" * MEGABYTE + "\n", "robot.yaml"),
     rejected("nul-byte", _doc() + "\x00\n", "robot.yaml"),
-    # --- issue 19: what aliases expand to, paths after normalisation, YAML 1.1 numbers, shell words -----------
+    # --- what aliases expand to, paths after normalisation, YAML 1.1 numbers, shell words -----------
     rejected("alias-bytes", "ros_distro: jazzy\nx: &x " + "y" * 300_000 + "\nhosts: [*x, *x, *x, *x, *x, *x, *x]\n",
              "robot.yaml"),
     rejected("alias-merge-bytes", "ros_distro: jazzy\nm: &m {a: " + "z" * 200_000 + "}\nhosts:\n" + "".join(

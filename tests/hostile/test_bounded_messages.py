@@ -1,4 +1,4 @@
-"""Issue 37: every value echoed in an error or warning is cut (``ui.MAX_ECHO`` characters, with its length), for
+"""Every value echoed in an error or warning is cut (``ui.MAX_ECHO`` characters, with its length), for
 every option of every task and every robot.yaml field; messages name the real cause in the user's words.
 
 Each case runs the command in process as a user would (``cli.main``), with a 120,000-character value, and reads

@@ -83,7 +83,7 @@ CASES = [
     refused("shell", "--component", "a\nb", says="unknown component 'a\\nb'"),
     refused("shell", says="shell needs --component"),
     refused("connect", "--component", TITLE, says="unknown component '\\x1b]0;pwned\\x07'"),
-    # empty values: refused in one line, never read as "not given" (issue 37: down --host "" removed every host's)
+    # empty values: refused in one line, never read as "not given" (down --host "" once removed every host's)
     refused("connect", "--component", "", says="--component was given an empty value"),
     refused("down", "--host", "", "--dry-run", says="--host was given an empty value"),
     refused("down", "--host=", says="--host was given an empty value"),

@@ -41,6 +41,6 @@ def test_a_project_folder_name_too_long_is_one_line_and_exit_2(tmp_path: Path) -
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr
     path = f"error: {tmp_path / LONG}:"
-    assert proc.stderr.strip().splitlines() == [  # the path cut to 200 characters, with its length (issue 37)
+    assert proc.stderr.strip().splitlines() == [  # the path cut to 200 characters, with its length
         f"error: {path[7:207]}... ({len(path) - 7:,} characters) cannot be used as a project folder: "
         "File name too long"]

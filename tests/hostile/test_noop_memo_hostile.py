@@ -1,4 +1,4 @@
-"""Issue 37, the no-op memo as a way in: ``.robocore/noop`` and every file in it are read like the other state
+"""The no-op memo as a way in: ``.robocore/noop`` and every file in it are read like the other state
 folders (never through a link, regular files only, size-capped, never a FIFO or device), a memo that cannot be
 trusted is dropped (a test for each way of faking one), the snapshot's walk never leaves the project through a
 link, and a file written twice within one clock tick is still seen (git's "racily clean" entries).

@@ -1,4 +1,4 @@
-"""Issue 37: robocore's state is private whatever the umask. Under ``.robocore/`` every folder robocore creates is
+"""robocore's state is private whatever the umask. Under ``.robocore/`` every folder robocore creates is
 0700 and every file 0600, except the few another user reads (0755 folders, 0644 files: ``files.SHARED``): the DDS
 profiles and the dev shell's start files (mounted into containers whose user may not be the invoking one) and the
 trees sent to robot hosts as they are (a component's ``install`` folder, the ``sync`` folder). Nothing robocore

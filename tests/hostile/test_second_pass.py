@@ -1,4 +1,4 @@
-"""Issue 19's classes as properties, so that a field added to robot.yaml later meets the same tests: alias
+"""The hostile-project classes as properties, so that a field added to robot.yaml later meets the same tests: alias
 structures measured by what they expand to, path spellings judged after normalisation, and link layouts
 under ``.robocore/`` that robocore never writes or removes through.
 """
