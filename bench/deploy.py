@@ -1,6 +1,6 @@
 """A one-line change to the talker, deployed to a remote robot host: robocore vs the naive path.
 
-Setup (not timed): one simulated robot host (Docker-in-Docker + sshd, integration/robot_host/)
+Setup (not timed): one simulated robot host (Docker-in-Docker + sshd, bench/robot_host/)
 reached over ssh://, the template project (wheels base) with talker, listener and the discovery
 server on that host, taken through prepare-base, stage, build, sync and run.
 
@@ -40,13 +40,9 @@ from typing import Any
 
 import harness
 from harness import Figure, record
+from robot_host.hosts import RobotFleet
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "integration"))
-
-from robot_host.hosts import RobotFleet  # noqa: E402
-
-from robocore.adapters.ssh import MULTIPLEX_SECONDS  # noqa: E402
+from robocore.adapters.ssh import MULTIPLEX_SECONDS
 
 PROJECT = "robocore-it-demo"  # shares the cached images of the integration suites
 

@@ -16,7 +16,7 @@ Docker, projects and robot hosts
 - ``project_copies`` (function): throw-away copies of the demo project; their containers are removed.
 - ``robot_run`` (function): a project brought up by the pytest plugin's machinery; closed afterwards.
 - ``robot_fleets`` (module) and ``fleet`` (module): Docker-in-Docker robot hosts reached over ssh://
-  (robot_host/); removed after the module's last test.
+  (bench/robot_host/); removed after the module's last test.
 - ``arm64_images`` (session): waits for the arm64 suites' images, made in the background
   (:mod:`arm64_project`) while the other suites run; those suites (``RUN_LAST``) run last.
 

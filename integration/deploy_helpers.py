@@ -1,6 +1,6 @@
 """Plain helpers shared by the integration suites (fixtures are in conftest.py).
 
-- polling: :func:`wait_for`;
+- polling: :func:`wait_for` (from bench/robot_host/polling.py, which the robot hosts and bench scripts use too);
 - logs: :func:`log_lines` (the lines of a container's log holding a marker);
 - ports: :func:`free_udp_port`, :func:`free_tcp_port`;
 - projects: :func:`copy_project`, a throw-away copy of the session's demo project with its own
@@ -20,15 +20,13 @@ import shutil
 import socket
 import subprocess
 import sys
-import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 import pytest
 import yaml
-
-T = TypeVar("T")
+from robot_host.polling import wait_for as wait_for  # re-exported: the suites' one wait loop
 
 HEARD = "I heard"
 PUBLISHED = "Publishing"
@@ -100,18 +98,6 @@ def run_nox(root: Path, *sessions: str) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
     return subprocess.run([sys.executable, "-m", "nox", "--no-venv", "-s", *sessions], cwd=root, env=env,
                           capture_output=True, text=True, timeout=1800)
-
-
-def wait_for(check: Callable[[], T], timeout: float, interval: float = 0.5) -> T | None:
-    """Poll ``check`` until it returns something truthy (returned) or ``timeout`` seconds pass (None)."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = check()
-        if value:
-            return value
-        if time.monotonic() >= deadline:
-            return None
-        time.sleep(interval)
 
 
 def log_lines(container: Any, marker: str, since: float | None = None) -> list[str]:

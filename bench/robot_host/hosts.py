@@ -25,11 +25,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from deploy_helpers import wait_for
 from testcontainers.core.container import DockerContainer
 from testcontainers.core.network import Network
 
 from robot_host.build import ensure_image
+from robot_host.polling import wait_for
 
 os.environ.setdefault("TESTCONTAINERS_RYUK_DISABLED", "true")
 

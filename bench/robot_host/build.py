@@ -4,7 +4,7 @@ The image runs sshd and dockerd (Debian's docker.io) so that integration suites 
 "robot" over ssh:// exactly as robocore reaches a real one. Nothing is pulled from a registry.
 The image tag carries a hash of its inputs, so it is built once per machine.
 
-    python integration/robot_host/build.py      # prints the image name
+    python bench/robot_host/build.py      # prints the image name
 """
 
 from __future__ import annotations
