@@ -1,4 +1,4 @@
-"""How long the compose files of a 10,000-component robot take to write (issue 37's goal: under 3 s).
+"""How long the compose files of a 10,000-component robot take to write (goal: under 3 s).
 
 One robot.yaml with N image components on two hosts (default 10,000) is loaded once; then, in one process and
 side by side, each step of ``stage --refresh``'s compose writing is timed: the container specs, the compose

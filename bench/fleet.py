@@ -16,7 +16,7 @@ Measured, one run, printed as one table:
 6. a robot's cost: RSS and CPU (over 30 s) of dockerd on a Swarm worker running its robot, beside dockerd of a
    plain daemon (a host that never joined) running nothing.
 
-Goals (issue 33): 10 robots in < 5 min; each wave's gate < 30 s; failed canary back < 60 s; rollback < 2 min;
+Goals: 10 robots in < 5 min; each wave's gate < 30 s; failed canary back < 60 s; rollback < 2 min;
 offline robot converged < 60 s after reconnecting.
 
     python bench/fleet.py

@@ -1,4 +1,4 @@
-"""How long each refusal of issue 19's hostile projects takes (goal: under 5 s each, on 2 cores).
+"""How long each refusal of a hostile project takes (goal: under 5 s each, on 2 cores).
 
 Each case sets up a hostile project in a temporary folder and runs ``robocore -p DIR TASK`` as a user would
 (a new process, start-up included; ``DOCKER_HOST`` points at a socket nobody serves, so no case reaches a
@@ -11,7 +11,7 @@ measured first in the same run), side by side:
 - ``.robocore``, ``.robocore/compose`` and ``.robocore/dds`` as links to a folder outside (stage --refresh,
   build), a package.xml FIFO (stage --dry-run);
 - a relative volume that leaves the project; ``--dry-run`` on a line with a task that has none;
-- issue 37: a link to ``/usr`` in the project, ``.robocore/noop`` linked outside, the memo as a FIFO and as a link
+- a link to ``/usr`` in the project, ``.robocore/noop`` linked outside, the memo as a FIFO and as a link
   to ``/dev/zero`` (each reproduction hung, ran out of memory or took 7-24 s before), a 120,000-character
   ``--component`` and an empty ``--host``.
 
@@ -74,7 +74,7 @@ def robot_as(root: Path, kind: str) -> Path:
 
 
 def memo_as(root: Path, kind: str) -> Path:
-    """Issue 37: something planted at the name of ``validate``'s memo (predictable from the project's path)."""
+    """Something planted at the name of ``validate``'s memo (predictable from the project's path)."""
     from robocore.commands import noop
 
     project(root)

@@ -27,7 +27,7 @@ from pathlib import Path
 from harness import Figure, record
 
 GOAL = 0.3
-#: The goal as a ratio to bare start-up, for a loaded machine: on the clean machine of issue 21 the ordinary
+#: The goal as a ratio to bare start-up, for a loaded machine: on a clean machine the ordinary
 #: no-op stage took 0.50 s, three times bare Python's start-up, so 0.3 s is 1.8 times it.
 GOAL_RATIO = 1.8
 TASKS = ("validate", "stage", "build", "status")

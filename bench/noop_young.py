@@ -1,4 +1,4 @@
-"""The no-op memo seconds after an edit (issue 37: "racily clean" files are hashed, not a reason to skip the memo).
+"""The no-op memo seconds after an edit ("racily clean" files are hashed, not a reason to skip the memo).
 
 A project made by ``robocore init --defaults`` (no image needed) answers ``validate`` side by side:
 - bare ``python -c pass`` (the floor);
