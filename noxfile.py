@@ -1,7 +1,9 @@
 """CI sessions: lint, typecheck, tests (no Docker), integration (Docker required).
 
-``scripts/test`` runs them with ``--no-venv`` inside the project's .venv; plain ``nox``
-makes a virtualenv per session instead.
+``scripts/test`` is the one way in: it makes the project's .venv, starts the arm64 suites' images in the
+background, and runs these four sessions with ``--no-venv`` in that venv; CI runs it (``.ci/run``), and
+``invoke test`` in this repository runs it too. Plain ``nox`` runs the same sessions, each in a virtualenv of its
+own, with the images started by the integration session instead (a later start, the same results).
 """
 
 from __future__ import annotations
@@ -45,6 +47,6 @@ def integration(session: nox.Session) -> None:
     _install(session)
     session.env["TESTCONTAINERS_RYUK_DISABLED"] = "true"
     # a test that hangs fails after 25 minutes (its fixtures' image builds included) instead of stalling CI;
-    # the 25 slowest tests are printed on every run (and on an interrupted one), so time growth is seen early
+    # the 60 slowest tests are printed on every run (and on an interrupted one), so time growth is seen early
     session.run("pytest", "integration", "-p", "no:cacheprovider", "--timeout=1500", "--durations=60",
                 *session.posargs, interrupt_timeout=INTERRUPT_GRACE)

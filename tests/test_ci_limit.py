@@ -65,7 +65,7 @@ def test_ci_run_stops_at_its_limit_with_progress_and_durations(tmp_path: Path) -
     assert done.returncode == 124, output
     assert "ci: stopped after 4s" in done.stderr
     assert "KeyboardInterrupt" in output  # where the run was when it stopped
-    assert "slowest 25 durations" in output  # --durations=25 of the integration session
+    assert "slowest 60 durations" in output  # --durations=60 of the integration session
     assert "1 passed" in output  # the progress so far
     assert "teardown finished" in output or "test_stuck" in output
 
