@@ -43,12 +43,17 @@ def _skipped(ws: Path) -> Callable[[Path, str], bool]:
     return lambda here, name: name in SKIP_DIRS or name.startswith(".") or (here == ws and name in SKIP_WS_DIRS)
 
 
+#: A folder holding one of these files is skipped by colcon (colcon-core's marker and colcon-ros' two).
+IGNORE_MARKERS = frozenset({"COLCON_IGNORE", "AMENT_IGNORE", "CATKIN_IGNORE"})
+
+
 def workspace_files(ws: Path) -> Iterator[tuple[str, Path]]:
-    """Files of a workspace, without build outputs, VCS data, caches and COLCON_IGNOREd folders."""
+    """Files of a workspace, without build outputs, VCS data, caches and the folders colcon ignores (a
+    ``COLCON_IGNORE``, ``AMENT_IGNORE`` or ``CATKIN_IGNORE`` file in them): what colcon builds, nothing else."""
     skipped = _skipped(ws)
     for dirpath, dirnames, filenames in os.walk(ws):
         here = Path(dirpath)
-        if "COLCON_IGNORE" in filenames:
+        if not IGNORE_MARKERS.isdisjoint(filenames):
             dirnames[:] = []
             continue
         dirnames[:] = sorted(d for d in dirnames if not skipped(here, d))

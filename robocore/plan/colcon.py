@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -114,6 +114,17 @@ class PackageEvent:
     package: str
     state: str  # started | finished | failed | aborted
     seconds: float | None = None
+
+
+def unbuilt(packages: Iterable[str], changed: Sequence[str] | None, events: Iterable[PackageEvent]) -> list[str]:
+    """The packages a build asked for (``changed``, or every package when None) that colcon never finished.
+
+    colcon exits 0 having built nothing when it cannot load the task extension of a package's build type (an
+    image whose colcon lacks colcon-ros, say: it only warns); a build that trusted the exit code would record
+    and report packages that have no install tree."""
+    finished = {e.package for e in events if e.state == "finished"}
+    wanted = list(packages) if changed is None else list(changed)
+    return sorted(p for p in wanted if p not in finished)
 
 
 def parse_event(line: str) -> PackageEvent | None:
