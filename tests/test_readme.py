@@ -4,7 +4,8 @@ Every command of the README's shell blocks runs here, in a fresh folder with no 
 tasks that need Docker or a robot run as the dry run each of them has (a dry run contacts no daemon and no
 host). The README's robot.yaml example validates in the project its commands made; its Python block compiles;
 its task table names exactly the tasks of the ``robocore`` command. Every relative link in README.md,
-CONTRIBUTING.md, CHANGELOG.md and docs/*.md resolves to a file, and a link with an anchor to a heading of it.
+CONTRIBUTING.md, CHANGELOG.md and docs/*.md resolves to a file, and a link with an anchor to a heading of it; every
+section the code cites by title (``docs/design-notes.md, "Discovery timing: 20 ms"``) is a heading of that page.
 """
 
 from __future__ import annotations
@@ -97,6 +98,30 @@ def broken_links(path: Path) -> list[str]:
     return problems
 
 
+#: A page of docs/ cited by a section's title in code or comments: ``docs/x.md, "Title"`` (the title may be the
+#: start of the heading's text).
+CITATION = re.compile(r'docs/([\w-]+\.md)[,:]?\s+"([^"]+)"')
+
+
+def headings(text: str) -> list[str]:
+    """The text of every heading of a Markdown text, code marks dropped (fenced blocks are no headings)."""
+    return [title.replace("`", "") for _, title in HEADING.findall(FENCE.sub("", text))]
+
+
+def broken_citations(text: str, docs: Path) -> list[str]:
+    """One line per citation of a docs/ section by title in ``text`` that names no page or no heading of it.
+    Comment markers at line starts are read through, so a citation may wrap across comment lines."""
+    flat = re.sub(r"\n\s*(?:#:?|//)?\s*", " ", text)
+    problems = []
+    for page, title in CITATION.findall(flat):
+        target = docs / page
+        if not target.is_file():
+            problems.append(f"docs/{page}: no such page")
+        elif not any(h.startswith(title) for h in headings(target.read_text(encoding="utf-8"))):
+            problems.append(f'docs/{page}, "{title}": no such heading')
+    return problems
+
+
 def documents() -> list[Path]:
     """The Markdown files of the repository a reader follows links through."""
     top = [ROOT / name for name in ("README.md", "CONTRIBUTING.md", "CHANGELOG.md") if (ROOT / name).exists()]
@@ -130,6 +155,14 @@ def test_anchors_follow_github() -> None:
     assert anchors(text) == {"builds-on-a-robot-host-builds_here", "the-no-op-memo-robocorenoop", "same", "same-1"}
 
 
+def test_a_citation_of_a_missing_section_is_found(tmp_path: Path) -> None:
+    (tmp_path / "notes.md").write_text("# Notes\n\n## Discovery timing: 20 ms\n")
+    code = ('#: the measurements: docs/notes.md, "Discovery timing: 20 ms".\n'
+            '#: and docs/notes.md,\n#: "Discovery timing"; docs/notes.md, "Discovery over UDP"; docs/gone.md, "X"\n')
+    assert broken_citations(code, tmp_path) == ['docs/notes.md, "Discovery over UDP": no such heading',
+                                                "docs/gone.md: no such page"]
+
+
 def test_a_readme_line_the_doc_test_cannot_run_is_refused() -> None:
     assert shell_line("robocore build sync run   # deploy") == "robocore build sync run --dry-run"
     assert shell_line("robocore validate") == "robocore validate"
@@ -144,6 +177,18 @@ def test_a_readme_line_the_doc_test_cannot_run_is_refused() -> None:
 @pytest.mark.parametrize("path", documents(), ids=lambda p: str(p.relative_to(ROOT)))
 def test_every_relative_link_resolves(path: Path) -> None:
     assert broken_links(path) == []
+
+
+def test_every_section_cited_in_the_code_exists() -> None:
+    listed = subprocess.run(["git", "ls-files", "robocore", "tests", "integration", "bench", "scripts", "template",
+                             "tasks.py", "noxfile.py"], cwd=ROOT, capture_output=True, text=True, check=True)
+    problems = []
+    for name in listed.stdout.split():
+        path = ROOT / name
+        if path.suffix in {".py", ".sh", ".jinja", ".yaml", ".yml", ".md", ""} and path.is_file() and (
+                path != Path(__file__).resolve()):  # this file's own examples of citations
+            problems += [f"{name}: {p}" for p in broken_citations(path.read_text(encoding="utf-8"), ROOT / "docs")]
+    assert problems == []
 
 
 def test_the_readme_stays_short() -> None:
