@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import re
+import shlex
 import shutil
 import stat
 import subprocess
@@ -197,11 +198,13 @@ def test_the_readme_stays_short() -> None:
 
 @pytest.fixture(scope="module")
 def readme_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, subprocess.CompletedProcess[str]]:
-    """The README's shell blocks run as one bash script in a fresh folder, with no Docker daemon reachable."""
-    lines = [shell_line(line) for block in code_blocks(README.read_text(encoding="utf-8"), "bash")
-             for line in block.splitlines()]
-    script = "set -euo pipefail\n" + "\n".join(line for line in lines if line is not None) + "\n"
+    """The README's shell blocks run as one bash script, each block from the same fresh folder, with no Docker
+    daemon reachable."""
     folder = tmp_path_factory.mktemp("readme")
+    script = "set -euo pipefail\n"
+    for block in code_blocks(README.read_text(encoding="utf-8"), "bash"):  # each block from the fresh folder
+        lines = [shell_line(line) for line in block.splitlines()]
+        script += f"cd {shlex.quote(str(folder))}\n" + "".join(f"{line}\n" for line in lines if line is not None)
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
            "DOCKER_HOST": f"unix://{folder}/no-docker.sock"}
     done = subprocess.run(["bash", "-c", script], cwd=folder, env=env, capture_output=True, text=True,
@@ -213,7 +216,9 @@ def test_the_readme_commands_run(readme_run: tuple[Path, subprocess.CompletedPro
     folder, done = readme_run
     assert done.returncode == 0, done.stdout + done.stderr
     assert "robot.yaml: ok" in done.stdout + done.stderr  # validate ran on the project init made
-    assert (folder / "myrobot" / "robot.yaml").is_file()
+    made = re.findall(r"^robocore init (\S+)", "\n".join(code_blocks(README.read_text(encoding="utf-8"), "bash")),
+                      re.M)
+    assert made and all((folder / name / "robot.yaml").is_file() for name in made), made
 
 
 def test_the_two_set_up_commands_are_what_ci_runs() -> None:
