@@ -110,15 +110,15 @@ def headings(text: str) -> list[str]:
 
 
 def broken_citations(text: str, docs: Path) -> list[str]:
-    """One line per citation of a docs/ section by title in ``text`` that names no page or no heading of it.
+    """One line per page of docs/ named in ``text`` that does not exist, and per citation of a section by title
+    that is no heading of its page.
     Comment markers at line starts are read through, so a citation may wrap across comment lines."""
     flat = re.sub(r"\n\s*(?:#:?|//)?\s*", " ", text)
-    problems = []
+    problems = [f"docs/{page}: no such page" for page in dict.fromkeys(re.findall(r"\bdocs/([\w-]+\.md)", flat))
+                if not (docs / page).is_file()]
     for page, title in CITATION.findall(flat):
         target = docs / page
-        if not target.is_file():
-            problems.append(f"docs/{page}: no such page")
-        elif not any(h.startswith(title) for h in headings(target.read_text(encoding="utf-8"))):
+        if target.is_file() and not any(h.startswith(title) for h in headings(target.read_text(encoding="utf-8"))):
             problems.append(f'docs/{page}, "{title}": no such heading')
     return problems
 
@@ -160,8 +160,10 @@ def test_a_citation_of_a_missing_section_is_found(tmp_path: Path) -> None:
     (tmp_path / "notes.md").write_text("# Notes\n\n## Discovery timing: 20 ms\n")
     code = ('#: the measurements: docs/notes.md, "Discovery timing: 20 ms".\n'
             '#: and docs/notes.md,\n#: "Discovery timing"; docs/notes.md, "Discovery over UDP"; docs/gone.md, "X"\n')
-    assert broken_citations(code, tmp_path) == ['docs/notes.md, "Discovery over UDP": no such heading',
-                                                "docs/gone.md: no such page"]
+    assert broken_citations(code, tmp_path) == ["docs/gone.md: no such page",
+                                                'docs/notes.md, "Discovery over UDP": no such heading']
+    assert broken_citations("see docs/notes.md and docs/notes.md", tmp_path) == []
+    assert broken_citations("see docs/old-name.md", tmp_path) == ["docs/old-name.md: no such page"]
 
 
 def test_a_readme_line_the_doc_test_cannot_run_is_refused() -> None:
