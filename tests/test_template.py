@@ -79,7 +79,7 @@ def test_generated_robot_yaml_validates_with_the_defaults(project: Path) -> None
     host = robot.hosts[0]
     assert host.ip == "127.0.0.1" and host.is_local
     assert host.user == init.current_user()
-    assert host.arch.value == init.machine_arch()
+    assert host.arch.value == init.default_arch()
     assert [(c.name, c.folder, c.runs_on, c.entrypoint) for c in robot.components] == [
         ("talker", "components/talker", "devmachine", "ros2 run demo_talker talker"),
         ("listener", "components/listener", "devmachine", "ros2 run demo_listener listener"),

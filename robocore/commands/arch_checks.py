@@ -14,7 +14,7 @@ from pathlib import Path
 
 from robocore.commands import machine as dev_machine
 from robocore.commands.machine import binfmt_problem, emulation_hint
-from robocore.config.model import Host, docker_arch, machine_arch
+from robocore.config.model import Host, docker_arch, kernel_arch
 from robocore.errors import ArchMismatch, RobocoreError
 from robocore.plan import arches
 
@@ -81,14 +81,14 @@ class HostArch:
         if self.problem:
             return f"{self.arch} (cannot run on {self.machine})"
         if self.emulated:
-            return f"{self.arch} emulated (qemu-{machine_arch(self.arch)} on {self.machine})"
+            return f"{self.arch} emulated (qemu-{kernel_arch(self.arch)} on {self.machine})"
         return f"{self.arch} native"
 
 
 def binfmt_entry_text(host: Host, arch: str) -> str | None:
     """The text of the host's binfmt_misc entry ``qemu-<machine>`` (read over ssh for a remote host); None when
     there is none or it cannot be read."""
-    entry = dev_machine.BINFMT_DIR / f"qemu-{machine_arch(arch)}"
+    entry = dev_machine.BINFMT_DIR / f"qemu-{kernel_arch(arch)}"
     if host.is_local:
         try:
             return entry.read_text()
@@ -109,7 +109,7 @@ def host_arch(host: Host, daemon_machine: str) -> HostArch:
     want, machine = host.arch.value, docker_arch(daemon_machine)
     if machine == want:
         return HostArch(want, machine, emulated=False)
-    qemu = f"qemu-{machine_arch(want)}"
+    qemu = f"qemu-{kernel_arch(want)}"
     why = binfmt_problem(binfmt_entry_text(host, want))
     if why is None:
         return HostArch(want, machine, emulated=True)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import getpass
 import os
-import platform
 import re
 import sys
 from dataclasses import dataclass, field
@@ -21,9 +20,9 @@ from typing import Any
 from robocore.adapters import origin
 from robocore.commands.reporting import Reporter
 from robocore.config.generations import base_problem
-from robocore.config.model import Arch, BaseKind, RosDistro, docker_arch
+from robocore.config.model import Arch, BaseKind, RosDistro
 from robocore.errors import UsageError
-from robocore.project import ProjectFolder
+from robocore.project import ProjectFolder, this_machine_arch
 from robocore.ui import shown
 
 #: Where the generated robot.yaml's ``yaml-language-server`` comment points (relative to the project).
@@ -45,9 +44,9 @@ class TemplateChoice:
     """One line for the user about updates."""
 
 
-def machine_arch() -> str:
-    """This machine's architecture as a Docker platform name (amd64 when robocore has no name for it)."""
-    arch = docker_arch(platform.machine())
+def default_arch() -> str:
+    """The arch of the default host: this machine's (Docker's name), or amd64 when robocore has no image for it."""
+    arch = this_machine_arch()
     return arch if arch in {a.value for a in Arch} else "amd64"
 
 
@@ -61,7 +60,7 @@ def current_user() -> str:
 
 def default_hosts() -> list[dict[str, str]]:
     """The default host list: just this machine."""
-    return [{"name": "devmachine", "ip": "127.0.0.1", "user": current_user(), "arch": machine_arch()}]
+    return [{"name": "devmachine", "ip": "127.0.0.1", "user": current_user(), "arch": default_arch()}]
 
 
 def project_name(destination: Path) -> str:

@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from robocore.config.model import machine_arch
+from robocore.config.model import kernel_arch
 from robocore.errors import ToolMissing
 from robocore.project import this_machine_arch
 
@@ -26,7 +26,7 @@ def native_arch() -> str:
 
 def emulation_hint(arch: str) -> str:
     """What to run, as root, so that a Linux machine runs ``arch`` binaries through qemu (docs/arm64.md)."""
-    qemu = f"qemu-{machine_arch(arch)}"
+    qemu = f"qemu-{kernel_arch(arch)}"
     return (f"as root: apt-get install qemu-user-static, then mount -t binfmt_misc binfmt_misc {BINFMT_DIR} "
             f"(if {BINFMT_DIR}/register is missing) and grep '^:{qemu}:' /usr/lib/binfmt.d/{qemu}.conf > "
             f"{BINFMT_DIR}/register (systemd machines: systemctl restart systemd-binfmt)")
@@ -49,7 +49,7 @@ def check_emulation(arch: str, native: str, who: str) -> None:
     """Raise ToolMissing when ``arch`` binaries cannot run in this machine's containers (no qemu registration)."""
     if arch == native:
         return
-    entry = BINFMT_DIR / f"qemu-{machine_arch(arch)}"
+    entry = BINFMT_DIR / f"qemu-{kernel_arch(arch)}"
     try:
         text: str | None = entry.read_text()
     except OSError:

@@ -86,7 +86,7 @@ def docker_arch(machine: str) -> str:
     return next((arch for arch, name in MACHINE_NAMES.items() if machine in (arch, name)), machine)
 
 
-def machine_arch(arch: str) -> str:
+def kernel_arch(arch: str) -> str:
     """A Docker arch name as the kernel says it (``arm64`` -> ``aarch64``); unknown names come back unchanged."""
     return MACHINE_NAMES.get(arch, arch)
 

@@ -21,7 +21,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from robocore.config.model import BaseKind, Robot, machine_arch
+from robocore.config.model import BaseKind, Robot, kernel_arch
 from robocore.plan import naming
 
 #: The Debian release of the registry-free roots.
@@ -163,7 +163,7 @@ class ArchPlan:
 
     def describe(self) -> str:
         """Lines for a dry run and the golden files."""
-        how = "native" if self.native else f"emulated (qemu-{machine_arch(self.arch)})"
+        how = "native" if self.native else f"emulated (qemu-{kernel_arch(self.arch)})"
         return "\n".join([
             f"arch {self.arch} [{self.platform}] {how}",
             f"  root: {self.root} (local, else {self.upstream} pulled for {self.platform}"
