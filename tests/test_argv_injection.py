@@ -20,10 +20,11 @@ import pytest
 from robocore.adapters import ssh, vcs
 from robocore.commands import observe
 from robocore.config.model import Component, DockerAccess, Host, Robot, TlsFiles
+from robocore.config.values import is_ipv6
 from robocore.errors import BuildError, ConfigError, HostError, UsageError
 from robocore.plan import devshell, dockerfiles
 from robocore.plan import sync as plan
-from robocore.plan.addresses import bare, bracketed, is_ipv6
+from robocore.plan.addresses import bare, bracketed
 from robocore.project import Project
 
 #: ``@M@`` becomes the path of a marker file that a command smuggled into a value would create.
@@ -134,7 +135,7 @@ def test_rsync_operands_follow_the_end_of_options_and_ipv6_is_bracketed(ip: str,
         options = before_marker(argv)
         assert [arg for arg in options if str(root) in arg] == [f"--link-dest={root}/current/"]
         remote = after_marker(argv)[-1]
-        assert remote.split("@", 1)[1].startswith(f"[{bare(ip)}]:" if is_ipv6(ip) else f"{ip}:")
+        assert remote.split("@", 1)[1].startswith(f"[{bare(ip)}]:" if is_ipv6(bare(ip)) else f"{ip}:")
 
 
 @pytest.mark.parametrize("ip, user", [("-oProxyCommand=x", "pi"), ("[-x]", "pi"), ("10.0.0.5", "-lroot")])

@@ -98,7 +98,7 @@ def test_every_ipv6_address_is_accepted_in_both_its_forms(address: ipaddress.IPv
 @AGREEMENT
 @given(near(values.IPV6))
 def test_what_the_ipv6_grammar_accepts_python_parses(value: str) -> None:
-    if values.is_ipv6(value):
+    if re.fullmatch(values.IPV6, value):
         assert ipaddress.ip_address(value).version == 6
 
 
@@ -286,3 +286,25 @@ def test_shown_values_escape_control_characters_and_stay_short() -> None:
     text = values.shown("a" * 1000)
     assert len(text) <= values.MAX_SHOWN + 30 and text.endswith("... (1,000 characters)")
     assert values.printable("a\u202eb\x07") == "a\\u202eb\\x07"
+
+
+@pytest.mark.parametrize(("address", "expected"), [
+    ("fe80::1", True),
+    ("::ffff:192.0.2.1", True),
+    # An address with a zone is an IPv6 address (RFC 4007 section 11): a tool needs it in brackets too.
+    ("fe80::1%eth0", True),
+    # Brackets are how a URL writes an address, not part of it.
+    ("[2001:db8::8]", False),
+    ("10.0.0.5", False),
+    ("robot.local", False),
+    ("fe80::1%", False),
+])
+def test_is_ipv6_answers_for_the_address_itself(address: str, expected: bool) -> None:
+    assert values.is_ipv6(address) is expected
+
+
+def test_bracketed_writes_each_ipv6_form_in_brackets_once() -> None:
+    from robocore.plan.addresses import bracketed
+
+    assert [bracketed(a) for a in ("fe80::1%eth0", "[2001:db8::8]", "2001:db8::8", "10.0.0.5")] == [
+        "[fe80::1%eth0]", "[2001:db8::8]", "[2001:db8::8]", "10.0.0.5"]

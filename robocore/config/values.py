@@ -148,8 +148,16 @@ def _is_ip(text: str) -> bool:
 
 
 def is_ipv6(address: str) -> bool:
-    """True when ``address`` is an IPv6 address literal (not a host name, not IPv4)."""
-    return re.fullmatch(IPV6, address) is not None
+    """True when ``address`` is an IPv6 address literal (not a host name, not IPv4), so that a tool that reads
+    ``host:port`` or ``host:path`` needs it in brackets.
+
+    A zone (``fe80::1%eth0``) is part of the address (RFC 4007 section 11); brackets are not (``[::1]`` is how a
+    URL writes an address, and ``plan.addresses.bare`` removes them).
+    """
+    try:
+        return isinstance(ipaddress.ip_address(address), ipaddress.IPv6Address)
+    except ValueError:
+        return False
 
 
 HostAddress = Annotated[str, AfterValidator(host_address), pattern_field(

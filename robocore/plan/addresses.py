@@ -7,9 +7,8 @@ address) and in brackets where a port or a path follows a colon (URLs, rsync's a
 
 from __future__ import annotations
 
-import ipaddress
-
 from robocore.config.model import is_loopback_address
+from robocore.config.values import is_ipv6
 
 
 def bare(address: str) -> str:
@@ -19,17 +18,9 @@ def bare(address: str) -> str:
     return address
 
 
-def is_ipv6(address: str) -> bool:
-    """True for an IPv6 address, bracketed or not (a zone such as ``%eth0`` included)."""
-    try:
-        return isinstance(ipaddress.ip_address(bare(address)), ipaddress.IPv6Address)
-    except ValueError:
-        return False
-
-
 def bracketed(address: str) -> str:
     """An IPv6 address in brackets, for ``host:port`` and ``host:path`` forms; other addresses as they are."""
-    return f"[{bare(address)}]" if is_ipv6(address) else address
+    return f"[{bare(address)}]" if is_ipv6(bare(address)) else address
 
 
 def url_host(address: str, port: int) -> str:
