@@ -22,12 +22,11 @@ from __future__ import annotations
 import subprocess
 import threading
 from concurrent.futures import Future
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from robocore.adapters.ssh import CONNECT_TIMEOUT
-from robocore.config.model import DockerAccess, Host
+from robocore.config.model import DockerAccess, Host, TlsFiles
 from robocore.errors import DockerError, HostError
 from robocore.plan.addresses import bare, url_host
 
@@ -214,17 +213,9 @@ def _ssh_refused(host: Host, proc: subprocess.CompletedProcess[bytes], remote: l
                          f"is the Docker daemon running on {host.name}? (systemctl status docker)")
 
 
-@dataclass(frozen=True)
-class TlsFiles:
-    """A TLS host's certificate files, as paths on this machine."""
-
-    ca_cert: str
-    client_cert: str
-    client_key: str
-
-
 def tls_files(host: Host, root: Path) -> TlsFiles:
-    """The TLS files of ``host``: ``~`` expanded, relative paths taken from the project folder ``root``."""
+    """The TLS files of ``host`` as paths on this machine: ``~`` expanded, relative paths taken from the project
+    folder ``root``."""
     if host.tls is None:
         raise HostError(f"host {host.name}: docker: tls needs tls: {{ca_cert, client_cert, client_key}} in robot.yaml")
 
@@ -232,7 +223,8 @@ def tls_files(host: Host, root: Path) -> TlsFiles:
         path = Path(value).expanduser()
         return str(path if path.is_absolute() else root / path)
 
-    return TlsFiles(resolve(host.tls.ca_cert), resolve(host.tls.client_cert), resolve(host.tls.client_key))
+    return TlsFiles(ca_cert=resolve(host.tls.ca_cert), client_cert=resolve(host.tls.client_cert),
+                    client_key=resolve(host.tls.client_key))
 
 
 def _tls_client(host: Host, timeout: int, connect_timeout: int, root: Path) -> docker.DockerClient:
