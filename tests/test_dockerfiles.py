@@ -9,7 +9,7 @@ import pytest
 from golden_files import check_golden
 
 from robocore.config.model import Robot
-from robocore.plan import dockerfiles
+from robocore.plan import arches, dockerfiles
 
 
 def robot(**overrides: Any) -> Robot:
@@ -47,7 +47,7 @@ def test_wheels_base_with_common_packages_golden() -> None:
 
 def test_official_base_golden() -> None:
     r = robot()
-    text = dockerfiles.base_dockerfile(r, root_image=dockerfiles.official_image(r), has_ca=True, common=["my_msgs"])
+    text = dockerfiles.base_dockerfile(r, root_image=arches.upstream_root(r), has_ca=True, common=["my_msgs"])
     check_golden("base-official.Dockerfile", text)
 
 
@@ -130,8 +130,8 @@ def test_the_wheels_base_commits_nothing_after_its_venv_but_the_label() -> None:
 
 def test_official_base_uses_override() -> None:
     r = robot(base={"kind": "official", "image": "myreg/ros:jazzy-custom"})
-    assert dockerfiles.official_image(r) == "myreg/ros:jazzy-custom"
-    assert dockerfiles.official_image(robot()) == "ros:jazzy-ros-base"
+    assert arches.upstream_root(r) == "myreg/ros:jazzy-custom"
+    assert arches.upstream_root(robot()) == "ros:jazzy-ros-base"
 
 
 def test_pip_requirements_are_shell_quoted() -> None:
@@ -175,8 +175,8 @@ def test_repo_folder_from_url() -> None:
 
 
 def test_base_tag_per_arch() -> None:
-    assert dockerfiles.base_tag("amd64", "amd64") == "latest"
-    assert dockerfiles.base_tag("arm64", "amd64") == "latest-arm64"
+    assert arches.base_tag("amd64", "amd64") == "latest"
+    assert arches.base_tag("arm64", "amd64") == "latest-arm64"
 
 
 def _shim(args: list[str], prefixes: list[Path]) -> Any:

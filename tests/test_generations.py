@@ -18,7 +18,7 @@ from robocore.config.generations import generation_problems
 from robocore.config.loader import parse_robot_text
 from robocore.config.model import Robot
 from robocore.errors import ConfigError
-from robocore.plan import cmake_packages, dockerfiles
+from robocore.plan import arches, cmake_packages, dockerfiles
 
 BASE = """\
 ros_distro: noetic
@@ -302,8 +302,8 @@ def test_a_debian_component_runs_no_rosdep_even_with_package_xmls() -> None:
 @pytest.mark.parametrize("distro", ["noetic", "melodic"])
 def test_the_official_base_of_a_ros1_distro_gets_colcon_from_apt(distro: str) -> None:
     r = robot(ros_distro=distro, base={"kind": "official"})
-    assert dockerfiles.official_image(r) == f"ros:{distro}-ros-base"
-    text = dockerfiles.base_dockerfile(r, root_image=dockerfiles.official_image(r), has_ca=False, common=[])
+    assert arches.upstream_root(r) == f"ros:{distro}-ros-base"
+    text = dockerfiles.base_dockerfile(r, root_image=arches.upstream_root(r), has_ca=False, common=[])
     line = run_line(text, "apt-get install")
     assert line.split("--no-install-recommends ", 1)[1].split(" && ", 1)[0].split() == list(
         dockerfiles.OFFICIAL_ROS1_APT)
@@ -330,13 +330,13 @@ def test_debian_noetic_base_with_common_packages_golden() -> None:
 
 def test_official_noetic_base_golden() -> None:
     r = robot(base={"kind": "official"})
-    text = dockerfiles.base_dockerfile(r, root_image=dockerfiles.official_image(r), has_ca=True, common=["my_msgs"])
+    text = dockerfiles.base_dockerfile(r, root_image=arches.upstream_root(r), has_ca=True, common=["my_msgs"])
     check_golden("base-official-noetic.Dockerfile", text)
 
 
 def test_official_melodic_base_golden() -> None:
     r = robot(ros_distro="melodic", base={"kind": "official"})
-    text = dockerfiles.base_dockerfile(r, root_image=dockerfiles.official_image(r), has_ca=False, common=[])
+    text = dockerfiles.base_dockerfile(r, root_image=arches.upstream_root(r), has_ca=False, common=[])
     check_golden("base-official-melodic.Dockerfile", text)
 
 

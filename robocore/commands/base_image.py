@@ -114,7 +114,7 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
     cmake = wheels_cmake_packages(project, [e.source for e in entries if e.dest.startswith("common/") and e.source])
     dockerfile = dockerfiles.base_dockerfile(robot, root_image=root_ref, has_ca=ca is not None, common=common,
                                              cmake=cmake)
-    plan = ImagePlan(role="base", name=naming.base_image(robot, project.name), tag=dockerfiles.base_tag(arch, native),
+    plan = ImagePlan(role="base", name=naming.base_image(robot, project.name), tag=per_arch.base_tag(arch, native),
                      arch=arch, dockerfile=dockerfile, parent=root_ref, context=tuple(entries),
                      labels=dockerfiles.base_labels(robot))
     return planned(project, plan, root_id, known=known)

@@ -32,7 +32,7 @@ from robocore.commands.workspace import check_workspace, selected_components, wh
 from robocore.config.model import Component
 from robocore.errors import BuildError, UnsafePath, UsageError
 from robocore.files import SHARED, check_no_links, make_folder, read_project_file, remove_tree, write_atomic
-from robocore.plan import arches, cmake_packages, colcon, dockerfiles, install_patch, naming
+from robocore.plan import arches, cmake_packages, colcon, install_patch, naming
 from robocore.plan.inputs import FileDigest, digest_bytes, tree_hash
 from robocore.plan.remote_build import builds_on_host
 from robocore.project import Project
@@ -215,7 +215,7 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callabl
                 environment=colcon.build_env(plan.workers, ccache=plan.ccache is not None),
                 labels={naming.LABEL_PROJECT: project.name, naming.LABEL_COMPONENT: name,
                         naming.LABEL_ROLE: "build"},
-                platform=dockerfiles.platform(plan.arch) if plan.arch != native else None, on_line=on_line,
+                platform=arches.platform(plan.arch) if plan.arch != native else None, on_line=on_line,
             )
             # an image whose colcon lacks colcon-package-selection: build everything instead
             if not (code == 2 and any("--packages-above" in line for line in other[-3:])):

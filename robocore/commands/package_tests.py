@@ -37,7 +37,7 @@ from robocore.commands.workspace import selected_components
 from robocore.config.model import Component
 from robocore.errors import BuildError, TestFailure, UnsafePath, UsageError
 from robocore.files import make_folder, remove_file, remove_tree, write_atomic
-from robocore.plan import colcon, dockerfiles, junit, naming
+from robocore.plan import arches, colcon, junit, naming
 from robocore.project import Project
 
 #: JUnit files colcon's test steps leave in a package's build folder, and folders searched for more.
@@ -239,7 +239,7 @@ def _run(project: Project, plan: ComponentTests, report: Reporter,
             client, plan.image, plan.argv, user=f"{os.getuid()}:{os.getgid()}", volumes=plan.mounts,
             environment=colcon.CONTAINER_ENV,
             labels={naming.LABEL_PROJECT: project.name, naming.LABEL_COMPONENT: name, naming.LABEL_ROLE: "test"},
-            platform=dockerfiles.platform(plan.arch) if plan.arch != native_arch() else None, on_line=on_line,
+            platform=arches.platform(plan.arch) if plan.arch != native_arch() else None, on_line=on_line,
         )
     finally:
         client.close()

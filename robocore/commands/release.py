@@ -28,7 +28,8 @@ from robocore.commands.run import deploy_host
 from robocore.commands.state import history, read_synced, record_run, with_synced_release, write_synced
 from robocore.config.model import Host
 from robocore.errors import DockerError, GroupError, HostError, RobocoreError, UsageError
-from robocore.plan import dockerfiles, naming
+from robocore.plan import arches as per_arch
+from robocore.plan import naming
 from robocore.plan.containers import host_specs
 from robocore.plan.release import (
     LocalImage,
@@ -95,7 +96,7 @@ def released_images(project: Project) -> list[LocalImage]:
     component image (of its host's arch)."""
     robot = project.robot
     base = naming.base_image(robot, project.name)
-    images = [LocalImage(repo=base, arch=arch, source=f"{base}:{dockerfiles.base_tag(arch, project.native_arch)}")
+    images = [LocalImage(repo=base, arch=arch, source=f"{base}:{per_arch.base_tag(arch, project.native_arch)}")
               for arch in arches(project)]
     for comp in robot.components:
         if not comp.image:

@@ -119,22 +119,12 @@ class ImagePlan:
     @property
     def platform(self) -> str:
         """The Docker platform (``linux/<arch>``)."""
-        return platform(self.arch)
-
-
-def platform(arch: str) -> str:
-    """Docker platform string of an arch (see :func:`robocore.plan.arches.platform`)."""
-    return arches.platform(arch)
+        return arches.platform(self.arch)
 
 
 def venv(distro: str) -> str:
     """The venv of the wheels base."""
     return f"/opt/ros/{distro}/venv"
-
-
-def official_image(robot: Robot) -> str:
-    """The reference an official base's root is pulled from (its FROM is the per-arch name of it)."""
-    return arches.upstream_root(robot)
 
 
 def wheels_problems(robot: Robot) -> list[tuple[tuple[str | int, ...], str]]:
@@ -167,11 +157,6 @@ def refuse_robot_shape(project: Project) -> None:
     found = wheels_problems(project.robot)
     if found:
         raise located(project.robot_file, found)
-
-
-def base_tag(arch: str, native_arch: str) -> str:
-    """Tag of the base image for ``arch`` (see :func:`robocore.plan.arches.base_tag`)."""
-    return arches.base_tag(arch, native_arch)
 
 
 def _env_lines(pairs: Sequence[tuple[str, str]]) -> str:

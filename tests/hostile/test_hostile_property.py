@@ -28,7 +28,7 @@ from robocore.adapters import ssh, vcs
 from robocore.config.loader import parse_robot_text
 from robocore.config.model import Robot
 from robocore.errors import ConfigError, RobocoreError
-from robocore.plan import dockerfiles
+from robocore.plan import arches, dockerfiles
 from robocore.plan import sync as sync_plan
 
 PROPERTY = settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -140,8 +140,8 @@ def check_argvs(robot: Robot) -> None:
         assert any(url in argv for argv in calls), calls
         if version:
             assert any(version in argv for argv in calls), calls
-    base = dockerfiles.base_dockerfile(robot, root_image=dockerfiles.official_image(robot), has_ca=False, common=[])
-    assert f"FROM {dockerfiles.official_image(robot)}" in base.splitlines()
+    base = dockerfiles.base_dockerfile(robot, root_image=arches.upstream_root(robot), has_ca=False, common=[])
+    assert f"FROM {arches.upstream_root(robot)}" in base.splitlines()
     builder = robot.components[0]
     text = dockerfiles.component_dockerfile(robot, builder, base_ref="robot-base:latest")
     runs = [shlex.split(line) for line in text.splitlines() if line.startswith("RUN ") and "install" in line]
