@@ -3,7 +3,7 @@
 The template stays a top-level ``template/`` folder in the repository (``copier copy
 path/to/robocore`` renders it through the root ``copier.yml``). An installed, non-editable
 robocore has no repository next to it, so ``robocore init`` renders this bundled copy
-(``robocore.adapters.copier_adapter.template_source``). Editable installs use ``template/``
+(``robocore.adapters.copier_adapter.bundled_template``). Editable installs use ``template/``
 in place and copy nothing. Everything else about the package is in pyproject.toml.
 """
 

@@ -42,29 +42,25 @@ def test_per_arch_plans_golden(kind: str, native: str) -> None:
     """Both arches of a mixed robot, seen from an amd64 and from an arm64 dev machine: roots, bases, ccache,
     and the base Dockerfile each arch is built from."""
     robot = _robot(kind)
-    plans = arches.arch_plans(robot, "proj", native)
-    assert [p.arch for p in plans] == ["amd64", "arm64"]
     parts = []
-    for plan in plans:
-        dockerfile = dockerfiles.base_dockerfile(robot, root_image=plan.root, has_ca=False, common=[])
-        parts += [plan.describe(), dockerfile]
+    for arch in ("amd64", "arm64"):
+        root = arches.base_root(robot, arch)
+        dockerfile = dockerfiles.base_dockerfile(robot, root_image=root, has_ca=False, common=[])
+        parts += [f"arch {arch} [{arches.platform(arch)}]",
+                  f"  root: {root} (local, else {arches.upstream_root(robot)} pulled for {arches.platform(arch)})",
+                  f"  base tag: {arches.base_tag(arch, native)}", dockerfile]
     check_golden(f"arches/{kind}-noetic-on-{native}.txt", "\n".join(parts))
 
 
 def test_two_arches_never_share_a_name() -> None:
     for kind in ("official", "debian"):
         robot = _robot(kind)
-        amd, arm = arches.arch_plans(robot, "proj", "amd64")
-        assert {amd.root, amd.base, amd.ccache}.isdisjoint({arm.root, arm.base, arm.ccache})
-        assert arm.root.startswith("robocore/arm64/") and amd.root.startswith("robocore/amd64/")
-        assert (amd.native, arm.native) == (True, False) and arm.platform == "linux/arm64"
+        amd, arm = arches.base_root(robot, "amd64"), arches.base_root(robot, "arm64")
+        assert arm.startswith("robocore/arm64/") and amd.startswith("robocore/amd64/")
+        for native in ("amd64", "arm64"):
+            assert arches.base_tag("amd64", native) != arches.base_tag("arm64", native)
+        assert (arches.platform("amd64"), arches.platform("arm64")) == ("linux/amd64", "linux/arm64")
     assert arches.root_image(BaseKind.debian, "arm64") == "robocore/arm64/debian:bookworm-debian"
-
-
-def test_a_robot_without_source_components_plans_the_native_arch() -> None:
-    robot = parse_robot_text("ros_distro: noetic\nbase: {kind: debian}\nhosts: [{name: a, ip: 10.0.0.1, arch: arm64}]\n"
-                             "components: [{name: c, image: busybox, runs_on: a}]\n")
-    assert [p.arch for p in arches.arch_plans(robot, "p", "amd64")] == ["amd64"]
 
 
 @pytest.mark.parametrize(("ref", "pinned"), [

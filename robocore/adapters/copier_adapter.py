@@ -6,7 +6,6 @@ failure becomes a :class:`~robocore.errors.RobocoreError` here, and only here.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -26,11 +25,6 @@ class TemplateError(RobocoreError):
     """copier could not render the project template."""
 
     exit_code = 2
-
-
-def template_source() -> str:
-    """Where the project template is: ``$ROBOCORE_TEMPLATE``, else :func:`bundled_template`."""
-    return os.environ.get(TEMPLATE_ENV) or str(bundled_template())
 
 
 def bundled_template() -> Path:

@@ -169,9 +169,8 @@ HostAddress = Annotated[str, AfterValidator(host_address), pattern_field(
 # --- paths on a host --------------------------------------------------------------------------------
 
 _PATH_SEGMENT = r"(?!\.\.?(?:/|$))[A-Za-z0-9._@%+=,~-]+"
-#: A normalised absolute folder: no ``//``, no ``.`` or ``..`` segments, no trailing ``/``, not ``/`` itself.
-ABSOLUTE_FOLDER = rf"(?=.{{2,1024}}$)(?:/{_PATH_SEGMENT})+"
-#: What may be written: a normalised folder, optionally with one trailing ``/`` (dropped).
+#: A normalised absolute folder (no ``//``, no ``.`` or ``..`` segments, not ``/`` itself), optionally with one
+#: trailing ``/`` (dropped).
 ABSOLUTE_FOLDER_INPUT = rf"(?=.{{2,1025}}$)(?:/{_PATH_SEGMENT})+/?"
 
 

@@ -21,8 +21,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from robocore.config.model import BaseKind, Robot, kernel_arch
-from robocore.plan import naming
+from robocore.config.model import BaseKind, Robot
 
 #: The Debian release of the registry-free roots.
 SUITE = "bookworm"
@@ -145,54 +144,6 @@ def root_strap(kind: BaseKind, arch: str, packages: Sequence[str]) -> RootStrap:
     (natively, with only maintainer scripts emulated), so the base's apt step has nothing left to do."""
     del kind  # the packages are the kind's; the name carries the kind
     return RootStrap(arch=arch, packages=tuple(sorted(set(packages))))
-
-
-@dataclass(frozen=True)
-class ArchPlan:
-    """Everything robocore names for one arch of a robot, as ``prepare-base``/``stage``/``build`` use it."""
-
-    arch: str
-    native: bool  # the dev machine runs it natively (else through qemu-user via binfmt_misc)
-    platform: str
-    root: str  # the base's FROM
-    upstream: str  # what the root is pulled from (with this arch's platform) when it is not here yet
-    bootstrapped: bool  # without a registry, the root is made with mmdebstrap --arch (wheels and debian bases)
-    base: str  # the base image reference
-    ccache: str  # project-relative folder of this arch's ccache
-    components: tuple[str, ...]  # components built from source for this arch
-
-    def describe(self) -> str:
-        """Lines for a dry run and the golden files."""
-        how = "native" if self.native else f"emulated (qemu-{kernel_arch(self.arch)})"
-        return "\n".join([
-            f"arch {self.arch} [{self.platform}] {how}",
-            f"  root: {self.root} (local, else {self.upstream} pulled for {self.platform}"
-            + (f", else mmdebstrap --arch={self.arch})" if self.bootstrapped else ")"),
-            f"  base: {self.base}",
-            f"  ccache: {self.ccache}",
-            f"  components: {', '.join(self.components) or '(none)'}",
-        ])
-
-
-def arch_plans(robot: Robot, project_name: str, native: str) -> list[ArchPlan]:
-    """One :class:`ArchPlan` per arch the robot's source-built components run on (the native one when none is)."""
-    by_arch: dict[str, list[str]] = {}
-    for comp in robot.components:
-        if comp.image is None:
-            by_arch.setdefault(robot.host(comp.runs_on).arch.value, []).append(comp.name)
-    if not by_arch:
-        by_arch[native] = []
-    base_name = naming.base_image(robot, project_name)
-    plans = []
-    for arch in sorted(by_arch):
-        upstream = upstream_root(robot)
-        plans.append(ArchPlan(
-            arch=arch, native=arch == native, platform=platform(arch), root=base_root(robot, arch),
-            upstream=upstream, bootstrapped=robot.base.kind is not BaseKind.official and not robot.base.image,
-            base=f"{base_name}:{base_tag(arch, native)}",
-            ccache=f".robocore/{CCACHE_FOLDER}/{arch}", components=tuple(by_arch[arch]),
-        ))
-    return plans
 
 
 def elf_arch(header: bytes) -> str | None:

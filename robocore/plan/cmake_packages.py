@@ -238,10 +238,3 @@ def toolchain_lines(distro: str, venv: str, packages: Sequence[str]) -> list[str
         f"&& ln -sfn /usr/include/python$v {WHEEL_BUILDER_PYTHON}/$t/include/python$v "
         f"&& ln -sfn {venv}/lib/python$v {WHEEL_BUILDER_PYTHON}/$t/lib/python$v",
     ]
-
-
-def missing_toolchain(manifests: Iterable[Manifest], labels: Mapping[str, str]) -> list[str]:
-    """CMake packages of a workspace whose image (``labels``) was staged without the tool chain."""
-    if labels.get(LABEL_TOOLCHAIN) == TOOLCHAIN_CMAKE:
-        return []
-    return cmake_packages(manifests)
