@@ -98,12 +98,11 @@ def upstream_root(robot: Robot) -> str:
 #: private ones of the roots' packages: debpython's and catkin's).
 PYTHON_MODULE_DIRS = ("/usr/lib/python3/dist-packages", "/usr/share/python3", "/usr/share/catkin")
 #: Byte-compiling once, at the end: each of Debian's python3 packages runs ``py3compile`` when it is set up,
-#: a Python start per package (measured for the debian base's arm64 root under qemu: 71 packages, 142 s of
-#: its 435 s). Once the essential packages are in, the real ``py3compile`` is diverted away (python3-minimal
-#: then unpacks it as ``py3compile.later``) and a no-op stands in its place (python3's runtime hooks call it
-#: unconditionally); at the end the no-op goes, the real one is put back, and one ``compileall`` run
-#: compiles the same folders (17.6 s under qemu). mmdebstrap runs each hook with the root folder as ``$1``;
-#: no value of robot.yaml is in them.
+#: a Python start per package, which is slow under qemu (docs/design-notes.md, "arm64 under emulation"). Once
+#: the essential packages are in, the real ``py3compile`` is diverted away (python3-minimal then unpacks it as
+#: ``py3compile.later``) and a no-op stands in its place (python3's runtime hooks call it unconditionally); at
+#: the end the no-op goes, the real one is put back, and one ``compileall`` run compiles the same folders.
+#: mmdebstrap runs each hook with the root folder as ``$1``; no value of robot.yaml is in them.
 COMPILE_LATER_HOOKS = (
     '--essential-hook=chroot "$1" dpkg-divert --quiet --local --rename --divert /usr/bin/py3compile.later '
     "--add /usr/bin/py3compile && printf '#!/bin/sh\\nexit 0\\n' > \"$1/usr/bin/py3compile\" "

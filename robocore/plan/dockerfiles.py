@@ -65,9 +65,8 @@ DEBIAN_APT: tuple[str, ...] = (
 )
 #: The CMake generator of new build trees in the debian base (``CMAKE_GENERATOR``; a tree keeps the generator
 #: it was made with). Ninja's incremental build is one process that stats the tree; Make's is a recursion of
-#: makes and ``cmake -E`` helpers, each a process start, which qemu makes slow: measured for the template's
-#: roscpp talker on arm64 under qemu (loaded machine), a build with nothing to do took 10.5 s with Make and
-#: 0.24 s with Ninja, and a one-line edit 63 s and 32 s.
+#: makes and ``cmake -E`` helpers, each a process start, which qemu makes slow (docs/design-notes.md, "arm64
+#: under emulation").
 DEBIAN_CMAKE_GENERATOR = "Ninja"
 #: colcon from PyPI for the debian base (Debian has no colcon), in a venv that sees Debian's ROS modules.
 DEBIAN_TOOLS: tuple[str, ...] = (
@@ -252,8 +251,8 @@ def _debian_lines(distro: str, has_ca: bool) -> list[str]:
         *_entrypoint_lines(),
         # the root robocore bootstraps has them already (mmdebstrap --include): apt runs only for another root
         f"RUN (dpkg -s {' '.join(DEBIAN_APT)} >/dev/null 2>&1 || ({_apt_install(DEBIAN_APT)})) \\\n"
-        # no pip of its own (ensurepip installs and compiles pip and setuptools: 30 s of the 70 under qemu): the
-        # venv sees Debian's pip, which installs into the venv it runs in
+        # no pip of its own (ensurepip installs and compiles pip and setuptools, slow under qemu): the venv sees
+        # Debian's pip, which installs into the venv it runs in
         f" && python3 -m venv --without-pip --system-site-packages {env}"
         f" && {env}/bin/python -m pip install {' '.join(DEBIAN_TOOLS)} \\\n"
         f" && ln -sf {env}/bin/colcon /usr/local/bin/colcon && ln -sfn {distro} /opt/ros/Debian",

@@ -51,10 +51,11 @@ RMW = "rmw_fastrtps_cpp"
 SUPER_CLIENT_PROFILE = "super_client.xml"
 CLIENT_PROFILE = "client.xml"
 #: The client profiles a node's successive replacements on a host go round: file -> user port offset (``offsetd3``;
-#: None: Fast DDS's 11). With its predecessor's ports (same participant id), peers wrote into the dead one's shared
-#: memory until Fast DDS noticed (1-3 s): a greeting asked for again came 2.3-2.9 s late (0.08 s over UDP; bench/
-#: deploy.py --watch). Four, as `dev` can replace a node twice in that time (its first deploy, then a save). Odd
-#: offsets 100 apart never meet a discovery port (10 + 2 x id), nor each other below 50 participants on a host.
+#: None: Fast DDS's 11). A replacement on its predecessor's ports (same participant id) is not heard while peers
+#: still write into the dead one's shared memory, until Fast DDS notices; a new offset gives it ports of its own.
+#: Four, as `dev` can replace a node twice in that time (its first deploy, then a save). Odd offsets 100 apart
+#: never meet a discovery port (10 + 2 x id), nor each other below 50 participants on a host. The measurements:
+#: docs/design-notes.md, "Four client profiles in rotation".
 CLIENT_ROTATION: dict[str, int | None] = {CLIENT_PROFILE: None, "client-1.xml": 111, "client-2.xml": 211,
                                           "client-3.xml": 311}
 #: The variables that name a process's profile file.
@@ -161,28 +162,23 @@ def server_command(robot: Robot, index: int) -> list[str]:
 
 
 #: How often a client announces itself to the servers until one answers, and the first announcements
-#: (Fast DDS defaults: 450 ms, and 5 x 100 ms). Measured on Jazzy (host network, one server): with
-#: the defaults a node started next to a running peer matched it after 0.5 - 1 s, so a publisher's
-#: first message on a 0.5 s timer was lost (10 of 10 starts); at 50 ms it matched in time in 21 of
-#: 22 starts. A new publisher on a robot host (Docker-in-Docker, a running subscriber and server there)
-#: saw its subscriber 0.19 s after it was made with 50 ms (and the server's 20 ms below), 0.12 s with 20 ms.
-#: A client stops announcing once a server has answered: the cost is a few small packets at start (50 a
-#: second, a few hundred bytes each, only while no server answers).
+#: (Fast DDS defaults: 450 ms, and 5 x 100 ms). With the defaults a node started next to a running peer matches
+#: it too late for the first message of a publisher on a 0.5 s timer; at 20 ms a restarted node matches its
+#: peers about as fast as without a server. A client stops announcing once a server has answered: the cost is a
+#: few small packets at start. The measurements: docs/design-notes.md, "Discovery timing: 20 ms".
 CLIENT_ANNOUNCEMENT_MS = 20
 INITIAL_ANNOUNCEMENTS = (5, 20)  # count, period in ms
 #: How often a server runs its discovery routine: it passes what it learnt on to its clients and repeats what
-#: they have not acknowledged yet (default 450 ms). Measured as above: a new publisher matched its subscriber
-#: after 0.29 s with 100 ms, 0.16-0.22 s with 20 ms, no sooner with 10 or 5 ms.
+#: they have not acknowledged yet (default 450 ms). 20 ms for the same reason as the clients' period; a shorter
+#: period matched no sooner.
 SERVER_ANNOUNCEMENT_MS = 20
 #: A client's discovery traffic (what servers and peers send it) goes over UDP, whatever the transport of its
 #: data. With shared memory, a node's replacement on the same host reuses the shared-memory port of the process
 #: it replaces, while the server and the other nodes may still hold the old port's memory and write into it
 #: until Fast DDS's watchdog (a 1 s period) finds its reader dead: the new node then heard nothing of the graph
-#: for up to a few seconds. Measured with `bench/deploy.py --watch` (15 rounds each, one machine, one run after
-#: the other): without this line 4 of 15 replacements published their first message 0.3-2.3 s later than usual
-#: (0.96 s median, save to heard); with it 1 of 15, by 0.35 s (0.86 s median). Data between the nodes of one
-#: host still goes through shared memory. No address and port 0: Fast DDS listens on this host's interfaces at
-#: the participant's usual metatraffic port.
+#: for up to a few seconds, which discovery over UDP avoids. Data between the nodes of one host still goes through
+#: shared memory. No address and port 0: Fast DDS listens on this host's interfaces at the participant's usual
+#: metatraffic port. The measurements: docs/design-notes.md, "Discovery traffic over UDP, data over shared memory".
 METATRAFFIC_OVER_UDP = (
     "          <metatrafficUnicastLocatorList><locator><udpv4/></locator></metatrafficUnicastLocatorList>\n"
 )

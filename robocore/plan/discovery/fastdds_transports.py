@@ -23,11 +23,11 @@ class TransportSettings:
 #: Fast DDS's shared-memory port health check, in ms (its default: 1000). A process that opens another's port, as
 #: a new node does for each peer it matches on its host, first checks that the port's listening thread is alive;
 #: when that thread has not woken since Fast DDS's watchdog last looked (about one open in six with the default),
-#: the opener sleeps a third of this value, its discovery held meanwhile. Captured over 40 `dev` rounds each
-#: (`bench/deploy.py --watch`, Jazzy): with the default, 4 new talkers went silent for 0.33 s right after taking in
-#: their first new peer and published that much later; with 150 ms none did; with 300 ms one, by 0.1 s. The
-#: listening thread wakes every third of this value, so a port is taken for dead (and made anew) only when that
-#: thread misses about two wake-ups in a row while another process opens the port: 0.2 s off the CPU at 300 ms.
+#: the opener sleeps a third of this value, its discovery held meanwhile: with the default a new node can go
+#: silent for a third of a second after taking in its first new peer. A shorter check shortens that sleep; it
+#: stays long enough that a port is taken for dead (and made anew) only when its listening thread, which wakes
+#: every third of this value, misses about two wake-ups in a row. The measurements: docs/design-notes.md,
+#: "Shared-memory port health check: 300 ms".
 SHM_HEALTHY_CHECK_MS = 300
 
 
