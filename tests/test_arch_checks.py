@@ -68,8 +68,13 @@ def test_a_symlinked_elf_is_not_followed(tmp_path: Path) -> None:
     install = _tree(tmp_path, marker="arm64", elves={})
     outside = tmp_path / "x86"
     outside.write_bytes(_elf(62))
-    (install / "lib" / "pkg" / "link").symlink_to(outside)
+    link = install / "lib" / "pkg" / "link"
+    link.symlink_to(outside)
     arch_checks.refuse_foreign_install(install, _host("arm64"), "talker")
+    link.unlink()
+    link.write_bytes(outside.read_bytes())  # the same ELF in the tree itself is refused
+    with pytest.raises(ArchMismatch, match=r"lib/pkg/link \(amd64\)"):
+        arch_checks.refuse_foreign_install(install, _host("arm64"), "talker")
 
 
 def _binfmt(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, text: str | None) -> None:

@@ -329,8 +329,10 @@ def _resource(name: str) -> str:
 
 
 def test_shell_files_exist() -> None:
-    for name in plan.SHELL_FILES:
-        assert _resource(name).strip()
+    """Every file the plan mounts is in the package and says something, and the package holds no other."""
+    folder = resources.files("robocore.resources").joinpath("shell")
+    assert sorted(plan.SHELL_FILES) == sorted(entry.name for entry in folder.iterdir() if entry.is_file())
+    assert all(_resource(name).strip() for name in plan.SHELL_FILES)
 
 
 def test_bashrc_has_the_seed_shortcuts_and_a_component_prompt() -> None:
