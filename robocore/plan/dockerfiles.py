@@ -65,8 +65,8 @@ DEBIAN_APT: tuple[str, ...] = (
 )
 #: The CMake generator of new build trees in the debian base (``CMAKE_GENERATOR``; a tree keeps the generator
 #: it was made with). Ninja's incremental build is one process that stats the tree; Make's is a recursion of
-#: makes and ``cmake -E`` helpers, each a process start, which qemu makes slow (docs/design-notes.md, "arm64
-#: under emulation").
+#: makes and ``cmake -E`` helpers, each a process start, which qemu makes slow
+#: (docs/design-notes.md, "arm64 under emulation").
 DEBIAN_CMAKE_GENERATOR = "Ninja"
 #: colcon from PyPI for the debian base (Debian has no colcon), in a venv that sees Debian's ROS modules.
 DEBIAN_TOOLS: tuple[str, ...] = (
