@@ -210,6 +210,114 @@ def volume_mounts(project: Project, component: Component) -> tuple[list[Mount], 
     return mounts, notes
 
 
+@dataclass
+class _Part:
+    """What one aspect of the dev container adds: mounts (in order), environment, session variables, notes."""
+
+    mounts: list[Mount] = field(default_factory=list)
+    env: dict[str, str] = field(default_factory=dict)
+    session: dict[str, str] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+def _identity(project: Project, component: Component, name: str, user: str, home: str, machine: DevMachine,
+              workspace: Path | None) -> _Part:
+    """The shell files, the user's home, robocore's variables, and the component's workspace with its build
+    folders when it has one (then colcon's defaults and log folder point into them)."""
+    part = _Part(
+        mounts=[Mount(str(project.shell_dir), CONTAINER_SHELL, read_only=True),
+                Mount(str(project.home_dir(user)), home)],
+        env={
+            "ROBOCORE_PROJECT": project.name,
+            "ROBOCORE_COMPONENT": component.name,
+            "ROBOCORE_CONTAINER": name,
+            "ROBOCORE_ROS_DISTRO": project.robot.ros_distro.value,
+            "ROBOCORE_UID": str(machine.uid),
+            "ROBOCORE_GID": str(machine.gid),
+            "ROBOCORE_USER": user,
+            "ROBOCORE_HOME": home,
+        },
+    )
+    if workspace is not None:
+        part.mounts.append(Mount(str(workspace), naming.CONTAINER_WS))
+        part.mounts += [Mount(str(source), target) for target, source in build_dirs(project, component.name).items()]
+        part.env["COLCON_DEFAULTS_FILE"] = f"{CONTAINER_SHELL}/colcon-defaults.yaml"
+        part.env["COLCON_LOG_PATH"] = CONTAINER_LOG
+    return part
+
+
+def _discovery(project: Project, dds_env: Mapping[str, str] | None) -> _Part:
+    """An observer (Fast DDS: a super client of the discovery servers) sees the whole graph; without the
+    discovery kind's environment, DDS keeps its defaults apart from the domain id."""
+    if dds_env is None:
+        return _Part(env={"ROS_DOMAIN_ID": str(project.robot.ros_domain_id)})
+    return _Part(mounts=[Mount(str(project.dds_dir), naming.CONTAINER_DDS, read_only=True)], env=dict(dds_env))
+
+
+def _component_volumes(project: Project, component: Component, existing_paths: frozenset[str] | None) -> _Part:
+    """The component's volumes, less those whose source is not on the dev machine (a note says so), and its
+    environment."""
+    volumes, notes = volume_mounts(project, component)
+    part = _Part(env=dict(component.environment), notes=list(notes))
+    for mount in volumes:
+        if existing_paths is not None and mount.source not in existing_paths:
+            part.notes.append(f"volume {mount.source} of component {component.name} does not exist here; skipped")
+            continue
+        part.mounts.append(mount)
+    return part
+
+
+def _gui(project: Project, machine: DevMachine, name: str, home: str, user: str) -> _Part:
+    """X11 through a per-container cookie, the Wayland socket when there is one; and the session's terminal."""
+    part = _Part(session={"HOME": home, "USER": user})
+    if machine.term:
+        part.session["TERM"] = machine.term
+    if machine.display:
+        if machine.x11_sockets:
+            part.mounts.append(Mount(X11_SOCKETS, X11_SOCKETS, read_only=True))
+        part.mounts.append(Mount(str(project.x11_dir(name)), CONTAINER_X11, read_only=True))
+        part.env["QT_X11_NO_MITSHM"] = "1"
+        part.session["DISPLAY"] = machine.display
+        part.session["XAUTHORITY"] = f"{CONTAINER_X11}/{XAUTH_FILE}"
+    if machine.wayland_socket:
+        socket_name = PurePosixPath(machine.wayland_socket).name
+        part.mounts.append(Mount(machine.wayland_socket, f"{CONTAINER_XDG}/{socket_name}"))
+        part.env["ROBOCORE_XDG_RUNTIME_DIR"] = CONTAINER_XDG
+        part.session["XDG_RUNTIME_DIR"] = CONTAINER_XDG
+        part.session["WAYLAND_DISPLAY"] = socket_name
+    return part
+
+
+@dataclass
+class _Hardware(_Part):
+    """Devices, GPUs and privileges: a :class:`_Part`, plus the device options of the container."""
+
+    devices: tuple[str, ...] = ()
+    rules: tuple[str, ...] = ()
+    gpus: bool = False
+
+
+def _hardware(component: Component, request: ShellRequest, machine: DevMachine) -> _Hardware:
+    """All of ``/dev`` (``--devices-all``) or the component's devices, the device nodes' groups, the GPUs
+    (``--gpus``, else when Docker has the NVIDIA runtime), and notes on what the robot gives the component and
+    this shell does not. The NVIDIA variables are defaults: the component's own values win."""
+    part = _Hardware()
+    if request.devices_all:
+        part.mounts.append(Mount("/dev", "/dev"))
+        part.rules = _DEVICE_RULES
+    else:
+        part.devices = tuple(component.devices)
+    if machine.device_gids:
+        part.env["ROBOCORE_EXTRA_GIDS"] = " ".join(str(g) for g in sorted(set(machine.device_gids)))
+    part.gpus = machine.nvidia_runtime if request.gpus is None else request.gpus
+    if not part.gpus and component.nvidia and request.gpus is None:
+        part.notes.append(f"component {component.name} asks for nvidia but Docker has no NVIDIA runtime: no GPU")
+    if component.privileged and not request.privileged:
+        part.notes.append(f"component {component.name} runs privileged on the robot; add --privileged for the same "
+                          "here")
+    return part
+
+
 def plan_shell(
     project: Project,
     request: ShellRequest,
@@ -224,108 +332,40 @@ def plan_shell(
     None leaves DDS at its defaults apart from the domain id. ``existing_paths``, when given, is the set of
     component volume sources that exist on the dev machine; the others are skipped with a note.
     """
-    robot = project.robot
     component = project.component(request.component)
     name = naming.shell_container_name(project.name, component.name, request.number)
     user = user_name(machine.user, machine.uid)
     home = f"/home/{user}"
-    notes: list[str] = []
-
-    mounts: list[Mount] = [
-        Mount(str(project.shell_dir), CONTAINER_SHELL, read_only=True),
-        Mount(str(project.home_dir(user)), home),
-    ]
     workspace = workspace_dir(project, component)
-    env: dict[str, str] = {
-        "ROBOCORE_PROJECT": project.name,
-        "ROBOCORE_COMPONENT": component.name,
-        "ROBOCORE_CONTAINER": name,
-        "ROBOCORE_ROS_DISTRO": robot.ros_distro.value,
-        "ROBOCORE_UID": str(machine.uid),
-        "ROBOCORE_GID": str(machine.gid),
-        "ROBOCORE_USER": user,
-        "ROBOCORE_HOME": home,
-    }
-    if workspace is not None:
-        mounts.append(Mount(str(workspace), naming.CONTAINER_WS))
-        for target, source in build_dirs(project, component.name).items():
-            mounts.append(Mount(str(source), target))
-        env["COLCON_DEFAULTS_FILE"] = f"{CONTAINER_SHELL}/colcon-defaults.yaml"
-        env["COLCON_LOG_PATH"] = CONTAINER_LOG
-    workdir = naming.CONTAINER_WS if workspace is not None else home
-
-    # Discovery: an observer (Fast DDS: a super client of the discovery servers) sees the whole graph.
-    if dds_env is not None:
-        env.update(dds_env)
-        mounts.append(Mount(str(project.dds_dir), naming.CONTAINER_DDS, read_only=True))
-    else:
-        env["ROS_DOMAIN_ID"] = str(robot.ros_domain_id)
-
-    volumes, volume_notes = volume_mounts(project, component)
-    notes += volume_notes
-    for mount in volumes:
-        if existing_paths is not None and mount.source not in existing_paths:
-            notes.append(f"volume {mount.source} of component {component.name} does not exist here; skipped")
-            continue
-        mounts.append(mount)
-    env.update(component.environment)
-
-    # GUI: X11 through a per-container cookie, Wayland socket when there is one.
-    session: dict[str, str] = {"HOME": home, "USER": user}
-    if machine.term:
-        session["TERM"] = machine.term
-    if machine.display:
-        if machine.x11_sockets:
-            mounts.append(Mount(X11_SOCKETS, X11_SOCKETS, read_only=True))
-        mounts.append(Mount(str(project.x11_dir(name)), CONTAINER_X11, read_only=True))
-        env["QT_X11_NO_MITSHM"] = "1"
-        session["DISPLAY"] = machine.display
-        session["XAUTHORITY"] = f"{CONTAINER_X11}/{XAUTH_FILE}"
-    if machine.wayland_socket:
-        socket_name = PurePosixPath(machine.wayland_socket).name
-        mounts.append(Mount(machine.wayland_socket, f"{CONTAINER_XDG}/{socket_name}"))
-        env["ROBOCORE_XDG_RUNTIME_DIR"] = CONTAINER_XDG
-        session["XDG_RUNTIME_DIR"] = CONTAINER_XDG
-        session["WAYLAND_DISPLAY"] = socket_name
-
-    # Devices, GPUs, privileges.
-    devices: tuple[str, ...] = ()
-    rules: tuple[str, ...] = ()
-    if request.devices_all:
-        mounts.append(Mount("/dev", "/dev"))
-        rules = _DEVICE_RULES
-    else:
-        devices = tuple(component.devices)
-    if machine.device_gids:
-        env["ROBOCORE_EXTRA_GIDS"] = " ".join(str(g) for g in sorted(set(machine.device_gids)))
-    gpus = machine.nvidia_runtime if request.gpus is None else request.gpus
-    if gpus:
+    hardware = _hardware(component, request, machine)
+    parts = [_identity(project, component, name, user, home, machine, workspace), _discovery(project, dds_env),
+             _component_volumes(project, component, existing_paths), _gui(project, machine, name, home, user),
+             hardware]
+    env: dict[str, str] = {}
+    for part in parts:  # later parts win: the component's environment over discovery's, robocore's GUI over both
+        env.update(part.env)
+    if hardware.gpus:
         env.setdefault("NVIDIA_VISIBLE_DEVICES", "all")
         env.setdefault("NVIDIA_DRIVER_CAPABILITIES", "all")
-    elif component.nvidia and request.gpus is None:
-        notes.append(f"component {component.name} asks for nvidia but Docker has no NVIDIA runtime: no GPU")
-    if component.privileged and not request.privileged:
-        notes.append(f"component {component.name} runs privileged on the robot; add --privileged for the same here")
-
     spec = ShellSpec(
         name=name,
-        image=image_for(robot, project.name, component),
+        image=image_for(project.robot, project.name, component),
         component=component.name,
         uid=machine.uid,
         gid=machine.gid,
         user=user,
         home=home,
-        workdir=workdir,
-        mounts=tuple(mounts),
+        workdir=naming.CONTAINER_WS if workspace is not None else home,
+        mounts=tuple(mount for part in parts for mount in part.mounts),
         environment=env,
-        session_env=session,
+        session_env={key: value for part in parts for key, value in part.session.items()},
         labels={},
-        devices=devices,
-        device_cgroup_rules=rules,
-        gpus=gpus,
+        devices=hardware.devices,
+        device_cgroup_rules=hardware.rules,
+        gpus=hardware.gpus,
         privileged=request.privileged,
-        platform=arches.platform(robot.host(component.runs_on).arch.value),
-        notes=tuple(notes),
+        platform=arches.platform(project.robot.host(component.runs_on).arch.value),
+        notes=tuple(note for part in parts for note in part.notes),
     )
     labels = {
         naming.LABEL_PROJECT: project.name,
