@@ -14,8 +14,9 @@ from pathlib import Path
 
 import pytest
 import yaml
+from in_process import run_main
 
-from robocore import cli, ui
+from robocore import ui
 from robocore.config.model import Component, Host, Robot
 from robocore.tasks import namespace
 
@@ -36,16 +37,6 @@ def project(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     monkeypatch.setenv("ROBOCORE_NO_MEMO", "1")
     monkeypatch.chdir(root)
     return root
-
-
-def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    try:
-        cli.main(argv)
-        code = 0
-    except SystemExit as done:
-        code = done.code if isinstance(done.code, int) else (0 if done.code is None else 1)
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def check_bounded(err: str) -> None:
@@ -74,7 +65,7 @@ def option_lines() -> list[list[str]]:
 @pytest.mark.parametrize("argv", option_lines(), ids=lambda a: " ".join(x if len(x) < 20 else f"<{len(x)}>" for x in a))
 def test_every_option_value_is_cut_in_what_comes_back(argv: list[str], project: Path,
                                                      capsys: pytest.CaptureFixture[str]) -> None:
-    code, _, err = run(argv, capsys)
+    code, _, err = run_main(argv, capsys)
     check_bounded(err)
     if code:
         assert err.strip(), "refused without a word"
@@ -83,14 +74,14 @@ def test_every_option_value_is_cut_in_what_comes_back(argv: list[str], project: 
 
 def test_a_long_value_says_its_length(project: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The reproduction: ``logs --component <120,000 characters> --dry-run`` printed a 120 KB error."""
-    code, _, err = run(["logs", "--component", BIG, "--dry-run"], capsys)
+    code, _, err = run_main(["logs", "--component", BIG, "--dry-run"], capsys)
     assert code == 2
     (line,) = err.splitlines()
     assert "unknown component 'xxxx" in line and "(120,000 characters)" in line and len(line) < 400
 
 
 def test_json_problems_are_cut_too(project: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    code, out, _ = run(["logs", "--component", BIG, "--dry-run", "--json"], capsys)
+    code, out, _ = run_main(["logs", "--component", BIG, "--dry-run", "--json"], capsys)
     assert code == 2
     (problem,) = json.loads(out)["problems"]
     assert "(120,000 characters)" in problem["message"] and len(problem["message"]) < 400
@@ -124,7 +115,7 @@ def field_documents() -> list[tuple[str, str]]:
 def test_every_robot_yaml_field_is_cut_in_what_comes_back(case: str, text: str, project: Path,
                                                           capsys: pytest.CaptureFixture[str]) -> None:
     (project / "robot.yaml").write_text(text)
-    _, _, err = run(["validate"], capsys)
+    _, _, err = run_main(["validate"], capsys)
     check_bounded(err)
 
 
@@ -143,7 +134,7 @@ def tls_project(root: Path, path: str) -> None:
 def test_a_dotdot_tls_path_is_not_called_a_symlink(project: Path, capsys: pytest.CaptureFixture[str]) -> None:
     (project.parent / "ca.pem").write_text("x")
     tls_project(project, "../ca.pem")
-    code, _, err = run(["validate"], capsys)
+    code, _, err = run_main(["validate"], capsys)
     assert code == 2
     (line,) = [line for line in err.splitlines() if "ca_cert" in line]
     assert "names a file outside the project folder" in line and "symlink" not in line
@@ -153,22 +144,22 @@ def test_a_linked_tls_path_is_called_a_symlink(project: Path, capsys: pytest.Cap
     (project.parent / "ca.pem").write_text("x")
     (project / "ca.pem").symlink_to(project.parent / "ca.pem")
     tls_project(project, "ca.pem")
-    code, _, err = run(["validate"], capsys)
+    code, _, err = run_main(["validate"], capsys)
     assert code == 2
     (line,) = [line for line in err.splitlines() if "ca_cert" in line]
     assert "leads through a symlink to a file outside the project folder" in line
 
 
 def test_a_huge_number_in_a_flag_is_in_the_users_words(project: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    code, _, err = run(["-T", "9" * 5000, "validate"], capsys)
+    code, _, err = run_main(["-T", "9" * 5000, "validate"], capsys)
     assert code == 2
     assert "a number of 5000 digits is too large" in err and "sys." not in err
-    code, _, err = run(["-D", "abc", "validate"], capsys)
+    code, _, err = run_main(["-D", "abc", "validate"], capsys)
     assert code == 2 and "not a whole number: 'abc'" in err and "int()" not in err
 
 
 def test_a_linked_tls_file_is_not_read_nor_echoed_whole(project: Path, capsys: pytest.CaptureFixture[str]) -> None:
     os.mkfifo(project / "ca.pem")
     tls_project(project, "ca.pem")
-    code, _, err = run(["validate"], capsys)
+    code, _, err = run_main(["validate"], capsys)
     assert code == 2 and "not a regular file" in err
