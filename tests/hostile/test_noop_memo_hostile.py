@@ -290,6 +290,18 @@ class _Stat:
         return getattr(self._real, name)
 
 
+def rewritten_within_one_tick(root: Path, node: Path, attempt: int) -> bool:
+    """Write ``node``, record the memo, write it again with the same size: True when both writes left the times
+    and size the memo's snapshot holds unchanged (they shared a tick of the coarse clock)."""
+    node.write_text(f"print({attempt % 10})\n")
+    before = os.stat(node)
+    recorded(root, f"round {attempt}\n")
+    node.write_text(f"print({(attempt + 1) % 10})\n")
+    after = os.stat(node)
+    return (after.st_mtime_ns, after.st_ctime_ns, after.st_size) == (before.st_mtime_ns, before.st_ctime_ns,
+                                                                     before.st_size)
+
+
 def test_a_file_written_twice_within_one_tick_is_seen(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Write, record the memo, write the same size again: on a file system whose clock ticks every 2 s both
     writes usually share every time the snapshot holds, and only the hash of the young file shows the second."""
@@ -298,14 +310,7 @@ def test_a_file_written_twice_within_one_tick_is_seen(tmp_path: Path, monkeypatc
     CoarseClock(monkeypatch)
     same_tick = 0
     for attempt in range(20):
-        node.write_text(f"print({attempt % 10})\n")
-        before = os.stat(node)
-        recorded(root, f"round {attempt}\n")
-        node.write_text(f"print({(attempt + 1) % 10})\n")
-        after = os.stat(node)
-        if (after.st_mtime_ns, after.st_ctime_ns, after.st_size) == (before.st_mtime_ns, before.st_ctime_ns,
-                                                                      before.st_size):
-            same_tick += 1
+        same_tick += rewritten_within_one_tick(root, node, attempt)
         assert replays(root)[0] is False, f"attempt {attempt}: the second write was not seen"
         if same_tick >= 3:
             break
@@ -320,12 +325,7 @@ def test_without_the_young_files_hash_the_second_write_would_be_missed(tmp_path:
     CoarseClock(monkeypatch)
     monkeypatch.setattr(noop, "RACY_SECONDS", -60.0)
     for attempt in range(20):
-        node.write_text(f"print({attempt % 10})\n")
-        before = os.stat(node)
-        recorded(root, f"round {attempt}\n")
-        node.write_text(f"print({(attempt + 1) % 10})\n")
-        after = os.stat(node)
-        if (after.st_mtime_ns, after.st_ctime_ns) == (before.st_mtime_ns, before.st_ctime_ns):
+        if rewritten_within_one_tick(root, node, attempt):
             assert replays(root) == (True, f"round {attempt}\n")  # believed: the second write is missed
             return
     pytest.fail("no two writes shared a tick")
