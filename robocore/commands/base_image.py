@@ -6,7 +6,7 @@ The base is rebuilt only when its inputs hash changes. Its parent is the officia
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 from robocore.commands.context import DRY_RUN_UNKNOWN, Options
@@ -132,28 +132,42 @@ def prepare_base(options: Options, *, force: bool) -> None:
     if options.dry_run:
         _show_bases(project, options, force=force)
         return
-    from concurrent.futures import ThreadPoolExecutor, as_completed
-
     from robocore.adapters.image_builder import image_state
 
     wanted = arches(project)
     native = native_arch()
     for arch in wanted:  # before any bootstrap starts
         check_emulation(arch, native, f"{ROBOT_FILE}: hosts of arch {arch}")
+    client = local_docker()
+
+    def build_base(arch: str) -> list[Outcome]:
+        base = plan_base(project, client, arch, refresh_sources=force, say=report.info)
+        outcomes: list[Outcome] = []
+        work: list[tuple[Planned, str]] = []
+        triage(base, decide(image_state(client, base.plan.ref), base, force=force), False, outcomes, work)
+        return outcomes + run_builds(report, work, parallel=False)
+
+    try:
+        outcomes = bases_as_roots_arrive(wanted, lambda arch: _make_root(project, arch, report.info), build_base)
+    finally:
+        client.close()
+    report_outcomes(report, outcomes)
+
+
+def bases_as_roots_arrive(wanted: Sequence[str], make_root: Callable[[str], None],
+                          build_base: Callable[[str], list[Outcome]]) -> list[Outcome]:
+    """Make the root of every arch in ``wanted`` side by side (a thread each) and build each arch's base, in this
+    thread, as soon as its root is there: the outcomes of the bases. A root that cannot be had raises its error
+    once the roots still being made have finished; the bases of the roots that came before it are built."""
+    from concurrent.futures import ThreadPoolExecutor, as_completed
+
     outcomes: list[Outcome] = []
     with ThreadPoolExecutor(max_workers=len(wanted), thread_name_prefix="robocore-root") as pool:
-        roots = {pool.submit(_make_root, project, arch, report.info): arch for arch in wanted}
-        client = local_docker()
-        try:
-            for done in as_completed(roots):
-                done.result()  # the root's error, if it could not be had
-                base = plan_base(project, client, roots[done], refresh_sources=force, say=report.info)
-                work: list[tuple[Planned, str]] = []
-                triage(base, decide(image_state(client, base.plan.ref), base, force=force), False, outcomes, work)
-                outcomes += run_builds(report, work, parallel=False)
-        finally:
-            client.close()
-    report_outcomes(report, outcomes)
+        roots = {pool.submit(make_root, arch): arch for arch in wanted}
+        for done in as_completed(roots):
+            done.result()  # the root's error, if it could not be had
+            outcomes += build_base(roots[done])
+    return outcomes
 
 
 def _make_root(project: Project, arch: str, say: Callable[[str], None]) -> None:
