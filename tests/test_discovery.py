@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import types
 from pathlib import Path
 from typing import Any
 
 import pytest
 import yaml
+from fakes import FakeContainer, FakeDocker
 
 from robocore.commands import run
 from robocore.commands.composefiles import write_dds_profiles
@@ -252,23 +252,6 @@ def test_a_long_error_line_is_cut_to_its_end() -> None:
     assert fastdds.readiness(line, ServerState("exited")).reason == line[-200:]
 
 
-class FakeContainer:
-    """What wait_server_ready reads of a docker-py container: a log that grows with each poll, a status."""
-
-    def __init__(self, logs: list[str], status: str = "running", restarts: int = 0) -> None:
-        self._logs = logs
-        self.polls = 0
-        self.status = status
-        self.attrs = {"RestartCount": restarts}
-
-    def logs(self, tail: int) -> bytes:
-        self.polls += 1
-        return "".join(self._logs[: self.polls]).encode()
-
-    def reload(self) -> None:
-        pass
-
-
 def test_the_wait_loop_polls_until_the_kind_says_ready() -> None:
     spec = containers.discovery_spec(Project(root=Path("/srv/r"), robot=robot()), 0)
     container = FakeContainer(["starting\n", "", STARTED])
@@ -339,18 +322,6 @@ def test_node_listing_keeps_named_nodes_and_drops_hidden_ones() -> None:
 # ------------------------------------------------------------------ replacing a node
 
 
-class FakeClient:
-    """What ``run`` asks of a docker-py client when it replaces a container: create, and what it made."""
-
-    def __init__(self) -> None:
-        self.created: list[dict[str, Any]] = []
-        self.containers = self
-
-    def create(self, **kwargs: Any) -> Any:
-        self.created.append(kwargs)
-        return types.SimpleNamespace(start=lambda: None)
-
-
 @pytest.mark.parametrize(("old_profile", "new_profile"),
                          [("client.xml", "client-1.xml"), ("client-1.xml", "client-2.xml"),
                           ("client-3.xml", "client.xml")])
@@ -361,12 +332,10 @@ def test_a_replaced_node_gets_the_next_profile_after_its_predecessors_and_the_sa
     specs = containers.host_specs(project, project.robot.hosts[0].name)
     spec = next(s for s in specs if s.role != naming.ROLE_DISCOVERY)
     old_env = {**spec.env, **{n: f"/robocore/dds/{old_profile}" for n in fastdds.PROFILE_VARIABLES}}
-    old = types.SimpleNamespace(attrs={"Config": {"Env": [f"{k}={v}" for k, v in old_env.items()]}},
-                                removed=False)
-    old.remove = lambda force: setattr(old, "removed", force)
-    client = FakeClient()
+    old = FakeContainer(attrs={"Config": {"Env": [f"{k}={v}" for k, v in old_env.items()]}})
+    client = FakeDocker()
     run._apply(client, Action("replace", spec.name, "new image"), spec, old,  # type: ignore[arg-type]
                project.robot.hosts[0], report=Reporter(quiet=True), kind=kind, ready_timeout=run.SERVER_READY_TIMEOUT)
-    [made] = client.created
+    [made] = client.containers.created
     assert old.removed and made["environment"]["FASTDDS_DEFAULT_PROFILES_FILE"] == f"/robocore/dds/{new_profile}"
     assert made["labels"] == spec.labels  # a later run compares the spec's hash: it keeps this container

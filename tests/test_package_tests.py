@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from fakes import FakeDocker
 
 from robocore.commands import build, package_tests
 from robocore.commands.context import Options
@@ -276,11 +277,6 @@ class FakeState:
     id = "img1"
 
 
-class FakeClient:
-    def close(self) -> None:
-        pass
-
-
 def _fake_docker(monkeypatch: pytest.MonkeyPatch, project: Project, results: Mapping[str, bytes],
                  calls: list[dict[str, Any]], code: int = 0) -> None:
     """A colcon test container that writes ``results[package]`` as the package's pytest.xml."""
@@ -302,7 +298,7 @@ def _fake_docker(monkeypatch: pytest.MonkeyPatch, project: Project, results: Map
 
     monkeypatch.setattr(image_builder, "run_streaming", run_streaming)
     monkeypatch.setattr(image_builder, "image_state", lambda client, ref: FakeState())
-    monkeypatch.setattr(package_tests, "local_docker", lambda: FakeClient())
+    monkeypatch.setattr(package_tests, "local_docker", lambda: FakeDocker())
 
 
 def test_the_command_runs_colcon_test_as_the_user_and_fails_on_a_failing_test(

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import pytest
+from fakes import FakeContainer
 
 from robocore.commands import observe
 from robocore.commands.reporting import Reporter, error_problems
@@ -72,15 +73,6 @@ def test_fail_prints_the_results_so_far_and_the_problems(capsys: pytest.CaptureF
     doc = json.loads(capsys.readouterr().out)
     assert doc["ok"] is False and doc["results"] == [{"kind": "thing", "name": "kept", "size": 0}]
     assert [p["message"] for p in doc["problems"]] == ["main: host main: unreachable"]
-
-
-class FakeContainer:
-    def __init__(self, lines: list[bytes]) -> None:
-        self.lines = lines
-
-    def logs(self, **kwargs: Any) -> Any:
-        assert kwargs.get("follow") is True
-        return iter(self.lines)
 
 
 def test_logs_follow_json_is_json_lines_then_the_envelope(capsys: pytest.CaptureFixture[str]) -> None:
