@@ -41,7 +41,7 @@ def test_ssh_hosts_are_warmed_only_before_remote_steps(tmp_path: Path, monkeypat
     seen: list[str] = []
     prefetched: list[tuple[str, int, int]] = []
     monkeypatch.setattr(ssh, "warm", lambda host: seen.append(host.name))
-    monkeypatch.setattr(warmup, "_warmed", set())
+    monkeypatch.setattr(warmup, "WARMED", set())
     monkeypatch.setattr(docker_hosts, "prefetch", lambda host, timeout, *, connect_timeout: prefetched.append(
         (host.name, timeout, connect_timeout)))
     (tmp_path / "robot.yaml").write_text("# the project's file\n")
@@ -58,7 +58,7 @@ def test_the_next_command_warms_the_recorded_hosts_first_until_robot_yaml_change
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     seen: list[tuple[str, str, int]] = []
     monkeypatch.setattr(ssh, "warm", lambda host: seen.append((host.user, host.ip, host.ssh_port)))
-    monkeypatch.setattr(warmup, "_warmed", set())
+    monkeypatch.setattr(warmup, "WARMED", set())
     robot_yaml = tmp_path / "robot.yaml"
     robot_yaml.write_text("# the project's file\n")
     context.warm_remote_hosts(_project(tmp_path), ["sync"])
@@ -67,7 +67,7 @@ def test_the_next_command_warms_the_recorded_hosts_first_until_robot_yaml_change
 
     def next_command(argv: list[str], cwd: Path = tmp_path) -> list[tuple[str, str, int]]:
         seen.clear()
-        monkeypatch.setattr(warmup, "_warmed", set())  # a new process
+        monkeypatch.setattr(warmup, "WARMED", set())  # a new process
         warmup.warm_recorded(argv, cwd=cwd)
         return list(seen)
 

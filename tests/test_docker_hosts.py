@@ -145,7 +145,7 @@ def test_a_prefetched_connection_is_taken_once_with_its_error(monkeypatch: pytes
             raise HostError(f"host {host.name}: cannot reach its Docker daemon")
         return f"client of {host.name}"
 
-    monkeypatch.setattr(docker_hosts, "_ssh_client", fake_ssh_client)
+    monkeypatch.setattr(docker_hosts, "ssh_client", fake_ssh_client)
     up, down = Host(name="up", ip="10.9.0.1"), Host(name="down", ip="10.9.0.2")
     docker_hosts.prefetch(up, 300, connect_timeout=8)
     docker_hosts.prefetch(up, 300, connect_timeout=8)  # already under way: not twice

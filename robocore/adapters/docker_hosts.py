@@ -69,7 +69,7 @@ def client_for(host: Host, timeout: int = 120, *, project_root: Path | None = No
             pending = _prefetched.pop(_prefetch_key(host, timeout, connect_timeout), None)
         if pending is not None:
             return pending.result()
-        return _ssh_client(host, timeout, connect_timeout)
+        return ssh_client(host, timeout, connect_timeout)
     if access is DockerAccess.tls:
         return _tls_client(host, timeout, connect_timeout, project_root or Path.cwd())
     return _tcp_client(host, timeout, connect_timeout)
@@ -111,7 +111,7 @@ def prefetch(host: Host, timeout: int = 120, *, connect_timeout: int = CONNECT_T
 
     def work() -> None:
         try:
-            pending.set_result(_ssh_client(host, timeout, connect_timeout))
+            pending.set_result(ssh_client(host, timeout, connect_timeout))
         except BaseException as exc:  # handed to whoever takes the connection
             pending.set_exception(exc)
 
@@ -144,7 +144,7 @@ def _unreachable(host: Host, exc: BaseException) -> HostError:
     return _cannot_reach(host, detail)
 
 
-def _ssh_client(host: Host, timeout: int, connect_timeout: int) -> docker.DockerClient:
+def ssh_client(host: Host, timeout: int, connect_timeout: int) -> docker.DockerClient:
     """A client whose requests run ``docker system dial-stdio`` on the host over ssh.
 
     The first request asks for the daemon's API version. If it fails, ``docker version`` over ssh

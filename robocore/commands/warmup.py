@@ -31,7 +31,8 @@ REMOTE_STEPS = frozenset({"dev", "sync", "run", "status", "logs", "connect", "do
 #: settings (status and logs use others).
 DOCKER_STEPS = frozenset({"dev", "run", "down", "rollback"})
 
-_warmed: set[tuple[str, str, int]] = set()  # (user, ip, port) already warmed by this process
+#: The (user, ip, port) of every host this process has warmed: each is warmed once per process.
+WARMED: set[tuple[str, str, int]] = set()
 
 
 @dataclass(frozen=True)
@@ -67,8 +68,8 @@ def warm(endpoints: Iterable[Endpoint]) -> None:
 
     for endpoint in endpoints:
         key = (endpoint.user, endpoint.ip, endpoint.ssh_port)
-        if key not in _warmed:
-            _warmed.add(key)
+        if key not in WARMED:
+            WARMED.add(key)
             ssh.warm(endpoint)
 
 
