@@ -8,6 +8,7 @@ command line's first steps (the ssh warm-up) can use it before the config model 
 
 from __future__ import annotations
 
+import functools
 import platform
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -50,7 +51,7 @@ class ProjectFolder:
         """True when something is at the fleet file's path (loading it then says what is wrong with it)."""
         return self.fleet_file.is_symlink() or self.fleet_file.exists()
 
-    @property
+    @functools.cached_property  # every container name and label holds it: 10,000 components ask 20,000 times
     def name(self) -> str:
         """Project name: the folder name, lower-cased for image and container names."""
         return _slug(self.root.name)

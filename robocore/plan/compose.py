@@ -4,14 +4,9 @@ from __future__ import annotations
 
 from typing import Any
 
-import yaml
-
+from robocore.plan import yaml_text
 from robocore.plan.containers import ContainerSpec, host_specs
 from robocore.project import Project
-
-#: libyaml's emitter where PyYAML was built with it (the same text as the pure-Python one, several times faster:
-#: bench/compose_scale.py), else PyYAML's own.
-DUMPER: type[yaml.SafeDumper] = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 
 def compose_document(specs: list[ContainerSpec]) -> dict[str, Any]:
@@ -35,5 +30,4 @@ def render(project: Project, host: str, *, tag: str | None = None, specs: list[C
         f"# The same containers `robocore run --host {host}` creates. By hand, on that host:\n"
         f"#   docker compose -f {host}.yaml up -d\n"
     )
-    body = yaml.dump(compose_document(specs), Dumper=DUMPER, sort_keys=False, default_flow_style=False, width=120)
-    return header + body
+    return header + yaml_text.dump(compose_document(specs))  # PyYAML's text, written faster

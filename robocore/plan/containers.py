@@ -13,28 +13,15 @@ from __future__ import annotations
 import hashlib
 import json
 import shlex
-from dataclasses import dataclass, field, fields, is_dataclass
+from dataclasses import dataclass, field, fields
 from pathlib import PurePosixPath
 from typing import Any
 
 from robocore.config.model import Component, Host, Robot, is_project_path, port_pattern, read_only_project_path
 from robocore.plan import arches, discovery, gui, layout, naming
 from robocore.plan.addresses import extra_hosts, reachable_from_container
-from robocore.plan.layout import host_paths
+from robocore.plan.layout import component_root, host_paths
 from robocore.project import Project
-
-
-def _plain(value: Any) -> Any:
-    """What ``dataclasses.asdict`` makes of ``value`` (the spec hash's input; the hashes of running containers
-    depend on it), without its deep copies: 10,000 specs are hashed for one compose file of 10,000 services."""
-    if is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _plain(getattr(value, f.name)) for f in fields(value)}
-    if isinstance(value, (list, tuple)):
-        return type(value)(_plain(item) for item in value)
-    if isinstance(value, dict):
-        return {_plain(key): _plain(item) for key, item in value.items()}
-    return value
-
 
 DEFAULT_TAG = "latest"
 #: Command of a component that has no entrypoint: stay up so that ``connect`` can enter it.
@@ -98,7 +85,10 @@ class ContainerSpec:
     @property
     def spec_hash(self) -> str:
         """A short content hash of the spec: equal hashes mean nothing to recreate."""
-        data = _plain(self)
+        # what dataclasses.asdict gives (the hashes of running containers depend on it), without its deep copies:
+        # 10,000 specs are hashed for one compose file of 10,000 services
+        data = {name: getattr(self, name) for name in _SPEC_FIELDS}
+        data["mounts"] = [{name: getattr(m, name) for name in _MOUNT_FIELDS} for m in self.mounts]
         if not data["extra_hosts"]:  # absent, as before the field existed: unchanged specs keep their hash
             del data["extra_hosts"]
         payload = json.dumps(data, sort_keys=True, separators=(",", ":"))
@@ -195,6 +185,10 @@ class ContainerSpec:
         return service
 
 
+_SPEC_FIELDS = tuple(f.name for f in fields(ContainerSpec))
+_MOUNT_FIELDS = tuple(f.name for f in fields(Mount))
+
+
 def compose_escape(text: str) -> str:
     """``text`` with every ``$`` doubled: compose's escape for a literal dollar sign."""
     return text.replace("$", "$$")
@@ -285,14 +279,39 @@ def seen_from(robot: Robot, network_mode: str) -> Robot:
     return robot.model_copy(update={"hosts": hosts})
 
 
+@dataclass(frozen=True)
+class _ClientSide:
+    """What the robot's discovery kind gives every component of one host on one network mode: the same for all of
+    them, so a host's specs compute it once per network mode (10,000 components: 10,000 robot copies otherwise)."""
+
+    environment: tuple[tuple[str, str], ...]
+    ipc_mode: str | None
+    depends_on: tuple[str, ...]
+
+
+def _client_side(robot: Robot, host: str, network: str) -> _ClientSide:
+    kind = discovery.for_robot(seen_from(robot, network))
+    return _ClientSide(environment=tuple(kind.client_environment(host, network_mode=network).items()),
+                       ipc_mode=kind.transport.ipc_mode(network),
+                       depends_on=tuple(discovery_service(s.index) for s in kind.servers_on(host)))
+
+
 def component_spec(project: Project, component: Component, *, tag: str | None = None) -> ContainerSpec:
     """The container of ``component`` on its host."""
+    return _component_spec(project, component, tag, {})
+
+
+def _component_spec(project: Project, component: Component, tag: str | None,
+                    client_sides: dict[tuple[str, str], _ClientSide]) -> ContainerSpec:
+    """:func:`component_spec`, with the client sides computed so far (host, network mode -> client side)."""
     robot = project.robot
     host: Host = robot.host(component.runs_on)
     paths = host_paths(project, host, component.name)
     network = component.network_mode
-    kind = discovery.for_robot(seen_from(robot, network))
-    env = kind.client_environment(host.name, network_mode=network)
+    client = client_sides.get((host.name, network))
+    if client is None:
+        client = client_sides[host.name, network] = _client_side(robot, host.name, network)
+    env = dict(client.environment)
     mounts: list[Mount] = []
     if component.has_workspace:
         mounts.append(Mount(paths.install, naming.CONTAINER_INSTALL, read_only=True))
@@ -300,8 +319,9 @@ def component_spec(project: Project, component: Component, *, tag: str | None = 
     display = gui.gui_plan(project, component)
     env.update(display.environment)
     mounts.extend(Mount(b.source, b.target, read_only=b.read_only) for b in display.binds)
-    base = PurePosixPath(str(project.root)) if host.is_local else PurePosixPath(host.deploy_root) / component.name
-    mounts.extend(_user_mount(v, base, remote=not host.is_local) for v in component.volumes)
+    if component.volumes:
+        base = PurePosixPath(str(project.root)) if host.is_local else component_root(host, component.name)
+        mounts.extend(_user_mount(v, base, remote=not host.is_local) for v in component.volumes)
     env.update(component.environment)
     if component.image:
         image = component.image
@@ -320,14 +340,14 @@ def component_spec(project: Project, component: Component, *, tag: str | None = 
         command=display.command or component_command(component),
         environment=tuple(sorted(env.items())),
         network_mode=network,
-        ipc_mode=kind.transport.ipc_mode(network),
+        ipc_mode=client.ipc_mode,
         ports=tuple(component.ports) if network == "bridge" else (),
         devices=tuple(component.devices),
         mounts=tuple(mounts),
         gpus=component.nvidia,
         privileged=component.privileged,
         restart=component.restart,
-        depends_on=tuple(discovery_service(s.index) for s in kind.servers_on(host.name)) + display.depends_on,
+        depends_on=client.depends_on + display.depends_on,
         extra_hosts=extra_hosts(network),
     )
 
@@ -380,5 +400,6 @@ def host_specs(project: Project, host: str, *, tag: str | None = None) -> list[C
     """Every container of ``host``: its discovery servers first, then its components in file order."""
     robot = project.robot
     specs = [discovery_spec(project, s.index, tag=tag) for s in discovery.for_robot(robot).servers_on(host)]
-    specs += [component_spec(project, c, tag=tag) for c in robot.components_on(host)]
+    client_sides: dict[tuple[str, str], _ClientSide] = {}
+    specs += [_component_spec(project, c, tag, client_sides) for c in robot.components_on(host)]
     return specs
