@@ -161,7 +161,7 @@ def test_the_master_runs_the_base_of_its_hosts_arch(tmp_path: Path, native: str,
     project = dataclasses.replace(_project(tmp_path, master=master), native_arch=native)
     dockerfiles.refuse_robot_shape(project)
     arch = {"ipc": "amd64", "jetson": "arm64"}[master]
-    assert images.arches(project) == sorted({"arm64", arch})  # the talker's and the master's
+    assert images.base_arches(project) == sorted({"arm64", arch})  # the talker's and the master's
     [spec] = [s for s in containers.host_specs(project, master) if s.role == naming.ROLE_DISCOVERY]
     assert spec.image == f"{project.name}-base:{arches.base_tag(arch, native)}"
     assert spec.image.endswith(":latest") == (arch == native)
@@ -175,7 +175,7 @@ def test_a_robot_with_no_host_of_this_machines_arch_has_only_that_arch(tmp_path:
     (tmp_path / "components" / "talker").mkdir(parents=True)
     project = dataclasses.replace(Project.load(tmp_path), native_arch="amd64")
     dockerfiles.refuse_robot_shape(project)
-    assert images.arches(project) == ["arm64"]
+    assert images.base_arches(project) == ["arm64"]
     specs = containers.host_specs(project, "pi")
     assert [(s.role, s.image) for s in specs] == [
         (naming.ROLE_DISCOVERY, f"{project.name}-base:latest-arm64"),

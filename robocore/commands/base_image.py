@@ -13,7 +13,7 @@ from robocore.commands.context import DRY_RUN_UNKNOWN, Options
 from robocore.commands.images import (
     Planned,
     allowed_protocol,
-    arches,
+    base_arches,
     decide,
     fetch_source,
     planned,
@@ -27,8 +27,7 @@ from robocore.commands.reporting import Outcome, report_outcomes
 from robocore.commands.workspace import wheels_cmake_packages
 from robocore.config.model import BaseKind
 from robocore.files import ROBOT_FILE, refuse_links_leaving
-from robocore.plan import arches as per_arch
-from robocore.plan import dockerfiles, naming
+from robocore.plan import arches, dockerfiles, naming
 from robocore.plan.dockerfiles import ContextEntry, ImagePlan
 from robocore.project import Project
 
@@ -39,13 +38,13 @@ if TYPE_CHECKING:
 ROOTFS_KINDS = frozenset({BaseKind.wheels, BaseKind.debian})
 
 
-def root_strap(project: Project, arch: str) -> per_arch.RootStrap | None:
+def root_strap(project: Project, arch: str) -> arches.RootStrap | None:
     """How the base's root is bootstrapped for ``arch`` (None: the official base and ``base.image`` are pulled)."""
     robot = project.robot
     if robot.base.kind not in ROOTFS_KINDS or robot.base.image:
         return None
     packages = dockerfiles.DEBIAN_APT if robot.base.kind is BaseKind.debian else dockerfiles.WHEELS_APT
-    return per_arch.root_strap(robot.base.kind, arch, packages)
+    return arches.root_strap(robot.base.kind, arch, packages)
 
 
 def _base_parent(project: Project, client: docker.DockerClient | None, arch: str, *, dry_run: bool,
@@ -56,7 +55,7 @@ def _base_parent(project: Project, client: docker.DockerClient | None, arch: str
     from robocore.adapters.image_builder import image_state
 
     robot = project.robot
-    target = per_arch.base_root(robot, arch)
+    target = arches.base_root(robot, arch)
     if client is None:
         return target, DRY_RUN_UNKNOWN
     if dry_run:
@@ -65,7 +64,7 @@ def _base_parent(project: Project, client: docker.DockerClient | None, arch: str
             return target, state.id
         strap = root_strap(project, arch)
         return target, "(to be bootstrapped)" if strap is not None else "(to be pulled)"
-    return rootfs.ensure_root_image(client, target=target, upstream=per_arch.upstream_root(robot), arch=arch,
+    return rootfs.ensure_root_image(client, target=target, upstream=arches.upstream_root(robot), arch=arch,
                                     strap=root_strap(project, arch), work_dir=project.cache_dir / "rootfs",
                                     status=say)
 
@@ -114,7 +113,7 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
     cmake = wheels_cmake_packages(project, [e.source for e in entries if e.dest.startswith("common/") and e.source])
     dockerfile = dockerfiles.base_dockerfile(robot, root_image=root_ref, has_ca=ca is not None, common=common,
                                              cmake=cmake)
-    plan = ImagePlan(role="base", name=naming.base_image(robot, project.name), tag=per_arch.base_tag(arch, native),
+    plan = ImagePlan(role="base", name=naming.base_image(robot, project.name), tag=arches.base_tag(arch, native),
                      arch=arch, dockerfile=dockerfile, parent=root_ref, context=tuple(entries),
                      labels=dockerfiles.base_labels(robot))
     return planned(project, plan, root_id, known=known)
@@ -134,7 +133,7 @@ def prepare_base(options: Options, *, force: bool) -> None:
         return
     from robocore.adapters.image_builder import image_state
 
-    wanted = arches(project)
+    wanted = base_arches(project)
     native = native_arch()
     for arch in wanted:  # before any bootstrap starts
         check_emulation(arch, native, f"{ROBOT_FILE}: hosts of arch {arch}")
@@ -183,7 +182,7 @@ def _show_bases(project: Project, options: Options, *, force: bool) -> None:
     """A dry run's plans: no daemon is contacted, nothing is pulled, bootstrapped or built."""
     outcomes: list[Outcome] = []
     work: list[tuple[Planned, str]] = []
-    for arch in arches(project):
+    for arch in base_arches(project):
         base = plan_base(project, None, arch, dry_run=True, refresh_sources=force, say=options.report.info)
         reason = decide(None, base, force=force)
         show_plan(options.report, base, reason)

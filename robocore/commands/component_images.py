@@ -17,7 +17,7 @@ from robocore.commands.context import DRY_RUN_UNKNOWN, Options
 from robocore.commands.images import (
     Planned,
     allowed_protocol,
-    arches,
+    base_arches,
     decide,
     fetch_source,
     planned,
@@ -30,8 +30,7 @@ from robocore.commands.reporting import Outcome, Reporter, report_outcomes
 from robocore.commands.workspace import check_workspace, selected_components, wheels_cmake_packages, workspace_files
 from robocore.config.model import BaseKind, Component
 from robocore.errors import BuildError
-from robocore.plan import arches as per_arch
-from robocore.plan import dockerfiles, naming
+from robocore.plan import arches, dockerfiles, naming
 from robocore.plan.dockerfiles import ContextEntry, ImagePlan
 from robocore.project import Project
 
@@ -97,7 +96,7 @@ def existing_base(project: Project, client: docker.DockerClient | None, arch: st
     a client (a dry run) its inputs are :data:`DRY_RUN_UNKNOWN`."""
     from robocore.adapters.image_builder import image_state
 
-    ref = f"{naming.base_image(project.robot, project.name)}:{per_arch.base_tag(arch, native_arch())}"
+    ref = f"{naming.base_image(project.robot, project.name)}:{arches.base_tag(arch, native_arch())}"
     if client is None:
         return BaseRef(ref=ref, arch=arch, inputs=DRY_RUN_UNKNOWN)
     state = image_state(client, ref)
@@ -146,7 +145,7 @@ def stage(options: Options, *, refresh: bool, component: str | None, force: bool
     work: list[tuple[Planned, str]] = []
     try:
         bases = {arch: existing_base(project, client, arch, dry_run=options.dry_run)
-                 for arch in arches(project, comps)}
+                 for arch in base_arches(project, comps)}
         if client is not None:
             _warn_stale_base(project, client, bases, report)
         for comp in comps:

@@ -29,9 +29,10 @@ if TYPE_CHECKING:
     from robocore.adapters.image_builder import ContextFile, ImageState
 
 
-def arches(project: Project, components: Sequence[Component] | None = None) -> list[str]:
-    """The arches the components (default: all) built from source run on, plus the discovery servers' hosts'
-    (each runs the base of its host's arch) when all are asked; the native one when none is."""
+def base_arches(project: Project, components: Sequence[Component] | None = None) -> list[str]:
+    """The arches that need a base image: those the components (default: all) built from source run on, plus
+    the discovery servers' hosts' (each runs the base of its host's arch) when all are asked; the native one when
+    none is."""
     robot = project.robot
     comps = robot.components if components is None else components
     found = {robot.host(c.runs_on).arch.value for c in comps if c.image is None}

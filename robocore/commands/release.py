@@ -23,13 +23,12 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from robocore.commands.context import Options
 from robocore.commands.hosts import for_each_host, select_hosts
-from robocore.commands.images import arches
+from robocore.commands.images import base_arches
 from robocore.commands.run import deploy_host
 from robocore.commands.state import history, read_synced, record_run, with_synced_release, write_synced
 from robocore.config.model import Host
 from robocore.errors import DockerError, GroupError, HostError, RobocoreError, UsageError
-from robocore.plan import arches as per_arch
-from robocore.plan import naming
+from robocore.plan import arches, naming
 from robocore.plan.containers import host_specs
 from robocore.plan.release import (
     LocalImage,
@@ -96,8 +95,8 @@ def released_images(project: Project) -> list[LocalImage]:
     component image (of its host's arch)."""
     robot = project.robot
     base = naming.base_image(robot, project.name)
-    images = [LocalImage(repo=base, arch=arch, source=f"{base}:{per_arch.base_tag(arch, project.native_arch)}")
-              for arch in arches(project)]
+    images = [LocalImage(repo=base, arch=arch, source=f"{base}:{arches.base_tag(arch, project.native_arch)}")
+              for arch in base_arches(project)]
     for comp in robot.components:
         if not comp.image:
             repo = naming.component_image(robot, project.name, comp.name)
