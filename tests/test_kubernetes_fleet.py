@@ -236,3 +236,73 @@ def test_a_recorded_fleet_release_is_exported_by_digest(tmp_path: Path) -> None:
                      "discovery-0": ref("amr-base", "3")}
     for doc in sets.values():
         validate(doc)
+
+
+VOLUMES = """\
+ros_distro: jazzy
+registry: 10.0.0.2:5000
+hosts:
+  - {name: main, ip: 10.0.0.10}
+components:
+  - name: mapper
+    folder: mapper
+    runs_on: main
+    entrypoint: ros2 run mapper node
+    volumes: ['./config/maps:/maps:ro', './data:/data', '/var/log/mapper:/logs']
+"""
+VOLUMES_FLEET = """\
+engine: kubernetes
+robots:
+  - {name: r1, hosts: {main: {ip: 10.1.0.10}}}
+"""
+
+
+def volumes_project(tmp_path: Path, *, recorded: bool) -> Path:
+    """A robot whose component has a read-only project volume, a writable one and a host path; with ``recorded``,
+    ``release --fleet --tag v9`` recorded its images (which then carry the read-only files)."""
+    from robocore.plan.fleet_release import ReleaseRecord
+
+    root = write(tmp_path / "mapbot", VOLUMES, VOLUMES_FLEET, ("mapper", "config", "config/maps"))
+    if recorded:
+        ref = "10.0.0.2:5000/mapbot-{}@sha256:" + "5" * 64
+        record = ReleaseRecord(version="v9", registry="10.0.0.2:5000",
+                               components={"mapper": {"amd64": ref.format("mapper")}},
+                               base={"amd64": ref.format("base")})
+        (root / ".robocore" / "releases").mkdir(parents=True)
+        (root / ".robocore" / "releases" / "v9.json").write_text(record.to_json())
+    return root
+
+
+def test_read_only_project_volumes_come_in_the_fleet_image_and_are_not_mounted(tmp_path: Path) -> None:
+    root = volumes_project(tmp_path, recorded=True)
+    folder = tmp_path / "out"
+    export_kubernetes(Options(project_dir=root, task="export", quiet=True), folder, tag="v9")
+    docs = render(folder / "robots" / "r1")
+    pod = by_kind(docs, "DaemonSet")["mapper"]["spec"]["template"]["spec"]
+    (container,) = pod["containers"]
+    assert container["image"] == "10.0.0.2:5000/mapbot-mapper@sha256:" + "5" * 64  # the image that carries /maps
+    volumes = {v["name"]: v for v in pod["volumes"]}
+    mounted = {m["mountPath"]: volumes[m["name"]] for m in container["volumeMounts"]}
+    assert "/maps" not in mounted
+    assert mounted["/logs"]["hostPath"] == {"path": "/var/log/mapper"}
+    data = mounted["/data"]["hostPath"]  # writable: a folder of the host, under its mount root, made when missing
+    assert data["type"] == "DirectoryOrCreate" and data["path"].endswith("/mapper/data")
+    assert not any("config/maps" in v.get("hostPath", {}).get("path", "") for v in pod["volumes"])
+    for doc in docs:
+        validate(doc)
+
+
+def test_read_only_project_volumes_without_a_fleet_release_are_refused_one_line(tmp_path: Path) -> None:
+    """Images by tag are code-less: nothing would put the read-only files in the pod. The writable volume is not
+    refused."""
+    import subprocess
+    import sys
+
+    root = volumes_project(tmp_path, recorded=False)
+    argv = [sys.executable, "-m", "robocore", "export", "kubernetes", str(tmp_path / "out"), "--tag", "v9"]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=120, cwd=root)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    (line,) = [line for line in done.stderr.splitlines() if line.startswith("error:")]
+    assert line.startswith("error: robot.yaml:10: components[0].volumes[0]: ")
+    assert "release --fleet --tag" in line
+    assert not (tmp_path / "out").exists()

@@ -79,15 +79,23 @@ class Model:
     fleet: Fleet | None
 
 
-def record_images(project: Project, tag: str) -> ImageSource | None:
-    """The images of the fleet release ``tag`` by digest (``release --fleet --tag V`` recorded them in
-    ``.robocore/releases/V.json``: component image plus its install tree, per arch), None when that release has no
-    record (the images are then named by tag)."""
+def has_fleet_release(project: Project, tag: str) -> bool:
+    """Whether ``release --fleet --tag TAG`` recorded its images (``.robocore/releases/TAG.json`` exists): the
+    pods then run self-contained images, which carry the read-only project volumes too."""
     import os
 
-    from robocore.commands.fleet_release import load_release_record, record_path
+    from robocore.commands.fleet_release import record_path
 
-    if not os.path.lexists(record_path(project, tag)):
+    return os.path.lexists(record_path(project, tag))
+
+
+def record_images(project: Project, tag: str) -> ImageSource | None:
+    """The images of the fleet release ``tag`` by digest (``release --fleet --tag V`` recorded them in
+    ``.robocore/releases/V.json``: component image plus its install tree and read-only project volumes, per arch),
+    None when that release has no record (the images are then named by tag)."""
+    from robocore.commands.fleet_release import load_release_record
+
+    if not has_fleet_release(project, tag):
         return None
     record = load_release_record(project, tag)
     robot = project.robot
@@ -124,14 +132,14 @@ def model_robots(model: Model, tag: str) -> list[RobotTarget]:
     return targets
 
 
-def load_models(options: Options, others: list[Path]) -> list[Model]:
+def load_models(options: Options, others: list[Path], tag: str) -> list[Model]:
     """The models of the export (the task's project first), each with its fleet file; what any of them cannot
-    export, and any problem of a fleet file, in one ConfigError."""
+    export with release ``tag``'s images, and any problem of a fleet file, in one ConfigError."""
     projects = [options.load(), *(Project.load(path) for path in others)]
     found: list[Problem] = []
     models: dict[str, Model] = {}
     for project in projects:
-        refused = problems(project.robot)
+        refused = problems(project.robot, fleet_images=has_fleet_release(project, tag))
         if refused:
             found += located(project.robot_file, refused).problems
         fleet = None
@@ -173,7 +181,7 @@ def export_kubernetes(options: Options, folder: Path, *, tag: str | None, git_re
     if tag is None:
         raise UsageError("export kubernetes needs --tag V: the release whose images the robots run",
                          hint="robocore release --tag v1, then robocore export kubernetes DIR --tag v1")
-    loaded = load_models(options, list(models or []))
+    loaded = load_models(options, list(models or []), tag)
     robots = merged([model_robots(model, tag) for model in loaded])
     projects = {model.name: model.project for model in loaded}
     files = plan_export(projects, robots, loaded[0].name, ExportOptions(repository=git_repo, path=git_path))

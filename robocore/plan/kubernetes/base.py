@@ -18,6 +18,7 @@ from typing import Any
 from robocore.config.model import DockerAccess, Robot
 from robocore.plan import discovery, naming
 from robocore.plan.containers import component_spec, discovery_spec
+from robocore.plan.fleet_release import baked_volumes
 from robocore.plan.kubernetes.names import discovery_service, discovery_workload, dump, k8s_name, logical_image
 from robocore.plan.kubernetes.pods import PodContext, daemon_set, headless_service
 from robocore.project import Project
@@ -68,12 +69,12 @@ def plan_base(project: Project, model: str) -> Base:
     out: dict[str, str] = {}
     resources: list[str] = []
 
-    def context(host: str, image: str, user_mounts: int = 0) -> PodContext:
+    def context(host: str, image: str, user_mounts: int = 0, baked: frozenset[str] = frozenset()) -> PodContext:
         arch = robot.host(host).arch.value
         images.add((base_repo, arch))
         return PodContext(model=model, arch=arch, image=image, wait_image=logical_image(base_repo, arch),
                           dds_config_map=DDS_CONFIG_MAP if files else None, discovery_names=names,
-                          advertised_names=advertised, user_mounts=user_mounts, deploy_roots=roots)
+                          advertised_names=advertised, user_mounts=user_mounts, deploy_roots=roots, baked=baked)
 
     for server in servers:
         spec = discovery_spec(view, server.index)
@@ -89,14 +90,15 @@ def plan_base(project: Project, model: str) -> Base:
     for component in robot.components:
         spec = component_spec(view, component)
         arch = robot.host(component.runs_on).arch.value
-        if component.image:
+        baked = frozenset(volume.split(":")[1] for volume in baked_volumes(component))
+        if component.image and not baked:
             image = spec.image
-        else:
+        else:  # a staged image, or a robot.yaml image that the fleet release's image extends with the baked files
             repo = naming.component_image(robot, project.name, component.name)
             images.add((repo, arch))
             image = logical_image(repo, arch)
         name = k8s_name(component.name)
-        ctx = context(component.runs_on, image, user_mounts=len(component.volumes))
+        ctx = context(component.runs_on, image, user_mounts=len(component.volumes), baked=baked)
         out[f"{name}.yaml"] = dump([daemon_set(name, spec, ctx)])
         resources.append(f"{name}.yaml")
     fields: dict[str, Any] = {"resources": resources}

@@ -16,6 +16,9 @@ The container itself (image, command, environment, IPC, devices, GPUs, privilege
 * **The process tree.** ``shareProcessNamespace`` makes the pod's pause process PID 1, which reaps
   orphans and lets the node handle SIGTERM, as Docker's ``--init`` does for robocore's components.
 * **ROS 1**: ``ROS_IP`` is the node's address (``status.hostIP``), for the TCPROS callbacks.
+* **Volumes**: the install tree and the read-only project volumes are in the fleet release's image, so the pod
+  mounts neither; a writable project volume is a folder under the host's mount root (made when missing), an
+  absolute one the host's own path.
 * **Devices**: ``privileged`` and a ``hostPath`` per device (a device cgroup rule has no pod form);
   GPUs: ``runtimeClassName: nvidia`` and every GPU visible, like ``--gpus all``.
 
@@ -65,6 +68,8 @@ class PodContext:
     user_mounts: int = 0  # how many of the spec's last mounts are robot.yaml ``volumes``
     #: The hosts' mount roots: a writable project volume is a folder robocore keeps there (made when missing).
     deploy_roots: tuple[str, ...] = ()
+    #: Container paths of the read-only project volumes, which the fleet release's image carries: not mounted.
+    baked: frozenset[str] = frozenset()
 
 
 def escape(text: str) -> str:
@@ -101,8 +106,8 @@ def _volumes(spec: ContainerSpec, context: PodContext) -> tuple[list[dict[str, A
         mounts.append(mount)
 
     for position, mount in enumerate(spec.mounts):
-        if mount.target == naming.CONTAINER_INSTALL:
-            continue  # the install tree is in the release image
+        if mount.target == naming.CONTAINER_INSTALL or (position >= user_start and mount.target in context.baked):
+            continue  # the install tree and the read-only project files are in the fleet release's image
         if mount.target == naming.CONTAINER_DDS:
             if context.dds_config_map is not None:
                 add({"configMap": {"name": context.dds_config_map}}, mount.target, True)

@@ -24,8 +24,9 @@ RESTART = ("a DaemonSet restarts every pod that stops; restart: {value} cannot b
            "unless-stopped (the default)")
 NAMED_VOLUME = ("a named Docker volume has no counterpart on a robot's cluster; use an absolute host path "
                 "(/var/lib/...:/data)")
-SYNCED_FILES = ("read-only project files come with each sync, and a Kubernetes pod runs only what its release "
-                "image holds; a hostPath copy of a synced tree is never exported: bake the files into the image")
+SYNCED_FILES = ("read-only project files reach a pod only inside a fleet release's image, and this tag has no "
+                "fleet release (images by tag are code-less; a hostPath copy of synced files is never exported): "
+                "run `release --fleet --tag V` first, or remove the volume")
 DEVICE_PERMISSIONS = ("a pod reaches devices only as privileged (read, write and mknod); permissions {value!r} "
                       "cannot be expressed: drop them")
 
@@ -55,8 +56,13 @@ def _name_problems(robot: Robot) -> Found:
     return found
 
 
-def problems(robot: Robot) -> Found:
-    """Every key of ``robot`` that the Kubernetes export cannot express, in file order, with the reason."""
+def problems(robot: Robot, *, fleet_images: bool = False) -> Found:
+    """Every key of ``robot`` that the Kubernetes export cannot express, in file order, with the reason.
+
+    ``fleet_images``: the pods run a fleet release's images (``release --fleet``), which carry each component's
+    read-only project volumes at their container paths; the pods then leave those volumes out
+    (:func:`~robocore.plan.fleet_release.baked_volumes`). Without them such a volume is refused: nothing would
+    put its files in the pod. A writable project volume is a folder of the robot's host either way."""
     found = _name_problems(robot)
     for index, component in enumerate(robot.components):
         where: KeyPath = ("components", index)
@@ -71,7 +77,8 @@ def problems(robot: Robot) -> Found:
         for number, volume in enumerate(component.volumes):
             source = volume.split(":")[0]
             if read_only_project_path(volume) is not None:
-                found.append(((*where, "volumes", number), SYNCED_FILES))
+                if not fleet_images:
+                    found.append(((*where, "volumes", number), SYNCED_FILES))
             elif not source.startswith("/") and not is_project_path(source):
                 found.append(((*where, "volumes", number), NAMED_VOLUME))
         for number, device in enumerate(component.devices):
