@@ -6,12 +6,14 @@ fleet of N robots in three waves (a canary, 10 %, the rest), each with a label. 
 1. **export**: ``robocore export kubernetes`` of the fleet into a new folder (planning and writing every file);
 2. **render**: ``kubectl kustomize`` of every robot's overlay, as each robot's controller renders its own
    folder, no network. kustomize's cost grows with the square of the objects of one render (the root
-   kustomization of 1000 robots, 12,000 objects, did not finish in 15 min here: 100 robots took 15 s of CPU,
-   200 took 49 s), and each ``kubectl`` costs ~0.1 s of CPU to start, so the overlays are rendered in batches of
-   :data:`BATCH` robots (a kustomization listing them, in a scratch folder), one batch per core at a time.
-   Measured here per batch of 1, 2, 5, 10, 20, 40 robots: 0.16, 0.23, 0.62, 0.81, 2.1, 4.9 s of CPU: ~10 is
-   cheapest. Every overlay reads its model's base again (kustomize keeps nothing between two resources): about
-   half of a robot's ~80 ms is that, the rest is the overlay's transformers;
+   kustomization of 1000 robots, 12,000 objects, did not finish in 15 min here; 100 robots took 10 s of CPU,
+   200 took 42 s), and each ``kubectl`` costs ~0.07 s of CPU to start, so the overlays are rendered in batches
+   of :data:`BATCH` robots (a kustomization listing them, in a scratch folder), one batch per core at a time.
+   Every overlay reads its model's base again (kustomize keeps nothing between two resources): about half of a
+   robot's time is that, the rest its transformers (namespace, labels and node pinning, images). At Go's default
+   ``GOGC=100`` a third of kustomize's CPU is its garbage collector, and more the bigger the batch (per robot, in
+   batches of 10, 20, 40: 80, 104, 123 ms); with ``GOGC=400`` (:data:`GOGC`, ~90-150 MB per render) it is
+   ~58 ms per robot for any batch of 5 to 40 robots. ``--gogc 100`` measures the default;
 3. **strict, base once**: ``kubernetes-validate --strict`` of every object of one robot's overlay, for
    Kubernetes 1.30 and the newest bundled (each model's base is validated once);
 4. **overlays change only ...**: every object of every robot compared with the same object of the first robot:
@@ -23,7 +25,7 @@ step prints its wall-clock seconds and the CPU seconds it used (this process and
 its wall-clock time to its goal (< 1 meets it): on a shared machine the CPU figure is the one that says what the
 step costs.
 
-    python bench/k8s_export.py [--robots 1000] [--keep DIR]
+    python bench/k8s_export.py [--robots 1000] [--keep DIR] [--gogc 400]
 """
 
 from __future__ import annotations
@@ -47,8 +49,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from k8s_checks import VERSIONS
 
 COMPONENTS = 8
-#: Robots per kustomize render: each render costs a start-up plus the square of its objects; ~10 is cheapest.
-BATCH = 10
+#: Robots per kustomize render: each render costs a start-up plus the square of its objects; 20 is cheapest here.
+BATCH = 20
+#: Go's GOGC for kustomize (its collector runs when the heap grows by this percentage; default 100).
+GOGC = 400
 #: Renders at a time: one per core.
 WORKERS = os.cpu_count() or 2
 ROBOT_YAML = """\
@@ -109,8 +113,9 @@ def cpu() -> float:
     return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
-def render_all(export: Path, scratch: Path) -> list[dict[str, Any]]:
-    """Every object of every robot's overlay, rendered :data:`BATCH` robots at a time, :data:`WORKERS` at once."""
+def render_all(export: Path, scratch: Path, gogc: int) -> list[dict[str, Any]]:
+    """Every object of every robot's overlay, rendered :data:`BATCH` robots at a time, :data:`WORKERS` at once,
+    kustomize with Go's ``GOGC=gogc``."""
     robots = sorted(p.name for p in (export / "robots").iterdir())
     batches = []
     for start in range(0, len(robots), BATCH):
@@ -120,10 +125,11 @@ def render_all(export: Path, scratch: Path) -> list[dict[str, Any]]:
         (folder / "kustomization.yaml").write_text(f"resources:\n{names}")
         batches.append(folder)
     prefix = ["unshare", "-n"] if shutil.which("unshare") else []
+    env = {**os.environ, "GOGC": str(gogc)}
 
     def render(folder: Path) -> str:
         argv = [*prefix, "kubectl", "kustomize", str(folder)]
-        return subprocess.run(argv, capture_output=True, text=True, check=True).stdout
+        return subprocess.run(argv, capture_output=True, text=True, check=True, env=env).stdout
 
     with ThreadPoolExecutor(WORKERS) as pool:
         texts = list(pool.map(render, batches))
@@ -134,6 +140,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", type=int, default=1000)
     parser.add_argument("--keep", type=Path, help="work in this folder and keep it")
+    parser.add_argument("--gogc", type=int, default=GOGC, help=f"Go's GOGC for kustomize (default {GOGC}; Go's "
+                        "own: 100)")
     args = parser.parse_args()
     work = args.keep or Path(tempfile.mkdtemp(prefix="robocore-k8s-bench-"))
     rows: list[tuple[str, float, float, str, float | None]] = []
@@ -149,9 +157,9 @@ def main() -> None:
         files = sum(1 for p in out.rglob("*") if p.is_file())
         rows.append(("export (new process)", export_s, export_c, f"{files} files", None))
         started, used = time.monotonic(), cpu()
-        docs = render_all(out, work / "batches")
+        docs = render_all(out, work / "batches", args.gogc)
         render_s, render_c = time.monotonic() - started, cpu() - used
-        rows.append((f"render (kubectl kustomize, {BATCH} robots a time)", render_s, render_c, f"{len(docs)} objects",
+        rows.append((f"render (kubectl kustomize, {BATCH} robots a render)", render_s, render_c, f"{len(docs)} objects",
                      None))
         rows.append(("export + render", export_s + render_s, export_c + render_c, "", 90.0))
         by_robot: dict[str, list[dict[str, Any]]] = {}
@@ -185,7 +193,7 @@ def main() -> None:
         if args.keep is None:
             shutil.rmtree(work, ignore_errors=True)
     print(f"robocore export kubernetes: {args.robots} robots x {COMPONENTS} components, {WORKERS} renders at a time, "
-          f"load average {os.getloadavg()[0]:.1f} at the end")
+          f"GOGC={args.gogc}, load average {os.getloadavg()[0]:.1f} at the end")
     print(f"{'step':48} {'wall s':>8} {'CPU s':>8}  {'what':>16}  {'goal':>8} {'wall/goal':>9}")
     for name, seconds, used_s, what, goal in rows:
         target = f"< {goal:.0f} s" if goal else ""

@@ -384,8 +384,8 @@ def rollback(c: Context, host: str | None = None, dry_run: bool = False) -> None
         "engine": "What to export for: kubernetes (kustomize, Rancher Fleet, Argo CD).",
         "path": "The folder to write: new, empty, or written by an earlier export (only its files are replaced).",
         "tag": "The release whose images the robots run (robocore release --tag V).",
-        "git_repo": "The git repository the GitOps controllers pull the folder from (Argo CD's repoURL).",
-        "git_path": "The folder's path inside that repository (default: its top).",
+        "git_repo": "The git repository the GitOps controllers pull from (default: fleet.yaml's gitops.repo).",
+        "git_path": "The folder's path inside that repository (default: fleet.yaml's gitops.path, else its top).",
         "model": "Another project (its robot.yaml and fleet.yaml) to export with this one; repeatable.",
         "dry_run": "Only list the files that would be written.",
         "json": "Machine-readable result on stdout.",
@@ -406,7 +406,7 @@ def export(c: Context, engine: str, path: str, tag: str | None = None, git_repo:
     folder = Path(path)
     models = [Path(m) for m in model or []]
     repository = _given(git_repo, "--git-repo")
-    inside = _given(git_path, "--git-path") or ""
+    inside = _given(git_path, "--git-path")
     _execute(options, lambda: command.export_kubernetes(options, folder, tag=_tag(tag), git_repo=repository,
                                                         git_path=inside, models=models))
 

@@ -96,8 +96,8 @@ def test_field_errors_name_the_fleet_file_line_and_key(robot: Robot) -> None:
         "fleet.yaml:11: robots[0].ros_domain_id: 300 is out of range (must be at most 232)",
         "fleet.yaml:20: rollout.health.heard[0]: 'chatter' is not a valid value here (expected an absolute ROS name "
         "such as /talker or /robot/chatter)",
-        "fleet.yaml:22: colour: unknown key 'colour'; did you mean 'rollout'? (allowed: engine, manager, registry, "
-        "robots, rollout)",
+        "fleet.yaml:22: colour: unknown key 'colour'; did you mean 'rollout'? (allowed: engine, gitops, manager, "
+        "registry, robots, rollout)",
     ]
 
 
@@ -170,7 +170,8 @@ def test_a_field_error_and_a_cross_check_are_reported_in_one_run(robot: Robot) -
 
 def test_the_top_level_must_be_a_mapping_and_yaml_errors_are_one_line(robot: Robot) -> None:
     assert refusal("- a\n- b\n", robot) == [
-        "fleet.yaml:1: top level must be a mapping of keys (engine, manager, registry, robots, rollout), got a list"]
+        "fleet.yaml:1: top level must be a mapping of keys (engine, gitops, manager, registry, robots, rollout), "
+        "got a list"]
     assert refusal("robots: [\n", robot)[0].startswith("fleet.yaml:2: YAML syntax error")
     assert "fleet.yaml:2: robots: this key appears twice" in refusal("robots: []\nrobots: []\n", robot)
 
@@ -222,3 +223,16 @@ def test_the_schema_agrees_with_the_model(edit: Any, valid: bool, robot: Robot) 
         assert not valid
     else:
         assert valid
+
+
+def test_gitops_names_the_repository_and_a_bad_url_is_one_line(robot: Robot) -> None:
+    fleet = parse_fleet_text(FLEET + "gitops: {repo: 'git@git.example.org:team/fleet.git', path: k8s/fleet}\n", robot)
+    assert fleet.gitops is not None
+    assert (fleet.gitops.repo, fleet.gitops.path) == ("git@git.example.org:team/fleet.git", "k8s/fleet")
+    assert parse_fleet_text(FLEET, robot).gitops is None
+    lines = refusal(FLEET + "gitops:\n  repo: https://bot:s3cret@git.example.org/fleet.git\n  path: ../up\n", robot)
+    assert [line.split(": ")[0:2] for line in lines] == [["fleet.yaml:23", "gitops.repo"],
+                                                         ["fleet.yaml:24", "gitops.path"]]
+    assert "password or token" in lines[0] and "s3cret" not in lines[0]
+    assert refusal(FLEET + "gitops: {repo: 'ftp://git.example.org/fleet'}\n", robot)[0].startswith(
+        "fleet.yaml:22: gitops.repo: must be a git repository URL")

@@ -3,6 +3,8 @@ robot with its master), exported, rendered, validated --strict; the controllers'
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -295,9 +297,6 @@ def test_read_only_project_volumes_come_in_the_fleet_image_and_are_not_mounted(t
 def test_read_only_project_volumes_without_a_fleet_release_are_refused_one_line(tmp_path: Path) -> None:
     """Images by tag are code-less: nothing would put the read-only files in the pod. The writable volume is not
     refused."""
-    import subprocess
-    import sys
-
     root = volumes_project(tmp_path, recorded=False)
     argv = [sys.executable, "-m", "robocore", "export", "kubernetes", str(tmp_path / "out"), "--tag", "v9"]
     done = subprocess.run(argv, capture_output=True, text=True, timeout=120, cwd=root)
@@ -306,3 +305,46 @@ def test_read_only_project_volumes_without_a_fleet_release_are_refused_one_line(
     assert line.startswith("error: robot.yaml:10: components[0].volumes[0]: ")
     assert "release --fleet --tag" in line
     assert not (tmp_path / "out").exists()
+
+
+def cli(project: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    """``robocore export kubernetes ARGS`` as a user runs it, in ``project``."""
+    argv = [sys.executable, "-m", "robocore", "export", "kubernetes", *args]
+    return subprocess.run(argv, capture_output=True, text=True, timeout=120, cwd=project)
+
+
+def repo_url(folder: Path) -> tuple[str, str]:
+    """The ApplicationSet's repoURL and the first robot's path."""
+    spec = yaml.safe_load((folder / "argocd" / "applicationset.yaml").read_text())["spec"]
+    return spec["template"]["spec"]["source"]["repoURL"], spec["generators"][0]["list"]["elements"][0]["path"]
+
+
+def test_the_repository_comes_from_fleet_yaml_or_the_option_and_a_placeholder_is_said(tmp_path: Path) -> None:
+    gitops = "gitops: {repo: 'git@git.example.org:team/fleet.git', path: k8s}\n"
+    amr = write(tmp_path / "amr", AMR, AMR_FLEET + gitops, ("driver", "perception"))
+    done = cli(amr, str(tmp_path / "a"), "--tag", "v2")
+    assert done.returncode == 0, done.stderr
+    assert repo_url(tmp_path / "a") == ("git@git.example.org:team/fleet.git", "k8s/robots/r1")
+    assert "placeholder" not in done.stderr
+    done = cli(amr, str(tmp_path / "b"), "--tag", "v2", "--git-repo", "https://git.example.org/other.git",
+               "--git-path", "fleet")
+    assert done.returncode == 0, done.stderr
+    assert repo_url(tmp_path / "b") == ("https://git.example.org/other.git", "fleet/robots/r1")
+    (amr / "fleet.yaml").write_text(AMR_FLEET)
+    done = cli(amr, str(tmp_path / "c"), "--tag", "v2")
+    assert done.returncode == 0, done.stderr
+    assert repo_url(tmp_path / "c")[0].endswith(".invalid/set-with--git-repo.git")
+    (warning,) = [line for line in done.stderr.splitlines() if line.startswith("warning:")]
+    assert "argocd/applicationset.yaml names no git repository (a placeholder" in warning and "--git-repo" in warning
+
+
+def test_a_bad_repository_option_is_one_line_and_nothing_is_written(tmp_path: Path) -> None:
+    amr = write(tmp_path / "amr", AMR, AMR_FLEET, ("driver", "perception"))
+    for args, shown in ((("--git-repo", "https://bot:s3cret@git.example.org/f.git"), "password or token"),
+                        (("--git-repo", "file:///srv/fleet"), "must be a git repository URL"),
+                        (("--git-path", "../elsewhere"), "no '.' or '..' part")):
+        done = cli(amr, str(tmp_path / "out"), "--tag", "v2", *args)
+        assert done.returncode == 2 and "Traceback" not in done.stderr
+        (line,) = [line for line in done.stderr.splitlines() if line.startswith("error:")]
+        assert line.startswith(f"error: {args[0]}: ") and shown in line and "s3cret" not in line
+        assert not (tmp_path / "out").exists()

@@ -28,6 +28,7 @@ from robocore.errors import ConfigError, Problem, UsageError
 from robocore.files import PRIVATE, write_tree
 from robocore.plan import naming
 from robocore.plan.kubernetes import ExportOptions, ImageRef, ImageSource, RobotTarget, plan_export, problems
+from robocore.plan.kubernetes.gitops import APPLICATION_SET
 from robocore.plan.kubernetes.names import is_dns_label, k8s_name
 from robocore.project import Project
 
@@ -174,20 +175,41 @@ def merged(groups: list[list[RobotTarget]]) -> list[RobotTarget]:
     return sorted(flat, key=lambda r: order[r.wave])
 
 
+def gitops_options(fleet: Fleet | None, git_repo: str | None, git_path: str | None) -> ExportOptions:
+    """Where the controllers pull the export from: ``--git-repo``/``--git-path``, else the fleet file's ``gitops``
+    (of the task's project); a bad option is a UsageError of one line."""
+    from robocore.config.values import git_folder, git_url
+
+    for option, value, check in (("--git-repo", git_repo, git_url), ("--git-path", git_path, git_folder)):
+        if value is not None:
+            try:
+                check(value)
+            except ValueError as error:
+                raise UsageError(f"{option}: {error}") from None
+    given = fleet.gitops if fleet is not None else None
+    repository = git_repo if git_repo is not None else (given.repo if given else None)
+    path = git_path if git_path is not None else (given.path if given else "")
+    return ExportOptions(repository=repository, path=path)
+
+
 def export_kubernetes(options: Options, folder: Path, *, tag: str | None, git_repo: str | None = None,
-                      git_path: str = "", models: list[Path] | None = None) -> Exported:
+                      git_path: str | None = None, models: list[Path] | None = None) -> Exported:
     """Export the project's robots (and those of ``models``) as kustomize and the GitOps controllers' files into
     ``folder``."""
     if tag is None:
         raise UsageError("export kubernetes needs --tag V: the release whose images the robots run",
                          hint="robocore release --tag v1, then robocore export kubernetes DIR --tag v1")
     loaded = load_models(options, list(models or []), tag)
+    gitops = gitops_options(loaded[0].fleet, git_repo, git_path)
     robots = merged([model_robots(model, tag) for model in loaded])
     projects = {model.name: model.project for model in loaded}
-    files = plan_export(projects, robots, loaded[0].name, ExportOptions(repository=git_repo, path=git_path))
+    files = plan_export(projects, robots, loaded[0].name, gitops)
     result = Exported(folder=str(folder), files=sorted(files), robots=[r.name for r in robots],
                       waves=list(dict.fromkeys(r.wave for r in robots)))
     report = options.report
+    if gitops.repository is None:
+        report.warn(f"{APPLICATION_SET} names no git repository (a placeholder that never syncs): give "
+                    "--git-repo URL, or gitops: {repo: URL} in fleet.yaml")
     if options.dry_run:
         report.notice(f"would write {len(files)} files into {folder} (robots: {', '.join(result.robots)})")
         for name in files:

@@ -25,6 +25,8 @@ from pydantic import AfterValidator, Field, ValidationError, model_validator
 from robocore.config.fleet_checks import FleetParts
 from robocore.config.model import DockerAccess, Host, Robot, Strict, TlsFiles
 from robocore.config.values import (
+    GitFolder,
+    GitUrl,
     HostAddress,
     Name,
     Number,
@@ -184,6 +186,15 @@ class Rollout(Strict):
     timeouts: Timeouts = Field(default_factory=Timeouts)
 
 
+class GitOps(Strict):
+    """Where the GitOps controllers pull the folder of `robocore export kubernetes` from (the kubernetes engine)."""
+
+    repo: GitUrl = Field(description="The git repository the export is committed to (Argo CD's repoURL), without "
+                         "credentials: the controllers keep those. `export kubernetes --git-repo` overrides it.")
+    path: GitFolder = Field(default="", description="The export folder's path inside that repository (default: its "
+                            "top). `export kubernetes --git-path` overrides it.")
+
+
 class Fleet(Strict):
     """A whole fleet: one fleet.yaml."""
 
@@ -194,6 +205,9 @@ class Fleet(Strict):
                                       "registry).")
     robots: list[FleetRobot] = Field(min_length=1, max_length=MAX_ROBOTS)
     rollout: Rollout = Field(default_factory=Rollout)
+    gitops: GitOps | None = Field(default=None, description="kubernetes engine: the git repository (and folder) the "
+                                  "GitOps controllers pull the export from; without it the Argo CD ApplicationSet "
+                                  "names a placeholder that never syncs.")
 
     def robot(self, name: str) -> FleetRobot:
         """The robot called ``name`` (KeyError if none)."""
@@ -243,7 +257,7 @@ def parse_fleet_text(text: str, robot: Robot, *, file: str = FLEET_FILE) -> Flee
 
     data, lines = read_yaml(text, file, kind=FLEET_FILE, schema_hint=FLEET_SCHEMA_COMMAND)
     if not isinstance(data, dict):
-        raise not_a_mapping(data, lines, file, "engine, manager, registry, robots, rollout")
+        raise not_a_mapping(data, lines, file, "engine, gitops, manager, registry, robots, rollout")
     problems = [problem(file, line, format_path(path), "this key appears twice") for path, line in lines.duplicates]
     fleet: Fleet | None = None
     try:

@@ -271,6 +271,50 @@ ImagePrefix = Annotated[str, AfterValidator(image_prefix), pattern_field(
 )]
 
 
+# --- git repositories (GitOps) ---------------------------------------------------------------------------
+
+_GIT_HOSTNAME = r"[A-Za-z0-9](?:[A-Za-z0-9.-]{0,251}[A-Za-z0-9])?"
+_GIT_HOST = rf"{_GIT_HOSTNAME}(?::[0-9]{{1,5}})?"
+_GIT_PATH = r"[A-Za-z0-9._~%+-]+(?:/[A-Za-z0-9._~%+-]+)*/?"
+#: A git repository URL a GitOps controller clones: ``https://host[:port]/path``, ``ssh://[user@]host[:port]/path``
+#: or scp-like ``user@host:path``. No credentials in it: the export is committed to git, and the controllers keep
+#: a repository's credentials in their own secrets.
+GIT_URL = (rf"(?=.{{1,2048}}$)(?:https?://{_GIT_HOST}/{_GIT_PATH}|ssh://(?:[A-Za-z0-9._-]+@)?{_GIT_HOST}/{_GIT_PATH}"
+           rf"|[A-Za-z0-9._-]+@{_GIT_HOSTNAME}:/?{_GIT_PATH})")
+#: A folder inside a git repository: relative, '/'-separated, no '.' or '..' part (empty: the top).
+_GIT_PART = r"(?!\.\.?(?:/|$))[A-Za-z0-9._~+-]+"
+GIT_FOLDER = rf"(?=.{{0,1024}}$)(?:{_GIT_PART}(?:/{_GIT_PART})*)?"
+
+
+def git_url(value: str) -> str:
+    """``value`` if it is a git repository URL a GitOps controller can clone (:data:`GIT_URL`), without
+    credentials."""
+    what = "a git repository URL such as https://git.example.com/team/fleet.git or git@git.example.com:team/fleet.git"
+    _refuse_common(value, what)
+    if re.match(r"[a-z+]+://[^/@]*:[^/@]*@", value):
+        raise ValueError(f"holds a password or token ({shown(value.split('@', 1)[1])}): give the controllers "
+                         "the repository's credentials, never the exported files (they are committed to git)")
+    if re.fullmatch(GIT_URL, value):
+        return value
+    raise ValueError(f"must be {what} (got {shown(value)})")
+
+
+def git_folder(value: str) -> str:
+    """``value`` if it is a folder inside a git repository (relative, no '.' or '..' part; empty: the top)."""
+    stripped = value.strip("/")
+    if re.fullmatch(GIT_FOLDER, stripped) and not has_control(value):
+        return value
+    raise ValueError(f"must be a relative folder of the repository such as fleet/k8s, with no '.' or '..' part "
+                     f"(got {shown(value)})")
+
+
+GitUrl = Annotated[str, AfterValidator(git_url), pattern_field(
+    GIT_URL, "A git repository URL (https://host/path, ssh://[user@]host/path or user@host:path), without "
+             "credentials.")]
+GitFolder = Annotated[str, AfterValidator(git_folder), pattern_field(
+    r"/*" + GIT_FOLDER + r"/*", "A folder inside the repository (relative, no '.' or '..' part; empty: its top).")]
+
+
 # --- packages -----------------------------------------------------------------------------------------
 
 #: A Debian package name with an optional ``=version`` or ``/release``.
