@@ -243,8 +243,7 @@ def test_a_recorded_fleet_release_is_exported_by_digest(tmp_path: Path) -> None:
 VOLUMES = """\
 ros_distro: jazzy
 registry: 10.0.0.2:5000
-hosts:
-  - {name: main, ip: 10.0.0.10}
+hosts: [{name: main, ip: 10.0.0.10}]
 components:
   - name: mapper
     folder: mapper
@@ -302,7 +301,7 @@ def test_read_only_project_volumes_without_a_fleet_release_are_refused_one_line(
     done = subprocess.run(argv, capture_output=True, text=True, timeout=120, cwd=root)
     assert done.returncode == 2 and "Traceback" not in done.stderr
     (line,) = [line for line in done.stderr.splitlines() if line.startswith("error:")]
-    assert line.startswith("error: robot.yaml:10: components[0].volumes[0]: ")
+    assert line.startswith("error: robot.yaml:9: components[0].volumes[0]: ")
     assert "release --fleet --tag" in line
     assert not (tmp_path / "out").exists()
 
