@@ -15,6 +15,7 @@ from k8s_checks import by_kind, render, validate
 
 from robocore.commands.context import Options
 from robocore.commands.export import export_kubernetes
+from robocore.plan.fleet_release import ReleaseRecord
 
 AMR = """\
 ros_distro: jazzy
@@ -216,8 +217,6 @@ def test_images_by_digest_per_arch(tmp_path: Path) -> None:
 
 def test_a_recorded_fleet_release_is_exported_by_digest(tmp_path: Path) -> None:
     """With ``release --fleet``'s record of the tag, every image is its digest for its host's arch."""
-    from robocore.plan.fleet_release import ReleaseRecord
-
     amr = write(tmp_path / "amr", AMR, AMR_FLEET, ("driver", "perception"))
     registry = "10.0.0.2:5000"
 
@@ -250,6 +249,7 @@ components:
     runs_on: main
     entrypoint: ros2 run mapper node
     volumes: ['./config/maps:/maps:ro', './data:/data', '/var/log/mapper:/logs']
+  - {name: viewer, image: 'example.org/viewer:1', runs_on: main, volumes: ['./config/maps:/maps:ro']}
 """
 VOLUMES_FLEET = """\
 engine: kubernetes
@@ -261,13 +261,12 @@ robots:
 def volumes_project(tmp_path: Path, *, recorded: bool) -> Path:
     """A robot whose component has a read-only project volume, a writable one and a host path; with ``recorded``,
     ``release --fleet --tag v9`` recorded its images (which then carry the read-only files)."""
-    from robocore.plan.fleet_release import ReleaseRecord
-
     root = write(tmp_path / "mapbot", VOLUMES, VOLUMES_FLEET, ("mapper", "config", "config/maps"))
     if recorded:
         ref = "10.0.0.2:5000/mapbot-{}@sha256:" + "5" * 64
         record = ReleaseRecord(version="v9", registry="10.0.0.2:5000",
-                               components={"mapper": {"amd64": ref.format("mapper")}},
+                               components={"mapper": {"amd64": ref.format("mapper")},
+                                           "viewer": {"amd64": ref.format("viewer")}},
                                base={"amd64": ref.format("base")})
         (root / ".robocore" / "releases").mkdir(parents=True)
         (root / ".robocore" / "releases" / "v9.json").write_text(record.to_json())
@@ -289,6 +288,9 @@ def test_read_only_project_volumes_come_in_the_fleet_image_and_are_not_mounted(t
     data = mounted["/data"]["hostPath"]  # writable: a folder of the host, under its mount root, made when missing
     assert data["type"] == "DirectoryOrCreate" and data["path"].endswith("/mapper/data")
     assert not any("config/maps" in v.get("hostPath", {}).get("path", "") for v in pod["volumes"])
+    viewer = by_kind(docs, "DaemonSet")["viewer"]["spec"]["template"]["spec"]  # robot.yaml's image, extended
+    assert viewer["containers"][0]["image"] == "10.0.0.2:5000/mapbot-viewer@sha256:" + "5" * 64
+    assert "/maps" not in [m["mountPath"] for m in viewer["containers"][0].get("volumeMounts", [])]
     for doc in docs:
         validate(doc)
 
@@ -300,9 +302,10 @@ def test_read_only_project_volumes_without_a_fleet_release_are_refused_one_line(
     argv = [sys.executable, "-m", "robocore", "export", "kubernetes", str(tmp_path / "out"), "--tag", "v9"]
     done = subprocess.run(argv, capture_output=True, text=True, timeout=120, cwd=root)
     assert done.returncode == 2 and "Traceback" not in done.stderr
-    (line,) = [line for line in done.stderr.splitlines() if line.startswith("error:")]
-    assert line.startswith("error: robot.yaml:9: components[0].volumes[0]: ")
-    assert "release --fleet --tag" in line
+    lines = [line for line in done.stderr.splitlines() if line.startswith("error:")]
+    assert [line.split(": ")[1:3] for line in lines] == [["robot.yaml:9", "components[0].volumes[0]"],
+                                                         ["robot.yaml:10", "components[1].volumes[0]"]]
+    assert all("release --fleet --tag" in line for line in lines)
     assert not (tmp_path / "out").exists()
 
 
@@ -333,8 +336,31 @@ def test_the_repository_comes_from_fleet_yaml_or_the_option_and_a_placeholder_is
     done = cli(amr, str(tmp_path / "c"), "--tag", "v2")
     assert done.returncode == 0, done.stderr
     assert repo_url(tmp_path / "c")[0].endswith(".invalid/set-with--git-repo.git")
+    (warning,) = [line for line in done.stderr.splitlines() if "applicationset" in line]
+    assert warning.startswith("warning: argocd/applicationset.yaml names no git repository (a placeholder")
+    assert "--git-repo" in warning
+
+
+def test_images_by_tag_are_said_to_hold_no_install_tree(tmp_path: Path) -> None:
+    """Without a fleet release record the images are the code-less ones of ``release --tag``: the export says
+    which components then lack their install tree; with a record it says nothing of the kind."""
+    amr = write(tmp_path / "amr", AMR, AMR_FLEET + "gitops: {repo: 'https://git.example.org/f.git'}\n",
+                ("driver", "perception"))
+    done = cli(amr, str(tmp_path / "a"), "--tag", "v9")
+    assert done.returncode == 0, done.stderr
     (warning,) = [line for line in done.stderr.splitlines() if line.startswith("warning:")]
-    assert "argocd/applicationset.yaml names no git repository (a placeholder" in warning and "--git-repo" in warning
+    assert "amr: release v9 has no fleet release record" in warning and "driver, perception" in warning
+    assert "release --fleet --tag v9" in warning
+    ref = "10.0.0.2:5000/amr-{}@sha256:" + "6" * 64
+    record = ReleaseRecord(version="v9", registry="10.0.0.2:5000",
+                           components={"driver": {"amd64": ref.format("driver")},
+                                       "perception": {"arm64": ref.format("perception")}},
+                           base={"amd64": ref.format("base"), "arm64": ref.format("base")})
+    (amr / ".robocore" / "releases").mkdir(parents=True)
+    (amr / ".robocore" / "releases" / "v9.json").write_text(record.to_json())
+    done = cli(amr, str(tmp_path / "b"), "--tag", "v9")
+    assert done.returncode == 0, done.stderr
+    assert "warning:" not in done.stderr
 
 
 def test_a_bad_repository_option_is_one_line_and_nothing_is_written(tmp_path: Path) -> None:

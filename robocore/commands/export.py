@@ -207,6 +207,12 @@ def export_kubernetes(options: Options, folder: Path, *, tag: str | None, git_re
     result = Exported(folder=str(folder), files=sorted(files), robots=[r.name for r in robots],
                       waves=list(dict.fromkeys(r.wave for r in robots)))
     report = options.report
+    for model in loaded:
+        codeless = [c.name for c in model.project.robot.components if c.has_workspace]
+        if codeless and not has_fleet_release(model.project, tag):
+            report.warn(f"{model.name}: release {tag} has no fleet release record, so its images are named by tag: "
+                        f"the code-less images of `release --tag`, without the install trees of {', '.join(codeless)}; "
+                        f"run `release --fleet --tag {tag}` for self-contained images by digest")
     if gitops.repository is None:
         report.warn(f"{APPLICATION_SET} names no git repository (a placeholder that never syncs): give "
                     "--git-repo URL, or gitops: {repo: URL} in fleet.yaml")
