@@ -44,6 +44,7 @@ from typing import Any
 
 import kubernetes_validate
 import yaml
+from harness import Figure, record
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from k8s_checks import VERSIONS
@@ -199,6 +200,12 @@ def main() -> None:
         target = f"< {goal:.0f} s" if goal else ""
         ratio = f"{seconds / goal:9.2f}" if goal else ""
         print(f"{name:48} {seconds:8.1f} {used_s:8.1f}  {what:>16}  {target:>8} {ratio}")
+    record("k8s_export", [Figure(name, seconds, "s", f"< {goal:.0f} s" if goal else None,
+                                 seconds / goal if goal else None, "wall / goal", seconds < goal if goal else None,
+                                 f"CPU {used_s:.1f} s" + (f"; {what}" if what else ""))
+                          for name, seconds, used_s, what, goal in rows],
+           goals=["export + render < 90 s", "strict validation of one robot + the overlay proof < 30 s"],
+           notes=[f"{args.robots} robots x {COMPONENTS} components, {WORKERS} renders at a time, GOGC={args.gogc}"])
 
 
 if __name__ == "__main__":
