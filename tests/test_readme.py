@@ -194,6 +194,35 @@ def test_every_section_cited_in_the_code_exists() -> None:
     assert problems == []
 
 
+#: A reference to a document that is not in the repository: a numbered seed or an issue number.
+OUTSIDE_REFERENCE = re.compile(r"seed 00\d|\bissue #?\d+", re.I)
+
+
+def outside_references(text: str) -> list[str]:
+    """The references in ``text`` to documents the repository does not hold (a reader cannot follow them)."""
+    return [match.group(0) for match in OUTSIDE_REFERENCE.finditer(text)]
+
+
+def test_a_reference_to_an_outside_document_is_found() -> None:
+    assert outside_references("the goal (Issue 37) of seed 002; see issue #12") == ["Issue 37", "seed 002", "issue #12"]
+    assert outside_references("an issue with 3 hosts; the seed examples") == []
+
+
+def test_no_file_refers_to_documents_outside_the_repository() -> None:
+    listed = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True)
+    found = []
+    for name in listed.stdout.split():
+        path = ROOT / name
+        if path == Path(__file__).resolve() or not path.is_file():
+            continue
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError:  # binary files
+            continue
+        found += [f"{name}: {ref}" for ref in outside_references(text)]
+    assert found == []
+
+
 def test_the_readme_stays_short() -> None:
     assert len(README.read_text(encoding="utf-8").splitlines()) < 250
 
