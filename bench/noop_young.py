@@ -10,7 +10,8 @@ A project made by ``robocore init --defaults`` (no image needed) answers ``valid
 
 Before this change no memo was recorded by a run that started within 2 s of a save: the next run took the
 ordinary path again, and so on until a run started with every file older than the window. The goal is a
-replay under 0.1 s at any file age; on a loaded machine compare the memo rows with bare start-up (same run).
+replay under 0.1 s at any file age; on a loaded machine compare the memo rows with bare start-up (same run), and
+the CPU time of each (the child's user + system time), which the load inflates less.
 
     python bench/noop_young.py [--runs N]
 """
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -30,14 +32,29 @@ from harness import Figure, record
 
 from robocore.commands import noop
 
+GOAL_S = 0.1
 
-def run(argv: list[str], cwd: Path, **env: str) -> float:
+
+def run(argv: list[str], cwd: Path, **env: str) -> tuple[float, float]:
+    """(wall-clock seconds, CPU seconds) of one run."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     done = subprocess.run(argv, cwd=cwd, env={**os.environ, **env}, capture_output=True, text=True)
     seconds = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if done.returncode != 0:
         sys.exit(f"{argv} failed: {done.stderr}")
-    return seconds
+    return seconds, after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime
+
+
+def medians(runs: list[tuple[float, float]]) -> tuple[float, float]:
+    return statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs)
+
+
+def row(label: str, figure: tuple[float, float], bare: float, mark: str = "") -> None:
+    seconds, cpu = figure
+    print(f"{label:44} {seconds:6.3f} s  {seconds / bare:5.2f}x bare  {seconds / GOAL_S:5.2f}x goal  "
+          f"CPU {cpu:6.3f} s  {cpu / GOAL_S:5.2f}x goal{mark}")
 
 
 def main() -> int:
@@ -45,18 +62,21 @@ def main() -> int:
     parser.add_argument("--runs", type=int, default=7)
     args = parser.parse_args()
     py = sys.executable
+    # robocore's byte code is written by the first run, as for any user (set, every run would compile the sources
+    # changed since the byte code was last written)
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
     validate = [py, "-m", "robocore", "validate"]
     with tempfile.TemporaryDirectory(prefix="robocore-bench-young-") as tmp:
         subprocess.run([py, "-m", "robocore", "init", "robot", "--defaults"], cwd=tmp, check=True, capture_output=True)
         root = Path(tmp) / "robot"
         robot = root / "robot.yaml"
         text = robot.read_bytes()
-        bare = statistics.median(run([py, "-c", "pass"], root) for _ in range(args.runs))
-        ordinary = statistics.median(run(validate, root, ROBOCORE_NO_MEMO="1") for _ in range(args.runs))
+        bare_row = medians([run([py, "-c", "pass"], root) for _ in range(args.runs)])
+        ordinary_row = medians([run(validate, root, ROBOCORE_NO_MEMO="1") for _ in range(args.runs)])
         time.sleep(noop.RACY_SECONDS + 0.5)
         run(validate, root)  # records the memo of old files
-        old = statistics.median(run(validate, root) for _ in range(args.runs))
-        young: list[tuple[float, float]] = []
+        old_row = medians([run(validate, root) for _ in range(args.runs)])
+        young: list[tuple[tuple[float, float], float]] = []
         for _ in range(args.runs):
             robot.write_bytes(text)  # saved again: new times, same content
             age = time.time() - robot.stat().st_mtime  # its age when the recording run starts
@@ -64,18 +84,17 @@ def main() -> int:
             young.append((run(validate, root), age))
         print(f"validate on {root} (median of {args.runs}; load average {os.getloadavg()[0]:.1f} on "
               f"{os.cpu_count()} cores: compare rows of this run)")
-        print(f"{'python -c pass':44} {bare:6.3f} s")
-        print(f"{'ordinary path (ROBOCORE_NO_MEMO=1)':44} {ordinary:6.3f} s  {ordinary / bare:5.2f}x bare")
-        print(f"{'memo, files older than the racy window':44} {old:6.3f} s  {old / bare:5.2f}x bare")
-        inside = [seconds for seconds, age in young if age < noop.RACY_SECONDS]
-        for seconds, age in young:
-            mark = "" if age < noop.RACY_SECONDS else "  (outside the window)"
-            label = f"memo recorded {age:.2f} s after a save"
-            print(f"{label:44} {seconds:6.3f} s  {seconds / bare:5.2f}x bare{mark}")
+        bare, ordinary, old = bare_row[0], ordinary_row[0], old_row[0]
+        row("python -c pass", bare_row, bare)
+        row("ordinary path (ROBOCORE_NO_MEMO=1)", ordinary_row, bare)
+        row("memo, files older than the racy window", old_row, bare)
+        inside = [figure for figure, age in young if age < noop.RACY_SECONDS]
+        for figure, age in young:
+            row(f"memo recorded {age:.2f} s after a save", figure, bare,
+                "" if age < noop.RACY_SECONDS else "  (outside the window)")
         if inside:
-            median = statistics.median(inside)
-            print(f"{'memo, young files (median of those inside)':44} {median:6.3f} s  {median / bare:5.2f}x bare")
-    young_median = statistics.median(inside) if inside else None
+            row("memo, young files (median of those inside)", medians(inside), bare)
+    young_median = medians(inside)[0] if inside else None
     record("noop_young", [
         Figure("python -c pass", bare, "s"),
         Figure("ordinary path (ROBOCORE_NO_MEMO=1)", ordinary, "s", ratio=ordinary / bare, ratio_of="x bare python"),

@@ -15,9 +15,12 @@ import contextlib
 import os
 import sys
 from collections.abc import Sequence
-from typing import Any
 
 from robocore import __version__
+
+TYPE_CHECKING = False  # typing's constant, without importing typing on the no-op memo's path (12M instructions)
+if TYPE_CHECKING:
+    from typing import Any
 
 PROJECT_FLAGS = ("-p", "--project")
 #: invoke core flags that take a separate value (``-f FILE``), so the value is not taken for a project.

@@ -163,6 +163,25 @@ def test_the_command_replays_validate_and_sees_an_edit(tmp_path: Path) -> None:
     assert broken.returncode != 0 and "unknown host 'nowhere'" in broken.stderr
 
 
+def test_a_replay_imports_only_what_it_needs(tmp_path: Path) -> None:
+    """A replay answers in a few tens of milliseconds because it imports neither robot.yaml's model nor invoke,
+    nor typing (about as much work as the whole snapshot); the ordinary run, the negative control, does."""
+    root = tmp_path / "robot"
+    root.mkdir()
+    (root / "robot.yaml").write_text("ros_distro: jazzy\nhosts:\n  - name: dev\n    ip: 127.0.0.1\n")
+    code = ("import sys\nsys.argv = ['robocore', 'validate']\nfrom robocore.cli import main\n"
+            "try:\n    main()\nfinally:\n    heavy = ('typing', 'pydantic', 'invoke', 'yaml')\n"
+            "    print('LOADED=' + ','.join(m for m in heavy if m in sys.modules))\n")
+
+    def loaded() -> str:
+        done = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=60)
+        assert done.returncode == 0, done.stderr
+        return done.stdout.strip().splitlines()[-1]
+
+    assert loaded() == "LOADED=typing,pydantic,invoke,yaml"  # the ordinary path, which records the memo
+    assert loaded() == "LOADED="
+
+
 def test_the_cli_asks_the_memo_about_every_memoised_task() -> None:
     from robocore import cli
 

@@ -41,9 +41,12 @@ import time
 from collections.abc import Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TextIO
 
 from robocore.commands.trees import MAX_YOUNG_BYTES, Snapshot, Untrusted, hash_file, inside, tree_digest
+
+TYPE_CHECKING = False  # typing's constant, without importing typing on the memo's path (12M instructions)
+if TYPE_CHECKING:
+    from typing import TextIO
 
 #: Tasks whose no-op is memoised, and whether their result depends on the local images.
 TASKS = {"validate": False, "stage": True, "build": True}
