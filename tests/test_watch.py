@@ -125,3 +125,70 @@ def test_a_costly_look_waits_in_proportion_so_watching_stays_a_fraction_of_a_cor
 def test_the_pause_has_a_ceiling() -> None:
     assert watch.poll_pause(10.0) == watch.POLL_MAX
     assert watch.poll_pause(10.0, 2.0) == 2.0  # a longer least pause asked for is kept
+
+
+def linked_project(tmp_path: Path) -> tuple[Path, Path, Path]:
+    """A project whose component folder holds links outside it (a folder, a file) and one inside it (a folder)."""
+    project, outside = tmp_path / "robot", tmp_path / "elsewhere"
+    (outside / "tree").mkdir(parents=True)
+    (outside / "tree" / "big.txt").write_text("outside")
+    (outside / "notes.txt").write_text("outside")
+    ws = project / "ws"
+    (project / "shared").mkdir(parents=True)
+    (project / "shared" / "lib.py").write_text("inside")
+    ws.mkdir()
+    (ws / "talker.py").write_text("v0")
+    (ws / "ext").symlink_to(outside / "tree", target_is_directory=True)  # a `cfg -> /root` a clone may carry
+    (ws / "notes").symlink_to(outside / "notes.txt")
+    (ws / "relative").symlink_to("../../elsewhere/tree", target_is_directory=True)
+    (ws / "shared").symlink_to("../shared", target_is_directory=True)  # inside: followed
+    return project, ws, outside
+
+
+def test_the_watch_never_reads_or_watches_outside_the_project_through_a_link(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import os
+
+    from robocore.commands import noop
+
+    project, ws, outside = linked_project(tmp_path)
+    looked: list[str] = []  # every path the look stats, lists or opens
+    for name in ("stat", "lstat", "scandir", "open", "listdir"):
+        real = getattr(os, name)
+
+        def spy(path: Any, *args: Any, _real: Any = real, **kwargs: Any) -> Any:
+            looked.append(os.fspath(path))
+            return _real(path, *args, **kwargs)
+
+        monkeypatch.setattr(os, name, spy)
+    before = noop.folders_digest([project / "robot.yaml", ws], project)
+    monkeypatch.undo()
+    assert looked
+    links = [str(ws / name) for name in ("ext", "notes", "relative")]
+    through = [p for p in looked if p.startswith(str(outside)) or any(p.startswith(link + "/") for link in links)]
+    assert through == []
+    # a change outside is not seen; the same change inside, through the inside link, is (the negative control)
+    (outside / "tree" / "big.txt").write_text("changed outside")
+    (outside / "tree" / "new.txt").write_text("added outside")
+    (outside / "notes.txt").write_text("changed outside too")
+    assert noop.folders_digest([project / "robot.yaml", ws], project) == before
+    (project / "shared" / "lib.py").write_text("changed inside")
+    assert noop.folders_digest([project / "robot.yaml", ws], project) != before
+
+
+def test_a_retargeted_link_and_a_linked_component_folder_count_by_the_link_itself(tmp_path: Path) -> None:
+    from robocore.commands import noop
+
+    project, ws, outside = linked_project(tmp_path)
+    linked_ws = project / "linked-ws"
+    linked_ws.symlink_to(outside / "tree", target_is_directory=True)
+    before = noop.folders_digest([ws, linked_ws], project)
+    (outside / "tree" / "big.txt").write_text("changed outside")
+    assert noop.folders_digest([ws, linked_ws], project) == before  # nothing behind the linked folder is watched
+    (ws / "ext").unlink()
+    (ws / "ext").symlink_to(outside, target_is_directory=True)
+    retargeted = noop.folders_digest([ws, linked_ws], project)
+    assert retargeted != before
+    linked_ws.unlink()
+    linked_ws.symlink_to(outside, target_is_directory=True)
+    assert noop.folders_digest([ws, linked_ws], project) != retargeted

@@ -68,15 +68,16 @@ IMAGES_LABEL = "dev.robocore.inputs"
 DISABLE = "ROBOCORE_NO_MEMO"
 
 
-def folders_digest(folders: Sequence[Path]) -> str:
-    """A digest of every entry of ``folders`` (as the memo's snapshot lists them, symlinked folders followed; a
-    missing folder counts as missing): any save, even of identical content, changes it. The dev loop watches
-    with it."""
+def folders_digest(folders: Sequence[Path], boundary: Path) -> str:
+    """A digest of every entry of ``folders`` (as the memo's snapshot lists them; a missing folder counts as
+    missing): any save, even of identical content, changes it. The dev loop watches with it. Symlinked folders
+    inside ``boundary`` (the project) are followed; a link leading outside counts by its own row only, never
+    followed, so nothing outside the project is read or watched through a link."""
     digest = hashlib.sha256()
     for folder in folders:
         digest.update(f"{folder}\0".encode())
         try:
-            tree_digest(folder, SKIPPED, digest)
+            tree_digest(folder, SKIPPED, digest, boundary=boundary, stop_at_boundary=True)
         except OSError:
             digest.update(b"\0missing")
     return digest.hexdigest()

@@ -52,7 +52,15 @@ def inside(real: str, boundary: str) -> bool:
     return real == boundary or real.startswith(boundary.rstrip("/") + "/")
 
 
-def tree_rows(root: Path, skipped: Sequence[str] = (), *, boundary: Path | None = None,
+def leads_outside(path: str, fence: str) -> bool:
+    """True when the symlink at ``path`` resolves outside the resolved folder ``fence``. Said from the link's own
+    text where that names a place outside (``cfg -> /root``: nothing outside is touched), else from its resolved
+    path (a chain of links, which ``realpath`` follows by their metadata)."""
+    named = os.path.normpath(os.path.join(os.path.realpath(os.path.dirname(path)), os.readlink(path)))
+    return not inside(named, fence) or not inside(os.path.realpath(path), fence)
+
+
+def tree_rows(root: Path, skipped: Sequence[str] = (), *, boundary: Path | None = None, stop_at_boundary: bool = False,
               ) -> Iterator[tuple[str, os.stat_result, str | None, os.stat_result | None]]:
     """``(relative path, lstat, link target or None, stat or None when broken)`` of every entry under ``root``,
     each folder once; ``skipped`` entries (relative paths) and Python's ``__pycache__`` folders are left out.
@@ -60,7 +68,9 @@ def tree_rows(root: Path, skipped: Sequence[str] = (), *, boundary: Path | None 
     Symlinked folders are walked when they resolve inside ``boundary`` (the project; None: anywhere). A symlink
     resolving to a folder outside it raises :class:`Untrusted` at once: the walk never leaves the project, and a
     link to a huge tree costs one ``realpath``. A symlink to anything else outside is listed with its target's
-    stat (metadata only: nothing outside is opened)."""
+    stat (metadata only: nothing outside is opened). With ``stop_at_boundary`` (the dev loop's watch), a symlink
+    leading outside, to a folder or anything else, is listed as a link (its own lstat and its text, its "stat" the
+    lstat) and neither followed nor looked at through: nothing outside is watched."""
     fence = None if boundary is None else os.path.realpath(boundary)
     seen: set[tuple[int, int]] = set()
     pending = [(str(root), "")]
@@ -83,6 +93,9 @@ def tree_rows(root: Path, skipped: Sequence[str] = (), *, boundary: Path | None 
             st: os.stat_result | None = lst
             if stat.S_ISLNK(lst.st_mode):
                 link = os.readlink(path)
+                if stop_at_boundary and fence is not None and leads_outside(path, fence):
+                    yield rel, lst, link + "\0outside", lst
+                    continue
                 try:
                     st = os.stat(path)
                 except OSError:
@@ -115,15 +128,24 @@ def hash_file(path: str, budget: list[int]) -> str:
 
 
 def tree_digest(root: Path, skipped: Sequence[str], into: hashlib._Hash, *, boundary: Path | None = None,
-                 young_after: float | None = None, young: dict[str, str] | None = None, tag: str = "",
-                 budget: list[int] | None = None) -> None:
-    """Feed ``into`` the stat rows of everything under ``root`` (:func:`tree_rows`); with ``young``, hash into it
+                 stop_at_boundary: bool = False, young_after: float | None = None, young: dict[str, str] | None = None,
+                 tag: str = "", budget: list[int] | None = None) -> None:
+    """Feed ``into`` the stat rows of everything under ``root`` (:func:`tree_rows`, ``stop_at_boundary`` too: then
+    a ``root`` that is itself a link leading outside counts by its own row only); with ``young``, hash into it
     (``tag`` + relative path -> sha256) every regular file changed at or after ``young_after``, within ``budget``
     bytes (shared between calls) and :data:`MAX_YOUNG_FILES` files, else :class:`Untrusted`."""
-    into.update(_stat_row(".", os.stat(root), None).encode())
     fence = os.path.realpath(boundary) if boundary is not None else None
+    if stop_at_boundary and fence is not None and not inside(os.path.realpath(root), fence):
+        # a link leading outside: its own row (a retargeted link is seen), nothing behind it; a path through a
+        # linked folder above it: not even that (its lstat would be of something outside)
+        if inside(os.path.realpath(os.path.dirname(root)), fence) and os.path.islink(root):
+            into.update(_stat_row(".\0outside", os.lstat(root), os.readlink(root)).encode())
+        else:
+            into.update(f"{root}\0outside\n".encode())
+        return
+    into.update(_stat_row(".", os.stat(root), None).encode())
     budget = [MAX_YOUNG_BYTES] if budget is None else budget
-    for rel, lst, link, target in tree_rows(root, skipped, boundary=boundary):
+    for rel, lst, link, target in tree_rows(root, skipped, boundary=boundary, stop_at_boundary=stop_at_boundary):
         if rel == STATE_DIR and stat.S_ISDIR(lst.st_mode):
             continue  # made with the first memo: its entries count, its own row would spoil that memo
         st = lst

@@ -91,7 +91,7 @@ def dev(options: Options, *, component: str | None, say: Callable[[str], None] =
         deploy(options.project_dir, selected, quiet=options.quiet, say=say, dry_run=True)
         return
     paths = watched(options, component)
-    current = noop.folders_digest(paths)
+    current = noop.folders_digest(paths, options.project_dir)
     deploy(options.project_dir, selected, quiet=options.quiet, say=say)
     say("dev: watching " + ", ".join(str(p) for p in paths) + " (Ctrl-C stops)")
     done = 0
@@ -99,13 +99,13 @@ def dev(options: Options, *, component: str | None, say: Callable[[str], None] =
     while rounds is None or done < rounds:
         time.sleep(pause)
         looked = time.monotonic()
-        seen = noop.folders_digest(paths)
+        seen = noop.folders_digest(paths, options.project_dir)
         pause = poll_pause(time.monotonic() - looked, poll)
         if seen == current:
             continue
         while True:  # coalesce: wait until the files stay the same for `settle` seconds
             time.sleep(settle)
-            later = noop.folders_digest(paths)
+            later = noop.folders_digest(paths, options.project_dir)
             if later == seen:
                 break
             seen = later
