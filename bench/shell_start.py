@@ -17,7 +17,9 @@ from pathlib import Path
 
 from harness import Figure, record
 
-CANDIDATES = ("robocore/debian:bookworm", "debian:bookworm", "robocore-test/debian:bookworm")
+#: Debian 12 images, the first one present is used (the Debian roots robocore makes for its bases come first).
+CANDIDATES = ("robocore/amd64/debian:bookworm-wheels", "robocore/amd64/debian:bookworm-debian",
+              "robocore/debian:bookworm", "debian:bookworm", "robocore-test/debian:bookworm")
 ROUNDS = 5
 
 
