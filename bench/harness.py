@@ -86,6 +86,8 @@ def record(name: str, figures: Iterable[Figure], *, goals: Sequence[str] = (), n
     """
     if not (BENCH / f"{name}.py").is_file():
         raise ValueError(f"{name}: no bench/{name}.py")
+    if os.environ.get("PYTHONDONTWRITEBYTECODE"):
+        notes = [*notes, "PYTHONDONTWRITEBYTECODE was set: modules without bytecode were compiled on every start"]
     main = sys.modules.get("__main__")
     doc = (getattr(main, "__doc__", None) or "").strip()
     result = {
