@@ -55,6 +55,7 @@ def test_record_writes_the_command_the_machine_and_the_figures(tmp_path: Path) -
                       'record("startup", [Figure("a", 0.25, "s", "< 0.3 s", 0.5, "x bare", True, "d"), '
                       'Figure("b", "none")], goals=["g"], notes=["n"])\n')
     env = {**os.environ, "PYTHONPATH": str(ROOT / "bench"), "ROBOCORE_BENCH_RESULTS": str(tmp_path / "out")}
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     done = subprocess.run([sys.executable, str(script), "--runs", "3"], capture_output=True, text=True, env=env,
                           timeout=60)
     assert done.returncode == 0, done.stderr
@@ -68,6 +69,10 @@ def test_record_writes_the_command_the_machine_and_the_figures(tmp_path: Path) -
     assert run["figures"] == [{"label": "a", "value": 0.25, "unit": "s", "goal": "< 0.3 s", "ratio": 0.5,
                                "ratio_of": "x bare", "met": True, "detail": "d"}, {"label": "b", "value": "none"}]
     assert not (RESULTS / ".startup.json.partial").exists()
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60,
+                          env={**env, "PYTHONDONTWRITEBYTECODE": "1"})  # start-up figures without bytecode
+    assert done.returncode == 0, done.stderr
+    assert json.loads((tmp_path / "out" / "startup.json").read_text())["notes"][1].startswith("PYTHONDONTWRITEBYTECODE")
 
 
 def test_record_refuses_a_name_that_is_no_bench_script(tmp_path: Path) -> None:
