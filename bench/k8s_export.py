@@ -13,7 +13,7 @@ fleet of N robots in three waves (a canary, 10 %, the rest), each with a label. 
    robot's time is that, the rest its transformers (namespace, labels and node pinning, images). At Go's default
    ``GOGC=100`` a third of kustomize's CPU is its garbage collector, and more the bigger the batch (per robot, in
    batches of 10, 20, 40: 80, 104, 123 ms); with ``GOGC=400`` (:data:`GOGC`, ~90-150 MB per render) it is
-   ~58 ms per robot for any batch of 5 to 40 robots. ``--gogc 100`` measures the default;
+   56-68 ms per robot for any batch of 5 to 40 robots. ``--gogc 100`` measures the default;
 3. **strict, base once**: ``kubernetes-validate --strict`` of every object of one robot's overlay, for
    Kubernetes 1.30 and the newest bundled (each model's base is validated once);
 4. **overlays change only ...**: every object of every robot compared with the same object of the first robot:
