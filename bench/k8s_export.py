@@ -212,7 +212,7 @@ def main() -> None:
                                  seconds / goal if goal else None, "wall / goal", seconds < goal if goal else None,
                                  f"CPU {used_s:.1f} s" + (f"; {what}" if what else ""))
                           for name, seconds, used_s, what, goal in rows],
-           goals=["export + render < 90 s", "strict validation of one robot + the overlay proof < 30 s"],
+           goals=["export + render < 90 s", "parse + strict validation of one robot + the overlay proof < 30 s"],
            notes=[f"{args.robots} robots x {COMPONENTS} components, {WORKERS} renders at a time, GOGC={args.gogc}"])
 
 
