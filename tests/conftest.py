@@ -8,12 +8,12 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
+from robocore.project import Project
+
 # Hypothesis' per-example deadline (200 ms) is a timing assertion: on a loaded machine it fails tests whose
 # behaviour is right. Speed is measured in bench/, so no property test here has a deadline.
 settings.register_profile("robocore", deadline=None)
 settings.load_profile("robocore")
-
-from robocore.project import Project
 
 MakeProject = Callable[..., Path]
 

@@ -1,8 +1,9 @@
 """``.ci/run`` stops itself before CI's limit, and the stopped run still shows its progress and slowest tests.
 
 The real ``.ci/run`` and ``noxfile.py`` run in a copy of the repository's layout whose ``scripts/test`` is a
-stand-in running nox's integration session on two small tests: one passes, one sleeps past a 15-second limit (long enough
-for nox and pytest to start on a loaded machine: with 4 s, a busy one was stopped while pytest was still importing).
+stand-in running nox's integration session on two small tests: one passes, one sleeps past a 15-second limit
+(long enough for nox and pytest to start on a loaded machine: with 4 s, a busy one was stopped while pytest was
+still importing).
 """
 
 from __future__ import annotations
