@@ -39,7 +39,15 @@ import docker  # noqa: E402
 from deploy_helpers import wait_for  # noqa: E402
 from local_registry import serve_registry  # noqa: E402
 from robot_host.hosts import RobotFleet  # noqa: E402
-from swarm_fleet import cut, listener_lines, make_project, make_releases, prepull  # noqa: E402
+from swarm_fleet import (  # noqa: E402
+    cut,
+    listener_lines,
+    make_project,
+    make_releases,
+    prepull,
+    remove_pushed_tags,
+    write_records,
+)
 
 ROBOTS = 10
 NAME = "robocore-it-benchfleet"
@@ -103,9 +111,10 @@ def main() -> None:
         with serve_registry(hosts, parent / "registry-data") as registry:
             waves = [{"name": "canary", "robots": ["r1"]}, {"name": "half", "percent": 50}, {"name": "rest"}]
             project = make_project(demo, parent, NAME, hosts, registry, waves=waves)
-            make_releases(client, demo, project, registry, parent / "contexts",
-                          {"v1": "same", "v2": "v2", "v3": "crash"})
-            prepull(hosts, project, "v1")
+            records = make_releases(client, demo, NAME, registry, parent / "contexts",
+                                    {"v1": "same", "v2": "v2", "v3": "crash"})
+            write_records(project, records)
+            prepull(hosts, json.loads(records["v1"])["base"]["amd64"], range(1, ROBOTS + 1))
             robocore(project, "fleet", "join")
             took, out = timed(project, "fleet", "rollout", "v1")
             table.append(("v1 to 10 robots (first release)", f"{took:.1f}", waves_gate(out)))
@@ -136,6 +145,7 @@ def main() -> None:
                           f"{worker_cpu:.1f} % CPU"))
             table.append(("dockerd of a plain daemon (nothing running)", f"{plain_rss:.0f} MiB",
                           f"{plain_cpu:.1f} % CPU"))
+            remove_pushed_tags(client, registry)
     client.close()
     width = max(len(r[0]) for r in table)
     print(f"{'fleet of 10 robots on Swarm':<{width}}  {'seconds':>8}  notes")

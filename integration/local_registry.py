@@ -32,7 +32,6 @@ def serve_registry(fleet: RobotFleet | None, folder: Path) -> Iterator[str]:
     config.write_text(f"version: 0.1\nstorage:\n  filesystem:\n    rootdirectory: {folder / 'data'}\n"
                       f"http:\n  addr: 127.0.0.1:{port}\nlog:\n  level: warn\n")
     server = subprocess.Popen([binary, "serve", str(config)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    tunnels = []
 
     def serving() -> bool:
         with contextlib.suppress(OSError), urllib.request.urlopen(f"http://127.0.0.1:{port}/v2/", timeout=2):
@@ -41,23 +40,35 @@ def serve_registry(fleet: RobotFleet | None, folder: Path) -> Iterator[str]:
 
     try:
         assert wait_for(serving, 30, interval=0.2), f"docker-registry did not answer on 127.0.0.1:{port}"
-        hosts = fleet.hosts if fleet is not None else []
-        for host in hosts:
+        with contextlib.ExitStack() as stack:
+            if fleet is not None:
+                stack.enter_context(registry_tunnels(fleet, f"127.0.0.1:{port}"))
+            yield f"127.0.0.1:{port}"
+    finally:
+        server.kill()
+        server.wait()
+
+
+@contextlib.contextmanager
+def registry_tunnels(fleet: RobotFleet, address: str) -> Iterator[None]:
+    """Make the registry at ``address`` (``127.0.0.1:PORT`` on this machine) the same address on every host of
+    ``fleet``: one ssh reverse tunnel each, up when this returns, closed afterwards."""
+    port = address.rsplit(":", 1)[1]
+    tunnels = []
+    try:
+        for host in fleet.hosts:
             tunnels.append(subprocess.Popen(
                 ["ssh", "-F", str(fleet.ssh_config), "-N", "-o", "ExitOnForwardFailure=yes",
                  "-R", f"{port}:127.0.0.1:{port}", f"root@{host.ip}"], stdin=subprocess.DEVNULL))
         probe = ["sh", "-c", '"$@" && echo up || true', "sh", "bash", "-c", f"exec 3<>/dev/tcp/127.0.0.1/{port}"]
-        for host in hosts:
-            assert fleet is not None
+        for host in fleet.hosts:
             assert wait_for(lambda h=host: h.ssh(fleet, *probe).strip() == "up", 20, interval=0.3), \
                 f"registry tunnel to {host.name} did not come up"
-        yield f"127.0.0.1:{port}"
+        yield
     finally:
         for tunnel in tunnels:
             tunnel.kill()
             tunnel.wait()
-        server.kill()
-        server.wait()
 
 
 def manifest(registry: str, repo: str, reference: str) -> dict[str, Any]:

@@ -1,19 +1,26 @@
-"""A fleet of the demo project on Docker-in-Docker robot hosts: its project folder and its releases.
+"""Fleets of the demo project on Docker-in-Docker robot hosts: their project folders and their releases.
 
 Shared by ``test_fleet_swarm.py`` and ``bench/fleet.py``. Host 0 of a :class:`RobotFleet` is the Swarm manager
 (a DinD host of its own: a manager's advertise address may not be loopback, and this machine's daemon is shared);
-hosts 1..N are the robots r1..rN, each a one-host robot of the demo project (discovery server, talker, listener).
+the other hosts are robot hosts. A project's robots are all of one model (its robot.yaml):
+
+- one host (``robot``): discovery server, talker and listener on it;
+- two hosts (``main``: discovery server and talker; ``aux``: listener), so the listener hears the talker across
+  the robot's own network, through the robot's own discovery server.
 
 Releases are self-contained images (the demo's component image plus its install tree at /robocore/install, what
 ``release --fleet`` makes) pushed to the registry every host reaches as the same 127.0.0.1:PORT, and written as
-release records ``.robocore/releases/V.json`` naming each image by digest.
+release records ``.robocore/releases/V.json`` naming each image by digest. Every project of a test gets the same
+records: the images do not depend on where a component runs.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shutil
-from collections.abc import Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -25,30 +32,39 @@ from robot_host.hosts import RobotFleet
 TALKER_PY = "demo_talker/lib/python3.11/site-packages/demo_talker/talker.py"
 #: The release variants: the demo as built, a talker that says "v2", a talker that exits 3 at start.
 VARIANTS = ("same", "v2", "crash")
+#: The hosts of a robot of one host, and of two (the first runs the discovery server and the talker).
+ONE_HOST = ("robot",)
+TWO_HOSTS = ("main", "aux")
 
 
 def make_project(demo: Path, parent: Path, name: str, hosts: RobotFleet, registry: str, *,
-                 waves: Sequence[dict[str, Any]], running: int = 3, robot_timeout: int = 90) -> Path:
-    """The demo project as a fleet of ``len(hosts.hosts) - 1`` one-host robots (r1..rN) managed by host 0."""
+                 waves: Sequence[dict[str, Any]], robots: Mapping[str, Sequence[int]] | None = None,
+                 running: int = 3, robot_timeout: int = 90, wave_timeout: int = 600) -> Path:
+    """The demo project as a fleet managed by host 0: ``robots`` maps each robot's name to the indexes of its hosts
+    in ``hosts`` (all robots with the same number of hosts: one robot.yaml); by default r1..rN, one host each."""
+    if robots is None:
+        robots = {f"r{i}": (i,) for i in range(1, len(hosts.hosts))}
+    (count,) = {len(indexes) for indexes in robots.values()}
+    names = ONE_HOST if count == 1 else TWO_HOSTS
 
     def edit(data: dict[str, Any]) -> None:
-        data["hosts"] = [{"name": "robot", "ip": "192.0.2.10", "user": "root"}]
-        data["discovery"] = {"servers": [{"host": "robot", "port": 11811}], "transport": "shm"}
+        data["hosts"] = [{"name": host, "ip": f"192.0.2.{10 + i}", "user": "root"} for i, host in enumerate(names)]
+        data["discovery"] = {"servers": [{"host": names[0], "port": 11811}], "transport": "shm"}
         for component in data["components"]:
-            component["runs_on"] = "robot"
+            component["runs_on"] = names[-1] if component["name"] == "listener" else names[0]
 
     root = copy_project(demo, parent, name, edit=edit)
-    count = len(hosts.hosts) - 1
     fleet = {
         "engine": "swarm",
         "manager": {"ip": hosts.hosts[0].ip, "user": "root"},
         "registry": registry,
-        "robots": [{"name": f"r{i}", "labels": {"site": "a" if i <= count // 2 else "b"},
-                    "hosts": {"robot": {"ip": hosts.hosts[i].ip}}} for i in range(1, count + 1)],
+        "robots": [{"name": robot, "labels": {"site": "a" if i < len(robots) // 2 else "b"},
+                    "hosts": {host: {"ip": hosts.hosts[index].ip} for host, index in zip(names, indexes, strict=True)}}
+                   for i, (robot, indexes) in enumerate(robots.items())],
         "rollout": {
             "waves": list(waves),
             "health": {"running": running, "nodes": ["/talker", "/listener"], "heard": ["/chatter"]},
-            "timeouts": {"robot": robot_timeout, "wave": 600},
+            "timeouts": {"robot": robot_timeout, "wave": wave_timeout},
         },
     }
     (root / "fleet.yaml").write_text(yaml.safe_dump(fleet, sort_keys=False))
@@ -65,18 +81,30 @@ def _push(docker_client: Any, ref: str) -> str:
     return str(digests[0])
 
 
-def make_releases(docker_client: Any, demo: Path, root: Path, registry: str, contexts: Path,
-                  versions: dict[str, str]) -> None:
-    """Push each release of ``versions`` (version -> variant of :data:`VARIANTS`) and write its record."""
-    name = root.name
+def push_base(docker_client: Any, name: str, registry: str) -> str:
+    """Push the demo's base image (what discovery servers and the health probe run) as ``name``'s; its digest
+    reference."""
     base_ref = f"{registry}/{name}-base:fleet"
     docker_client.images.get("robocore-it-demo-base:latest").tag(base_ref)
-    base = _push(docker_client, base_ref)
-    records = root / ".robocore" / "releases"
-    records.mkdir(parents=True, exist_ok=True)
+    return _push(docker_client, base_ref)
+
+
+def make_releases(docker_client: Any, demo: Path, name: str, registry: str, contexts: Path,
+                  versions: dict[str, str], base: str | None = None) -> dict[str, str]:
+    """Push each release of ``versions`` (version -> variant of :data:`VARIANTS`) under ``name``'s repositories,
+    with ``base`` (:func:`push_base`'s reference; pushed here when None); version -> its release record (the
+    file's text, see :func:`write_records`)."""
+    if base is None:
+        base = push_base(docker_client, name, registry)
+    records = {}
+    built: dict[tuple[str, str], str] = {}  # (component, variant) -> pushed: the listener is the same in each
     for version, variant in versions.items():
         refs = {}
         for component in ("talker", "listener"):
+            same = built.get((component, variant if component == "talker" else "same"))
+            if same is not None:
+                refs[component] = same
+                continue
             context = contexts / f"{component}-{version}"
             shutil.rmtree(context, ignore_errors=True)
             shutil.copytree(demo / ".robocore" / "build" / component / "install", context / "install", symlinks=True)
@@ -89,10 +117,30 @@ def make_releases(docker_client: Any, demo: Path, root: Path, registry: str, con
                                                 "COPY install /robocore/install\n")
             ref = f"{registry}/{name}-{component}:{version}"
             docker_client.images.build(path=str(context), tag=ref, rm=True)
-            refs[component] = _push(docker_client, ref)
-        record = {"format": 1, "version": version, "registry": registry,
-                  "components": {c: {"amd64": r} for c, r in refs.items()}, "base": {"amd64": base}}
-        (records / f"{version}.json").write_text(json.dumps(record))
+            refs[component] = built[(component, variant if component == "talker" else "same")] = \
+                _push(docker_client, ref)
+        records[version] = json.dumps({"format": 1, "version": version, "registry": registry,
+                                       "components": {c: {"amd64": r} for c, r in refs.items()},
+                                       "base": {"amd64": base}})
+    return records
+
+
+def write_records(root: Path, records: Mapping[str, str]) -> None:
+    """Write ``records`` (version -> text) as project ``root``'s release records."""
+    folder = root / ".robocore" / "releases"
+    folder.mkdir(parents=True, exist_ok=True)
+    for version, text in records.items():
+        (folder / f"{version}.json").write_text(text)
+        (folder / f"{version}.json").chmod(0o600)
+
+
+def remove_pushed_tags(docker_client: Any, registry: str) -> None:
+    """Remove this machine's tags under ``registry`` (what :func:`make_releases` built and pushed)."""
+    for image in docker_client.images.list():
+        for tag in image.tags:
+            if tag.startswith(f"{registry}/"):
+                with contextlib.suppress(Exception):
+                    docker_client.images.remove(tag)
 
 
 def cut(hosts: RobotFleet, index: int, cut_off: bool) -> None:
@@ -105,21 +153,25 @@ def cut(hosts: RobotFleet, index: int, cut_off: bool) -> None:
         assert code == 0, out
 
 
-def listener_lines(hosts: RobotFleet, index: int, project: str) -> list[str]:
-    """What robot ``index``'s listener printed lately, read on its host (not through the manager)."""
-    service = f"{project}-r{index}-listener"
+def listener_lines(hosts: RobotFleet, index: int, project: str, robot: str | None = None) -> list[str]:
+    """What ``robot``'s listener (default: robot ``r<index>``), on host ``index``, printed lately, read on that
+    host (not through the manager)."""
+    service = f"{project}-{robot or f'r{index}'}-listener"
     out = hosts.hosts[index].ssh(hosts, "sh", "-c", f"docker ps -q --filter label=com.docker.swarm.service.name="
                                  f"{service} | head -1 | xargs -r docker logs --tail 20 2>&1", check=False)
     return [line for line in out.splitlines() if "I heard" in line]
 
 
-def prepull(hosts: RobotFleet, root: Path, version: str) -> None:
-    """Pull ``version``'s base image (by digest, from the registry) on every robot host at once, as a robot
-    already holding its model's base before its first release does; the rollouts then pull only the release's
-    small layers (the talker's and listener's images are the base plus one layer)."""
-    from concurrent.futures import ThreadPoolExecutor
+@contextlib.contextmanager
+def parallel(workers: int) -> Iterator[ThreadPoolExecutor]:
+    """A thread pool for a few things done at once (robocore commands, pulls)."""
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        yield pool
 
-    record = json.loads((root / ".robocore" / "releases" / f"{version}.json").read_text())
-    base = record["base"]["amd64"]
-    with ThreadPoolExecutor(max_workers=len(hosts.hosts)) as pool:
-        list(pool.map(lambda host: host.ssh(hosts, "docker", "pull", "-q", base, timeout=600), hosts.hosts[1:]))
+
+def prepull(hosts: RobotFleet, base: str, indexes: Sequence[int]) -> None:
+    """Pull the base image ``base`` (by digest, from the registry) on the hosts of ``indexes`` at once, as robots
+    already holding their model's base before its first release do; the rollouts then pull only the release's
+    small layers (the talker's and listener's images are the base plus a few)."""
+    with parallel(len(indexes)) as pool:
+        list(pool.map(lambda i: hosts.hosts[i].ssh(hosts, "docker", "pull", "-q", base, timeout=900), indexes))
