@@ -14,9 +14,16 @@ is started right after the start and the time until it hears the talker is print
   clients' 8 s lease of the server, plus 4 s) so that every client drops the old instance first; and
   shorter holds, to show where recovery stops.
 
-    python bench/server_restart.py [--image robocore-it-demo-base:latest] [--wait 30] [--hold 12]
+With ``--distro kilted`` (Fast DDS 3.x, and a Kilted wheels base as ``--image``) the server is started without
+``-i``, as robocore starts it there, so it has a new GUID at every start and robocore holds nothing: the rows are
+that restart after a SIGKILL and after a SIGTERM stop, and, for contrast, the same server given a fixed GUID
+(``-i 0``, as 2.x must). ``--repeat`` runs each row that many times.
 
-The image is any Jazzy wheels base robocore built (the integration suites build ``robocore-it-demo-base``).
+    python bench/server_restart.py [--image robocore-it-demo-base:latest] [--distro jazzy] [--wait 30] [--hold 12]
+        [--repeat 1]
+
+The image is any wheels base of the distro robocore built (the integration suites build ``robocore-it-demo-base``
+for Jazzy).
 """
 
 from __future__ import annotations
@@ -40,8 +47,13 @@ from robocore.plan.discovery import fastdds
 
 PREFIX = "robocore-it-dsprobe"
 SUBNET, SERVER_IP, TALKER_IP, LISTENER_IP = "172.31.78.0/24", "172.31.78.10", "172.31.78.11", "172.31.78.12"
-ROBOT = Robot.model_validate({"ros_distro": "jazzy", "hosts": [{"name": "main", "ip": SERVER_IP}], "components": []})
-CLIENT_ENV = fastdds.client_environment(ROBOT)
+
+
+def robot_of(distro: str) -> Robot:
+    """A one-host robot of ``distro`` whose server is at SERVER_IP (robocore's own commands and profiles for it)."""
+    return Robot.model_validate({"ros_distro": distro, "hosts": [{"name": "main", "ip": SERVER_IP}], "components": []})
+
+
 DDS_DIR = "/robocore/dds"  # where CLIENT_ENV's profile file is (robocore's layout in containers)
 TALKER = """
 import rclpy
@@ -95,14 +107,17 @@ def start(client: Any, net: Any, image: str, name: str, ip: str, argv: list[str]
     return container
 
 
-def client_node(client: Any, net: Any, image: str, name: str, ip: str, argv: list[str], dds: str) -> Any:
+def client_node(client: Any, net: Any, image: str, name: str, ip: str, argv: list[str], dds: str,
+                robot: Robot) -> Any:
     """A node started as robocore starts components: robocore's client environment and profile."""
-    return start(client, net, image, name, ip, argv, CLIENT_ENV, volumes={dds: {"bind": DDS_DIR, "mode": "ro"}})
+    env = fastdds.client_environment(robot)
+    return start(client, net, image, name, ip, argv, env, volumes={dds: {"bind": DDS_DIR, "mode": "ro"}})
 
 
-def listen(client: Any, net: Any, image: str, wait: float, dds: str) -> str:
+def listen(client: Any, net: Any, image: str, wait: float, dds: str, robot: Robot) -> str:
     """A new listener's verdict: ``HEARD <s>`` (seconds from its start) or ``NOTHING``."""
-    container = client_node(client, net, image, "listener", LISTENER_IP, ["python3", "-c", LISTENER, str(wait)], dds)
+    argv = ["python3", "-c", LISTENER, str(wait)]
+    container = client_node(client, net, image, "listener", LISTENER_IP, argv, dds, robot)
     try:
         container.wait(timeout=wait + 60)
         lines = container.logs(stdout=True, stderr=False).decode(errors="replace").split()
@@ -111,23 +126,26 @@ def listen(client: Any, net: Any, image: str, wait: float, dds: str) -> str:
         container.remove(force=True)
 
 
-def scenario(client: Any, image: str, wait: float, dds: str, *, backup: bool, hold: int,
-             stop_timeout: int) -> dict[str, str]:
+def scenario(client: Any, image: str, wait: float, dds: str, robot: Robot, *, backup: bool, hold: int,
+             stop_timeout: int, fixed_id: bool = False) -> dict[str, str]:
     with network(client) as net:
-        process = fastdds.server_process(ROBOT, 0)
+        process = fastdds.server_process(robot, 0)
         env = {**process.environment, "ROBOCORE_DS_HOLD": str(hold)}
         state = {f"{PREFIX}-state": {"bind": process.state_dir, "mode": "rw"}}  # a volume: it outlives a restart
-        argv = [*process.command, *(["-b"] if backup else [])]  # -b: the backup files go to the state volume
+        argv = list(process.command)
+        if fixed_id and "-i" not in argv:  # 3.x: the same GUID at every start, as 2.x has
+            argv[argv.index("discovery") + 1:argv.index("discovery") + 1] = ["-i", "0"]
+        argv += ["-b"] if backup else []  # -b: the backup files go to the state volume
         server = start(client, net, image, "server", SERVER_IP, argv, env, volumes=state, working_dir=process.state_dir)
         time.sleep(2)
-        client_node(client, net, image, "talker", TALKER_IP, ["python3", "-c", TALKER], dds)
+        client_node(client, net, image, "talker", TALKER_IP, ["python3", "-c", TALKER], dds, robot)
         time.sleep(4)
-        before = listen(client, net, image, wait, dds)
+        before = listen(client, net, image, wait, dds, robot)
         stopping = time.monotonic()
         server.stop(timeout=stop_timeout)
         stopped = time.monotonic()
         server.start()
-        after = listen(client, net, image, wait + hold, dds)
+        after = listen(client, net, image, wait + hold, dds, robot)
         server.reload()
         logs = server.logs().decode(errors="replace")
         crashed = next((line.strip() for line in logs.splitlines() if "malloc" in line or "corrupt" in line), "")
@@ -138,39 +156,56 @@ def scenario(client: Any, image: str, wait: float, dds: str, *, backup: bool, ho
         return {"before": before, "after": after, "server": status}
 
 
+def rows_of(robot: Robot, hold: int) -> dict[str, dict[str, Any]]:
+    """The ways of restarting the server measured on ``robot``'s Fast DDS line: label -> :func:`scenario`'s options."""
+    if robot.fastdds_line >= 3:  # a new GUID at every start (no -i): robocore holds nothing
+        return {
+            "new GUID, no hold (robocore), SIGKILL stop": dict(backup=False, hold=0, stop_timeout=0),
+            "new GUID, no hold (robocore), SIGTERM stop": dict(backup=False, hold=0, stop_timeout=10),
+            "same GUID (-i 0), no hold, SIGKILL stop": dict(backup=False, hold=0, stop_timeout=0, fixed_id=True),
+        }
+    return {
+        "same GUID, no hold": dict(backup=False, hold=0, stop_timeout=0),
+        "BACKUP server (-b), SIGTERM stop": dict(backup=True, hold=0, stop_timeout=10),
+        "BACKUP server (-b), SIGKILL stop": dict(backup=True, hold=0, stop_timeout=0),
+        f"same GUID, hold {hold} s (robocore)": dict(backup=False, hold=hold, stop_timeout=0),
+        f"same GUID, hold {hold // 2} s": dict(backup=False, hold=hold // 2, stop_timeout=0),
+        f"same GUID, hold {hold // 3} s": dict(backup=False, hold=hold // 3, stop_timeout=0),
+    }
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--image", default="robocore-it-demo-base:latest")
+    parser.add_argument("--distro", default="jazzy", help="the image's ROS 2 distro (kilted: Fast DDS 3.x)")
     parser.add_argument("--wait", type=float, default=30.0)
-    parser.add_argument("--hold", type=int, default=fastdds.restart_hold_seconds(ROBOT))
+    parser.add_argument("--hold", type=int, help="robocore's hold (default: robocore's, for the distro)")
+    parser.add_argument("--repeat", type=int, default=1, help="runs of each way")
     args = parser.parse_args()
+    robot = robot_of(args.distro)
+    hold = fastdds.restart_hold_seconds(robot) if args.hold is None else args.hold
     client = docker.from_env()
     try:
         client.images.get(args.image)
     except ImageNotFound:
         raise SystemExit(f"{args.image}: no such image (run the integration suites or pass --image)") from None
     dds = tempfile.mkdtemp(prefix=f"{PREFIX}-")
-    for name, text in fastdds.profile_files(ROBOT).items():
+    for name, text in fastdds.profile_files(robot).items():
         (Path(dds) / name).write_text(text)
     os.chmod(dds, 0o755)
-    rows = {
-        "same GUID, no hold": dict(backup=False, hold=0, stop_timeout=0),
-        "BACKUP server (-b), SIGTERM stop": dict(backup=True, hold=0, stop_timeout=10),
-        "BACKUP server (-b), SIGKILL stop": dict(backup=True, hold=0, stop_timeout=0),
-        f"same GUID, hold {args.hold} s (robocore)": dict(backup=False, hold=args.hold, stop_timeout=0),
-        f"same GUID, hold {args.hold // 2} s": dict(backup=False, hold=args.hold // 2, stop_timeout=0),
-        f"same GUID, hold {args.hold // 3} s": dict(backup=False, hold=args.hold // 3, stop_timeout=0),
-    }
-    print(f"{'restart':40} {'listener before':16} {'listener after the restart':56} server after")
+    print(f"{args.distro} (Fast DDS {robot.fastdds_line}.x), {args.image}; robocore's hold: {hold} s")
+    print(f"{'restart':44} {'listener before':16} {'listener after the restart':56} server after")
     figures = []
-    for label, kwargs in rows.items():
-        with contextlib.suppress(NotFound):
-            done = scenario(client, args.image, args.wait, dds, **kwargs)  # type: ignore[arg-type]
-            print(f"{label:40} {done['before']:16} {done['after']:56} {done['server']}", flush=True)
-            figures.append(Figure(label, done["after"], detail=f"listener before: {done['before']}; server after: "
-                                                               f"{done['server']}"))
-    record("server_restart", figures, notes=[f"image {args.image}; a listener waits {args.wait:g} s (plus the hold) "
-                                             "to hear the talker after the restart"])
+    for label, kwargs in rows_of(robot, hold).items():
+        for _ in range(args.repeat):
+            with contextlib.suppress(NotFound):
+                done = scenario(client, args.image, args.wait, dds, robot, **kwargs)
+                print(f"{label:44} {done['before']:16} {done['after']:56} {done['server']}", flush=True)
+                figures.append(Figure(label, done["after"], detail=f"listener before: {done['before']}; server "
+                                                                   f"after: {done['server']}"))
+    record("server_restart", figures, notes=[f"{args.distro} (Fast DDS {robot.fastdds_line}.x), image {args.image}; "
+                                             f"a listener waits {args.wait:g} s (plus the hold) to hear the talker "
+                                             "after the restart"])
     return 0
 
 
