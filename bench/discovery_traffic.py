@@ -97,7 +97,8 @@ rospy.Subscriber(f"/bench/t{(i - 1) % total}", String, lambda _: None)
 rospy.spin()
 """
 #: The script of a ROS 1 component: waits for the go file (mode, end of the window in s), then starts its nodes;
-#: 2 s before the end of each window, how many bench nodes the master knows (one call: it is traffic too).
+#: how many bench nodes the master knows, 2 s before the end of the first window and 1 s after the last (one call
+#: each: it is traffic too, and the last falls after the counters are read).
 NODES_ROS1 = """
 import os, subprocess, sys, time
 go, first, count, total = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
@@ -110,7 +111,7 @@ start = time.monotonic()
 node = os.path.join(os.path.dirname(os.path.abspath(__file__)), "bench_node_ros1.py")
 children = [subprocess.Popen([sys.executable, node, str(i), str(total)]) for i in range(first, first + count)]
 print(f"MADE {count} {time.monotonic() - start:.2f}", flush=True)
-for mark in (18, end - 2):
+for mark in (18, end + 1):
     time.sleep(max(0.0, start + mark - time.monotonic()))
     state = rosgraph.Master("/bench_count").getSystemState()
     names = {n for _, nodes in state[0] for n in nodes if n.startswith("/bench_n")}
@@ -122,11 +123,12 @@ SCRIPTS = "bench"
 SCRIPT_FILE = "bench_nodes.py"
 GO_FILE = "go"
 FIRST_WINDOW_S = 20.0
+AFTER_END_S = 3.0
 #: Participant ids whose metatraffic ports are counted (per host; Fast DDS gives them out from 0).
 PARTICIPANT_IDS = 120
 TABLE = "robocore_traffic"
 INTERFACE = "eth0"
-COUNTERS = ("discovery", "udp", "tcp")
+COUNTERS = ("discovery", "udp_all", "tcp_all")
 MODES = ("server", "simple", "rosmaster")
 
 
@@ -199,8 +201,8 @@ def nft_ruleset(ports: Sequence[int], interface: str = INTERFACE) -> str:
         + "  chain out {\n"
         "    type filter hook output priority -300; policy accept;\n"
         f'    oifname "{interface}" udp dport @discovery_ports counter name "discovery"\n'
-        f'    oifname "{interface}" meta l4proto udp counter name "udp"\n'
-        f'    oifname "{interface}" meta l4proto tcp counter name "tcp"\n'
+        f'    oifname "{interface}" meta l4proto udp counter name "udp_all"\n'
+        f'    oifname "{interface}" meta l4proto tcp counter name "tcp_all"\n'
         "  }\n"
         "}\n"
     )
@@ -268,7 +270,7 @@ class Point:
     def discovery(self) -> str:
         """The counter of this mode's discovery traffic: ROS 1's is TCP (XML-RPC with the master and between
         the nodes, TCPROS connection set-up: the nodes send no data)."""
-        return "tcp" if self.mode == "rosmaster" else "discovery"
+        return "tcp_all" if self.mode == "rosmaster" else "discovery"
 
     def wire(self, counter: str, *, later: bool = False) -> Count:
         """The sum over the hosts of ``counter`` in the first window (or the later one, per minute)."""
@@ -290,13 +292,16 @@ class Counters:
         hosts = testrun.hosts_to_start(robot.project.robot)
         image = agent_image(robot.client, testrun.host_spec(run, robot.project, hosts[0]).image)
         self.agents: dict[str, Any] = {}
-        for host in hosts:
-            self.agents[host] = robot.client.containers.run(
-                image, entrypoint=["sleep"], command=["infinity"], name=f"{run.prefix}-traffic-{host}",
-                network_mode=f"container:{run.host_container(host)}", cap_add=["NET_ADMIN"], labels=run.labels,
-                detach=True, user="root")
-        for host in hosts:
-            self._exec(host, ["sh", "-c", fault_plan.NFT_SCRIPT, "robocore-nft", nft_ruleset(ports)])
+        try:
+            for host in hosts:
+                self.agents[host] = robot.client.containers.run(
+                    image, entrypoint=["sleep"], command=["infinity"], name=f"{run.prefix}-traffic-{host}",
+                    network_mode=f"container:{run.host_container(host)}", cap_add=["NET_ADMIN"], labels=run.labels,
+                    detach=True, user="root")
+                self._exec(host, ["sh", "-c", fault_plan.NFT_SCRIPT, "robocore-nft", nft_ruleset(ports)])
+        except BaseException:
+            self.close()
+            raise
 
     def _exec(self, host: str, argv: list[str]) -> str:
         code, output = self.agents[host].exec_run(argv)
@@ -370,6 +375,7 @@ def measure(project: Path, point: Point, servers: int, per_process: int) -> Poin
         cpu1 = usage(server)[0] if server is not None else 0.0
         time.sleep(max(0.0, start + FIRST_WINDOW_S + 60 * point.minutes - time.monotonic()))
         at_end = counters.read()
+        time.sleep(AFTER_END_S)  # the last SEEN lines (ROS 1's comes after the counters are read)
         if server is not None:
             cpu2, rss = usage(server)
             point.server = {"cpu_first_s": cpu1 - cpu0, "cpu_per_min_s": (cpu2 - cpu1) / point.minutes,
@@ -378,7 +384,7 @@ def measure(project: Path, point: Point, servers: int, per_process: int) -> Poin
         point.later = diff(at_end, at_first)
         logs = [robot.logs(p.name) for p in processes]
         firsts = [seen_at(log, FIRST_WINDOW_S) for log in logs]
-        lasts = [seen_at(log, FIRST_WINDOW_S + 60 * point.minutes) for log in logs]
+        lasts = [seen_at(log, FIRST_WINDOW_S + 60 * point.minutes + AFTER_END_S) for log in logs]
         point.seen = (None if None in firsts else min(f for f in firsts if f is not None),
                       None if None in lasts else min(f for f in lasts if f is not None))
         rss = sum(usage(robot.containers[p.name].get_wrapped_container())[1] for p in processes)
@@ -448,7 +454,7 @@ def report(points: list[Point], servers: int) -> None:
         if p.error:
             print(f"| {p.nodes} | {p.hosts} | {p.mode} | failed: {p.error} | | | | |")
             continue
-        other = show(p.wire("udp") - p.wire("discovery")) if p.discovery == "discovery" else "-"
+        other = show(p.wire("udp_all") - p.wire("discovery")) if p.discovery == "discovery" else "-"
         busiest = max(p.first, key=lambda h: p.first[h][p.discovery].packets)
         share = p.first[busiest][p.discovery].packets / max(p.wire(p.discovery).packets, 1)
         seen = " / ".join("-" if s is None else str(s) for s in p.seen)

@@ -22,10 +22,10 @@ NFT_OUTPUT = """table inet robocore_traffic {
 \tcounter discovery {
 \t\tpackets 1234 bytes 567890
 \t}
-\tcounter udp {
+\tcounter udp_all {
 \t\tpackets 1300 bytes 600000
 \t}
-\tcounter tcp {
+\tcounter tcp_all {
 \t\tpackets 0 bytes 0
 \t}
 }
@@ -81,13 +81,13 @@ def test_the_ruleset_counts_what_leaves_the_interface(bench: ModuleType) -> None
     assert "elements = { 7400, 7410, 11811 }" in text
     assert 'oifname "eth0" udp dport @discovery_ports counter name "discovery"' in text
     assert "hook output" in text and "hook input" not in text
-    assert all(f"counter {name} {{ }}" in text for name in ("discovery", "udp", "tcp"))
+    assert all(f"counter {name} {{ }}" in text for name in ("discovery", "udp_all", "tcp_all"))
 
 
 def test_counters_are_read_from_nft_output(bench: ModuleType) -> None:
     counts = bench.parse_counters(NFT_OUTPUT)
-    assert counts == {"discovery": bench.Count(1234, 567890), "udp": bench.Count(1300, 600000),
-                      "tcp": bench.Count(0, 0)}
+    assert counts == {"discovery": bench.Count(1234, 567890), "udp_all": bench.Count(1300, 600000),
+                      "tcp_all": bench.Count(0, 0)}
     assert bench.parse_counters("table inet robocore_traffic {\n}\n") == {}
 
 
@@ -107,10 +107,19 @@ def test_the_wire_is_the_sum_over_hosts_and_later_is_per_minute(bench: ModuleTyp
     assert point.wire("discovery") == count(150, 1500)
     assert point.wire("discovery", later=True) == count(30, 300)
     assert bench.diff({"h0": {"discovery": count(9, 90)}}, {"h0": {"discovery": count(4, 40)}})["h0"] == {
-        "discovery": count(5, 50), "udp": count(0, 0), "tcp": count(0, 0)}
+        "discovery": count(5, 50), "udp_all": count(0, 0), "tcp_all": count(0, 0)}
 
 
 def test_growth_is_the_slope_per_node(bench: ModuleType) -> None:
     assert bench.growth({2: 20.0, 8: 80.0, 32: 320.0}) == pytest.approx(10.0)
     assert bench.growth({2: 5.0, 4: 5.0}) == pytest.approx(0.0)
     assert math.isnan(bench.growth({2: 1.0}))
+
+
+def test_the_ros_1_master_counts_tcp_and_runs_on_the_ros_1_project(bench: ModuleType) -> None:
+    count = bench.Count
+    point = bench.Point(nodes=2, hosts=2, mode="rosmaster", minutes=1.0)
+    point.first = {"h0": {"discovery": count(0, 0), "udp_all": count(3, 300), "tcp_all": count(70, 9000)}}
+    assert point.wire(point.discovery) == count(70, 9000)
+    assert bench.Point(nodes=2, hosts=2, mode="simple", minutes=1.0).discovery == "discovery"
+    assert [bench.ros_line(m) for m in bench.MODES] == ["ros2", "ros2", "ros1"]
