@@ -40,10 +40,10 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import itertools
 import math
 import os
 import re
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -239,13 +239,10 @@ def seen_at(log: str, second: float) -> int | None:
     return seen[-1][1] if seen else None
 
 
-def growth(points: dict[int, float]) -> float:
-    """The least-squares slope of a figure over the number of nodes (per added node)."""
-    if len(points) < 2:
-        return math.nan
-    xs, ys = list(points), list(points.values())
-    mean_x, mean_y = statistics.fmean(xs), statistics.fmean(ys)
-    return sum((x - mean_x) * (y - mean_y) for x, y in zip(xs, ys, strict=True)) / sum((x - mean_x) ** 2 for x in xs)
+def growth(points: dict[int, float]) -> list[tuple[int, int, float]]:
+    """The growth of a figure per added node between each size and the next: (from, to, per node)."""
+    sizes = sorted(points)
+    return [(a, b, (points[b] - points[a]) / (b - a)) for a, b in itertools.pairwise(sizes)]
 
 
 # --------------------------------------------------------------------------- a point on the local daemon
@@ -461,13 +458,14 @@ def report(points: list[Point], servers: int) -> None:
         print(f"| {p.nodes} | {p.hosts} | {p.mode} | {show(p.wire(p.discovery))} | "
               f"{show(p.wire(p.discovery, later=True))} | {other} | {busiest} {share:.0%} | {seen} of {p.nodes} |")
     good = [p for p in points if not p.error]
-    print("\nGrowth per added node (least-squares slope over the points):")
+    print("\nDiscovery packets per node, and per node added from one size to the next:")
     for mode in sorted({p.mode for p in good}):
-        mine = [p for p in good if p.mode == mode]
+        mine = sorted((p for p in good if p.mode == mode), key=lambda p: p.nodes)
         for label, later in (("first 20 s", False), ("per minute after", True)):
-            packets = growth({p.nodes: p.wire(p.discovery, later=later).packets for p in mine})
-            kib = growth({p.nodes: p.wire(p.discovery, later=later).bytes / 1024 for p in mine})
-            print(f"  {mode:9} {label:17} {packets:10,.1f} packets/node {kib:10,.1f} KiB/node")
+            figures = {p.nodes: float(p.wire(p.discovery, later=later).packets) for p in mine}
+            each = ", ".join(f"{n}: {v / n:,.0f}" for n, v in figures.items())
+            added = ", ".join(f"{a}->{b}: {v:,.0f}" for a, b, v in growth(figures))
+            print(f"  {mode:9} {label:17} per node {each}; per added node {added}")
     by = {(p.nodes, p.mode): p for p in good}
     ratios = [f"{n} nodes {ratio(by[(n, 'simple')], by[(n, 'server')]):.1f}x"
               for n in sorted({p.nodes for p in good}) if (n, "simple") in by and (n, "server") in by]

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import importlib.util
-import math
 import sys
 from pathlib import Path
 from types import ModuleType
@@ -110,10 +109,9 @@ def test_the_wire_is_the_sum_over_hosts_and_later_is_per_minute(bench: ModuleTyp
         "discovery": count(5, 50), "udp_all": count(0, 0), "tcp_all": count(0, 0)}
 
 
-def test_growth_is_the_slope_per_node(bench: ModuleType) -> None:
-    assert bench.growth({2: 20.0, 8: 80.0, 32: 320.0}) == pytest.approx(10.0)
-    assert bench.growth({2: 5.0, 4: 5.0}) == pytest.approx(0.0)
-    assert math.isnan(bench.growth({2: 1.0}))
+def test_growth_is_per_node_added_from_one_size_to_the_next(bench: ModuleType) -> None:
+    assert bench.growth({8: 80.0, 2: 20.0, 32: 500.0}) == [(2, 8, 10.0), (8, 32, 17.5)]
+    assert bench.growth({2: 1.0}) == []
 
 
 def test_the_ros_1_master_counts_tcp_and_runs_on_the_ros_1_project(bench: ModuleType) -> None:
