@@ -28,12 +28,14 @@ Windows: the first 20 s after the nodes are told to start (their processes were 
 before), then ``--minutes`` minutes, given per minute. Each node process prints how many nodes each of its
 nodes sees (``seen``: the smallest, out of the robot's total) every 5 s.
 
-    python bench/discovery_traffic.py [--nodes 2 8 32 64] [--modes server simple] [--minutes 1]
-        [--project DIR]
+    python bench/discovery_traffic.py [--nodes 2 8 32 64] [--modes server simple rosmaster] [--minutes 1]
+        [--project DIR] [--ros1-project DIR]
 
-The robot is made from ``robocore init --defaults --base wheels`` (Jazzy, Debian 12 + ROS 2 wheels; its base is
-built on first use and kept) unless ``--project`` names such a project. Everything a point starts is removed
-before the next point.
+The ROS 2 robot is made from ``robocore init --defaults --base wheels`` (Jazzy, Debian 12 + ROS 2 wheels), the
+ROS 1 robot (``rosmaster``: the ROS master on h0, rospy nodes one per process, every TCP packet counted) from
+``robocore init --defaults --distro noetic --base debian``, unless ``--project`` / ``--ros1-project`` names such a
+project; their bases are built on first use and kept. Everything a point starts is removed before the next
+point. Results and what they mean: docs/discovery-traffic.md.
 """
 
 from __future__ import annotations
@@ -379,6 +381,13 @@ def measure(project: Path, point: Point, servers: int, per_process: int) -> Poin
                             "rss_mib": rss}
         point.first = diff(at_first, {h: {} for h in at_first})
         point.later = diff(at_end, at_first)
+        for process in processes:  # a node process that died would read as a quiet one
+            container = robot.containers[process.name].get_wrapped_container()
+            container.reload()
+            if container.status != "running":
+                tail = robot.logs(process.name).strip().splitlines()[-1:] or ["no output"]
+                raise RuntimeError(f"{process.name} on {process.host} exited "
+                                   f"({container.attrs['State'].get('ExitCode')}): {tail[0][:200]}")
         logs = [robot.logs(p.name) for p in processes]
         firsts = [seen_at(log, FIRST_WINDOW_S) for log in logs]
         lasts = [seen_at(log, FIRST_WINDOW_S + 60 * point.minutes + AFTER_END_S) for log in logs]
