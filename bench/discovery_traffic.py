@@ -56,6 +56,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from harness import Figure, record
 
 #: The script of a ROS 2 component: waits for the go file (it holds the mode first), then makes its nodes, each in a
 #: context of its own (a DDS participant of its own); every 5 s, how many nodes the least informed of them sees.
@@ -489,6 +490,27 @@ def report(points: list[Point], servers: int) -> None:
         print(f"| {p.nodes} | {p.mode} | {' | '.join(cells)} | {p.node_rss_mib:.1f} |")
 
 
+def figures_of(points: list[Point]) -> list[Figure]:
+    """The result file's rows: each point's discovery packets (first 20 s, per minute after) and the server's cost."""
+    out = []
+    for p in points:
+        name = f"{p.nodes} nodes, {p.hosts} hosts, {p.mode}"
+        if p.error:
+            out.append(Figure(name, "failed", detail=p.error))
+            continue
+        seen = " / ".join("-" if s is None else str(s) for s in p.seen)
+        first, later = p.wire(p.discovery), p.wire(p.discovery, later=True)
+        out.append(Figure(f"{name}: discovery packets, first 20 s", first.packets, "packets",
+                          detail=f"{first.bytes / 1024:,.0f} KiB; nodes seen at 20 s / end: {seen} of {p.nodes}"))
+        out.append(Figure(f"{name}: discovery packets per minute after", later.packets, "packets",
+                          detail=f"{later.bytes / 1024:,.0f} KiB"))
+        if p.server:
+            out.append(Figure(f"{name}: server CPU, first 20 s", p.server["cpu_first_s"], "s",
+                              detail=f"{p.server['cpu_per_min_s']:.2f} s per minute after; "
+                                     f"RSS {p.server['rss_mib']:.1f} MiB"))
+    return out
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--nodes", type=int, nargs="+", default=[2, 8, 32, 64])
@@ -520,6 +542,9 @@ def main() -> int:
                       flush=True)
                 points.append(point)
     report(points, args.servers)
+    record("discovery_traffic", figures_of(points),
+           notes=[f"discovery datagrams sent on the wire, summed over the host namespaces; {args.servers} server(s); "
+                  f"{args.per_process} nodes per process; docs/discovery-traffic.md"])
     return 0
 
 

@@ -37,7 +37,11 @@ def bench() -> ModuleType:
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
+    sys.path.insert(0, str(BENCH.parent))  # it imports bench/harness.py, as bench scripts do
+    try:
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(BENCH.parent))
     return module
 
 
@@ -121,3 +125,19 @@ def test_the_ros_1_master_counts_tcp_and_runs_on_the_ros_1_project(bench: Module
     assert point.wire(point.discovery) == count(70, 9000)
     assert bench.Point(nodes=2, hosts=2, mode="simple", minutes=1.0).discovery == "discovery"
     assert [bench.ros_line(m) for m in bench.MODES] == ["ros2", "ros2", "ros1"]
+
+
+def test_the_result_rows_carry_each_point_and_a_failed_one(bench: ModuleType) -> None:
+    count = bench.Count
+    good = bench.Point(nodes=8, hosts=2, mode="server", minutes=1.0, seen=(8, 8),
+                       server={"cpu_first_s": 0.04, "cpu_per_min_s": 0.03, "rss_mib": 10.0})
+    good.first = {"h0": {"discovery": count(645, 278 * 1024)}}
+    good.later = {"h0": {"discovery": count(200, 132 * 1024)}}
+    failed = bench.Point(nodes=64, hosts=4, mode="simple", minutes=1.0, error="RuntimeError: nodes-0 exited")
+    rows = bench.figures_of([good, failed])
+    assert [(r.label, r.value) for r in rows] == [
+        ("8 nodes, 2 hosts, server: discovery packets, first 20 s", 645),
+        ("8 nodes, 2 hosts, server: discovery packets per minute after", 200),
+        ("8 nodes, 2 hosts, server: server CPU, first 20 s", 0.04),
+        ("64 nodes, 4 hosts, simple", "failed")]
+    assert "8 / 8 of 8" in rows[0].detail and "RSS 10.0 MiB" in rows[2].detail
