@@ -32,6 +32,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from harness import Figure, record
+
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "integration"))
 
@@ -151,6 +153,10 @@ def main() -> None:
     print(f"{'fleet of 10 robots on Swarm':<{width}}  {'seconds':>8}  notes")
     for what, value, notes in table:
         print(f"{what:<{width}}  {value:>8}  {notes}")
+    record("fleet", [Figure(what, float(value.split()[0]), value.split()[1] if " " in value else "s", detail=notes)
+                     for what, value, notes in table],
+           goals=["10 robots in < 5 min", "each wave's gate < 30 s", "failed canary back < 60 s", "rollback < 2 min",
+                  "offline robot converged < 60 s after reconnecting"])
 
 
 if __name__ == "__main__":
