@@ -2,17 +2,15 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 from types import ModuleType
 
 import pytest
 import yaml
+from bench_scripts import load
 
 from robocore.project import Project
 
-BENCH = Path(__file__).resolve().parents[1] / "bench" / "discovery_traffic.py"
 TEMPLATE = {"ros_distro": "jazzy", "image_prefix": "traffic-", "base": {"kind": "wheels"},
             "hosts": [{"name": "main", "ip": "127.0.0.1"}],
             "components": [{"name": "talker", "folder": "components/talker", "runs_on": "main"}]}
@@ -33,16 +31,7 @@ NFT_OUTPUT = """table inet robocore_traffic {
 
 @pytest.fixture(scope="module")
 def bench() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("discovery_traffic", BENCH)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up
-    sys.path.insert(0, str(BENCH.parent))  # it imports bench/harness.py, as bench scripts do
-    try:
-        spec.loader.exec_module(module)
-    finally:
-        sys.path.remove(str(BENCH.parent))
-    return module
+    return load("discovery_traffic")
 
 
 def test_nodes_are_spread_evenly_over_the_hosts_in_bounded_processes(bench: ModuleType) -> None:
