@@ -161,3 +161,60 @@ def test_fleet_words_become_the_fleet_tasks() -> None:
     assert fleet_task(["status"]) == ["status"]
     with pytest.raises(CommandLineError, match="unknown fleet command"):
         fleet_task(["fleet", "explode"])
+
+
+class _Service:
+    """A docker-py Service whose first ``refusals`` updates are refused with ``error``."""
+
+    def __init__(self, mode: dict[str, object], refusals: int, error: str) -> None:
+        self.id, self.version, self.attrs = "svc1", 1, {"Spec": {"Mode": mode}}
+        self.refusals, self.error, self.reloads = refusals, error, 0
+        self.updates: list[int] = []  # the version each accepted update was made on
+
+    def update(self, **kwargs: object) -> None:
+        from docker.errors import APIError
+
+        if self.refusals:
+            self.refusals -= 1
+            self.version += 1  # what happened meanwhile
+            raise APIError("500 Server Error", explanation=self.error)
+        self.updates.append(self.version)
+
+    def reload(self) -> None:
+        self.reloads += 1
+
+
+class _Services:
+    def __init__(self, service: _Service) -> None:
+        self.service = service
+
+    def get(self, name: str) -> _Service:
+        return self.service
+
+
+class _Client:
+    def __init__(self, service: _Service) -> None:
+        self.services = _Services(service)
+
+
+@pytest.mark.parametrize("refusals", [0, 1, 4])
+def test_an_update_out_of_sequence_is_made_again_on_the_new_version(fleet_robots, refusals: int) -> None:  # type: ignore[no-untyped-def]
+    from robocore.adapters.swarm import apply_service
+
+    talker = services(fleet_robots, "r1")["talker"]
+    service = _Service({"global": {}}, refusals, "update out of sequence")
+    ids = {c.name: f"id-{c.name}" for c in talker.configs}
+    assert apply_service(_Client(service), talker, ids) == "svc1"  # type: ignore[arg-type]
+    assert service.updates == [1 + refusals] and service.reloads == refusals
+
+
+def test_other_refusals_and_a_service_that_never_settles_are_errors(fleet_robots) -> None:  # type: ignore[no-untyped-def]
+    from robocore.adapters.swarm import UPDATE_ATTEMPTS, apply_service
+    from robocore.errors import DockerError
+
+    talker = services(fleet_robots, "r1")["talker"]
+    for refusals, error in ((1, "rpc error: code = InvalidArgument"), (UPDATE_ATTEMPTS, "update out of sequence")):
+        service = _Service({"global": {}}, refusals, error)
+        with pytest.raises(DockerError, match=f"docker service update .*talker: {error}"):
+            apply_service(_Client(service), talker, {c.name: f"id-{c.name}" for c in talker.configs})  # type: ignore[arg-type]
+        assert service.updates == []

@@ -220,7 +220,7 @@ def apply_service(client: docker.DockerClient, spec: ServiceSpec, config_ids: di
 
     A one-shot service (restart condition ``none``, such as a probe) is only ever created: its one task is its
     result."""
-    from docker.errors import NotFound
+    from docker.errors import APIError, NotFound
 
     kwargs = service_kwargs(spec, config_ids)
     with swarm_errors(f"docker service update {spec.name}"):
@@ -237,8 +237,26 @@ def apply_service(client: docker.DockerClient, spec: ServiceSpec, config_ids: di
             # first update of an unchanged service replace its task: that update is made now, at creation.
             service.reload()
         name = kwargs.pop("name")
-        service.update(name=name, **kwargs)
+        for attempt in range(1, UPDATE_ATTEMPTS + 1):
+            try:
+                service.update(name=name, **kwargs)
+                break
+            except APIError as exc:
+                if attempt == UPDATE_ATTEMPTS or not out_of_sequence(exc):
+                    raise
+                service.reload()  # the manager moved the service on since it was read: update the new version
         return str(service.id)
+
+
+#: How many times an update refused as "out of sequence" is tried again on the service's new version.
+UPDATE_ATTEMPTS = 5
+
+
+def out_of_sequence(exc: Exception) -> bool:
+    """Whether Swarm refused an update because the service changed since it was read (its version index moved:
+    the manager itself bumps it, e.g. while it reconciles a node that came back). The update is then made again
+    on the new version; any other refusal is an error."""
+    return "update out of sequence" in str(getattr(exc, "explanation", None) or exc)
 
 
 def updating(client: docker.DockerClient, name: str) -> bool:
