@@ -44,3 +44,15 @@ def test_a_package_in_a_folder_colcon_ignores_is_not_a_package_of_the_build(tmp_
     (tmp_path / "src" / "ignored" / marker).touch()
     roots, files = workspace_packages(tmp_path)
     assert roots == {"kept": "src/kept"} and set(files) == {"kept"}
+
+
+def test_a_build_that_finished_nothing_it_was_asked_for_is_one_build_error_naming_the_packages() -> None:
+    from robocore.errors import BuildError
+    from robocore.plan.colcon import refuse_unbuilt
+
+    warning = "WARNING:colcon.colcon_core.verb:No task extension to 'build' a 'ros.ament_python' package"
+    with pytest.raises(BuildError, match=r"^component talker: colcon build on host pi exited 0 without building "
+                                         r"demo_talker\n  WARNING:colcon") as caught:
+        refuse_unbuilt("talker", {"demo_talker": "h1"}, None, [], [warning], where=" on host pi")
+    assert "colcon-ros" in (caught.value.hint or "")
+    refuse_unbuilt("talker", {"demo_talker": "h1"}, None, _events("Finished <<< demo_talker [1.0s]"), [])

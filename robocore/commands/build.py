@@ -232,12 +232,7 @@ def _colcon(project: Project, plan: BuildPlan, report: Reporter, update: Callabl
                              hint=f"fix it in {plan.component.folder}, then run build --component {name}")
         tail = "\n".join(f"  {line}" for line in other[-20:])
         raise BuildError(f"component {name}: colcon build exited {code}\n{tail}")
-    missing = colcon.unbuilt(plan.packages, plan.changed, events)
-    if missing:
-        tail = "\n".join(f"  {line}" for line in other[-20:])
-        raise BuildError(f"component {name}: colcon build exited 0 without building {', '.join(missing)}\n{tail}",
-                         hint="colcon skips a package whose build type it has no extension for: does the "
-                              "component's image have colcon-ros (python3-colcon-ros)?")
+    colcon.refuse_unbuilt(name, plan.packages, plan.changed, events, other)
     write_atomic(plan.out / "install" / arches.INSTALL_ARCH_FILE, plan.arch + "\n", mode=SHARED)  # sent with the tree
     record_build(plan)
     built = [e.package for e in events if e.state == "finished"]

@@ -151,13 +151,7 @@ def build_on_host(project: Project, build: HostBuildPlan, workspace: Path, holde
                              f"(log: {where}/{failed[0]})\n{tail}",
                              hint=f"fix it in {build.component.folder}, then run build --component {name}")
         raise BuildError(f"component {name}: colcon build on host {host.name} exited {code}\n{tail}")
-    missing = colcon.unbuilt(build.packages, build.changed, events)
-    if missing:
-        tail = "\n".join(f"  {line}" for line in other[-20:])
-        raise BuildError(f"component {name}: colcon build on host {host.name} exited 0 without building "
-                         f"{', '.join(missing)}\n{tail}",
-                         hint="colcon skips a package whose build type it has no extension for: does the "
-                              "component's image have colcon-ros (python3-colcon-ros)?")
+    colcon.refuse_unbuilt(name, build.packages, build.changed, events, other, where=f" on host {host.name}")
     record_host_build(project, build)
     return Outcome(what=name, role="build", action="built", reason=build.reason, image_id=build.image_id,
                    seconds=time.monotonic() - start, packages=[e.package for e in events if e.state == "finished"])

@@ -7,7 +7,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from robocore.errors import UsageError
+from robocore.errors import BuildError, UsageError
 from robocore.plan import naming
 
 CONTAINER_BUILD = "/robocore/build"
@@ -124,6 +124,19 @@ def unbuilt(packages: Iterable[str], changed: Sequence[str] | None, events: Iter
     finished = {e.package for e in events if e.state == "finished"}
     wanted = list(packages) if changed is None else list(changed)
     return sorted(p for p in wanted if p not in finished)
+
+
+def refuse_unbuilt(component: str, packages: Iterable[str], changed: Sequence[str] | None,
+                   events: Iterable[PackageEvent], output: Sequence[str], *, where: str = "") -> None:
+    """BuildError when colcon exited 0 without finishing a package it was asked for (:func:`unbuilt`), with the
+    last lines of colcon's other output (its warning says why); ``where``: `` on host NAME`` for a host build."""
+    missing = unbuilt(packages, changed, events)
+    if missing:
+        tail = "\n".join(f"  {line}" for line in output[-20:])
+        raise BuildError(f"component {component}: colcon build{where} exited 0 without building "
+                         f"{', '.join(missing)}\n{tail}",
+                         hint="colcon skips a package whose build type it has no extension for: does the "
+                              "component's image have colcon-ros (python3-colcon-ros)?")
 
 
 def parse_event(line: str) -> PackageEvent | None:
