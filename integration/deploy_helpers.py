@@ -43,10 +43,15 @@ def compose_command() -> list[str]:
                 pytrace=False)
 
 
+#: Ports the suites pick for servers they start later: below the kernel's ephemeral range (32768-60999 here),
+#: so that a port found free is not handed to some client's socket before the server binds it.
+TEST_PORTS = range(20000, 32768)
+
+
 def free_udp_port() -> int:
     """A UDP port nobody listens on right now (host networking: the discovery server binds it)."""
     for _ in range(200):
-        port = random.randint(20000, 40000)
+        port = random.choice(TEST_PORTS)
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
             try:
                 sock.bind(("0.0.0.0", port))

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from deploy_helpers import wait_for
+from deploy_helpers import TEST_PORTS, wait_for
 
 RGB = tuple[int, int, int]
 
@@ -53,7 +53,7 @@ def free_display(numbers: range = range(20, 64)) -> tuple[int, int, int]:
         if display_taken(number) or not tcp_free(5900 + number):
             continue
         for _ in range(100):
-            web = random.randint(20000, 40000)
+            web = random.choice(TEST_PORTS)
             if tcp_free(web):
                 return number, 5900 + number, web
     raise RuntimeError("no free X display and ports")

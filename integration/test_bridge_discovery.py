@@ -8,8 +8,6 @@ gateway by ``extra_hosts: host-gateway``). Control: the same listener given the 
 
 from __future__ import annotations
 
-import random
-import socket
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -17,25 +15,13 @@ from typing import Any
 
 import pytest
 import yaml
-from deploy_helpers import HEARD, copy_project, log_lines, remove_project_containers, wait_for
+from deploy_helpers import HEARD, copy_project, free_tcp_port, log_lines, remove_project_containers, wait_for
 
 pytestmark = pytest.mark.docker
 
 HEAR_WITHIN = 60.0
 #: How long the control listener is given to hear something it must not.
 SILENT_FOR = 25.0
-
-
-def free_tcp_port() -> int:
-    for _ in range(200):
-        port = random.randint(20000, 40000)
-        with socket.socket() as sock:
-            try:
-                sock.bind(("127.0.0.1", port))
-            except OSError:
-                continue
-            return port
-    raise RuntimeError("no free TCP port")
 
 
 @pytest.fixture
