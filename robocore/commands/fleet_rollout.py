@@ -124,15 +124,23 @@ class Gate:
 
     def __init__(self, client: docker.DockerClient, fleet: FleetProject, release: plan.Release | None,
                  releases: dict[str, plan.Release], options: Options) -> None:
-        from robocore import resources
-
         self.client = client
         self.fleet = fleet
         self.releases = releases
         self.health = fleet.fleet.rollout.health
         self.timeouts = fleet.fleet.rollout.timeouts
         self.report = options.report
-        self.script = resources.read("fleet-probe").decode()
+        self.scripts: dict[str, str] = {}  # probe resource -> its text
+
+    def script(self, robot: str) -> str:
+        """The health probe script for ``robot``'s graph (its discovery kind's: rclpy for ROS 2, the master for
+        ROS 1)."""
+        from robocore import resources
+
+        name = plan.probe_resource(self.fleet.instances[robot])
+        if name not in self.scripts:
+            self.scripts[name] = resources.read(name).decode()
+        return self.scripts[name]
 
     def run(self, changes: list[_Change], deadline: float | None = None) -> None:
         """Decide every change (healthy, failed or pending); a change still undecided at ``deadline`` (a
@@ -203,7 +211,7 @@ class Gate:
             left = max(change.deadline - clock - 5, 5)
             check = plan.GateCheck(nodes=tuple(self.health.nodes), heard=tuple(self.health.heard), timeout=left)
             spec = plan.probe_service(self.fleet.project, change.robot, self.fleet.instances[change.robot], release,
-                                      check, self.script, uuid.uuid4().hex[:8])
+                                      check, self.script(change.robot), uuid.uuid4().hex[:8])
             ids = swarm.ensure_configs(self.client, spec.configs)
             swarm.apply_service(self.client, spec, ids)
             change.probe = spec.name
@@ -224,7 +232,9 @@ class Gate:
         else:
             missing = ", ".join(str(n) for n in _list(verdict.get("missing")))
             silent = ", ".join(str(t) for t in _list(verdict.get("silent")))
-            parts = ([f"nodes missing: {missing}"] if missing else []) + ([f"not heard: {silent}"] if silent else [])
+            error = str(verdict.get("error") or "")
+            parts = ([error] if error else []) + ([f"nodes missing: {missing}"] if missing else []) \
+                + ([f"not heard: {silent}"] if silent else [])
             self._decide(change, FAILED, "; ".join(parts) or "unhealthy")
 
 

@@ -58,6 +58,9 @@ RESTART_CONDITIONS = {"no": "none", "on-failure": "on-failure", "always": "any",
 RESTART_DELAY = 1.0
 #: Where a probe finds its script (a Swarm config).
 PROBE_SCRIPT = "/robocore/fleet-probe.py"
+#: The health probe of each discovery kind (a file of :mod:`robocore.resources`): an rclpy observer of the Fast DDS
+#: graph for ROS 2; for ROS 1, a client of the robot's master (its XML-RPC API for the nodes, rospy for the topics).
+PROBE_RESOURCES = {"fastdds": "fleet-probe", "rosmaster": "fleet-probe-ros1"}
 
 
 @dataclass(frozen=True)
@@ -228,6 +231,16 @@ class GateCheck:
     nodes: tuple[str, ...]
     heard: tuple[str, ...]
     timeout: float
+
+
+def probe_resource(instance: Robot) -> str:
+    """The probe script (a resource name) that can read the graph of ``instance``: its discovery kind's; KeyError
+    for a kind that has none."""
+    kind = discovery.for_robot(instance).kind
+    try:
+        return PROBE_RESOURCES[kind]
+    except KeyError:
+        raise KeyError(f"a health probe for discovery kind {kind}") from None
 
 
 def probe_service(project: Project, robot: str, instance: Robot, release: Release, check: GateCheck,
