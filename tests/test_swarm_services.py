@@ -218,3 +218,137 @@ def test_other_refusals_and_a_service_that_never_settles_are_errors(fleet_robots
         with pytest.raises(DockerError, match=f"docker service update .*talker: {error}"):
             apply_service(_Client(service), talker, {c.name: f"id-{c.name}" for c in talker.configs})  # type: ignore[arg-type]
         assert service.updates == []
+
+
+class _Api:
+    """docker-py's low-level API as far as a label-only update uses it: records what was sent."""
+
+    def __init__(self, attrs: dict[str, object]) -> None:
+        self.attrs, self.sent = attrs, []  # type: list[dict[str, object]]
+
+    def inspect_service(self, name: str) -> dict[str, object]:
+        return self.attrs
+
+    def update_service(self, service: str, version: int, **kwargs: object) -> None:
+        self.sent.append({"service": service, "version": version, **kwargs})
+
+
+class _StoredClient(_Client):
+    def __init__(self, service: _Service) -> None:
+        super().__init__(service)
+        self.api = _Api(service.attrs)
+
+
+def _stored(spec: plan.ServiceSpec, ids: dict[str, str]) -> _Service:
+    """A service as the manager stores it after robocore made it from ``spec`` (its template digest label)."""
+    from robocore.adapters.swarm import LABEL_TEMPLATE, service_kwargs, template_digest
+
+    kwargs = service_kwargs(spec, ids)
+    service = _Service({"global": {}}, 0, "")
+    labels = {**spec.label_map, LABEL_TEMPLATE: template_digest(kwargs)}
+    service.attrs = {"ID": "svc1", "Version": {"Index": 7}, "Spec": {
+        "Name": spec.name, "Mode": {"Global": {}}, "Labels": labels,
+        "TaskTemplate": {"ContainerSpec": {"Image": spec.image}, "Networks": [{"Target": "host"}]},
+        "UpdateConfig": {"Order": "stop-first"}, "EndpointSpec": {"Mode": "vip"}}}
+    return service
+
+
+def test_an_unchanged_service_gets_its_labels_only_and_keeps_its_task(fleet_robots) -> None:  # type: ignore[no-untyped-def]
+    """A release that does not change a service (a discovery server: same base image) sends its stored template
+    back as it is, with the new labels: Swarm replaces no task, so no second server ever starts beside the first."""
+    from robocore.adapters.swarm import LABEL_TEMPLATE, apply_service
+
+    server = services(fleet_robots, "r1")["discovery-0"]
+    service = _stored(server, {})
+    template = service.attrs["Spec"]["TaskTemplate"]  # type: ignore[index]
+    client = _StoredClient(service)
+    relabelled = plan.release_labels(server, version="v1", previous="v2", previous_image=server.image, changed="now",
+                                     health="")
+    assert apply_service(client, relabelled, {}) == "svc1"  # type: ignore[arg-type]
+    assert service.updates == []  # no update of the template
+    (sent,) = client.api.sent
+    assert sent["task_template"] is template and sent["version"] == 7 and sent["mode"] == {"Global": {}}
+    assert sent["labels"][plan.LABEL_RELEASE] == "v1"  # type: ignore[index]
+    assert sent["labels"][LABEL_TEMPLATE] == service.attrs["Spec"]["Labels"][LABEL_TEMPLATE]  # type: ignore[index]
+
+
+def test_a_changed_service_is_updated_in_full(fleet_robots) -> None:  # type: ignore[no-untyped-def]
+    """The negative control: a new image (or any other part of the template) is a real, stop-first update."""
+    from dataclasses import replace
+
+    from robocore.adapters.swarm import apply_service
+
+    talker = services(fleet_robots, "r1")["talker"]
+    ids = {c.name: f"id-{c.name}" for c in talker.configs}
+    for changed in (replace(talker, image="10.0.0.2:5000/p-talker@sha256:" + "b" * 64),
+                    replace(talker, environment=(*talker.environment, ("EXTRA", "1")))):
+        service = _stored(talker, ids)
+        client = _StoredClient(service)
+        apply_service(client, changed, ids)  # type: ignore[arg-type]
+        assert service.updates == [1] and client.api.sent == []
+
+
+def test_every_task_has_an_init_that_passes_sigterm_on(fleet_robots) -> None:  # type: ignore[no-untyped-def]
+    """The discovery server has no SIGTERM handler: without an init as PID 1 it ignores the stop and is killed
+    after the grace period, holding its port meanwhile."""
+    for spec in services(fleet_robots, "r1").values():
+        assert service_kwargs(spec, {c.name: "id" for c in spec.configs})["init"] is True, spec.component
+
+
+def test_set_labels_sends_the_stored_spec_back_without_defaults(fleet_robots) -> None:  # type: ignore[no-untyped-def]
+    from robocore.adapters.swarm import set_labels
+
+    server = services(fleet_robots, "r1")["discovery-0"]
+    service = _stored(server, {})
+    client = _StoredClient(service)
+    set_labels(client, server.name, {plan.LABEL_HEALTH: "healthy"})  # type: ignore[arg-type]
+    (sent,) = client.api.sent
+    assert sent["task_template"] is service.attrs["Spec"]["TaskTemplate"]  # type: ignore[index]
+    assert "fetch_current_spec" not in sent  # docker-py's fetch fills in the daemon's defaults
+    assert sent["labels"][plan.LABEL_HEALTH] == "healthy"  # type: ignore[index]
+    assert sent["labels"][plan.LABEL_ROBOT] == "r1"  # type: ignore[index]
+
+
+USER_IMAGE = """\
+ros_distro: jazzy
+hosts:
+  - {name: main, ip: 127.0.0.1, user: me}
+components:
+  - {name: cam, runs_on: main, image: "vendor/cam:1.2", volumes: ["./config:/params:ro"]}
+  - {name: tool, runs_on: main, image: "vendor/tool:3"}
+"""
+
+
+def test_a_user_image_runs_as_its_release_image_carrying_the_baked_files(tmp_path: Path) -> None:
+    """The read-only project volume is not mounted on Swarm: the release's image of the component carries it, so
+    that image runs, not the bare ``image:`` (which would lack /params); with no release image, a component with
+    baked files is a KeyError (refused), one without any runs its own image."""
+    from robocore.config.model import Robot
+
+    robot = parse_robot_text(USER_IMAGE)
+    fleet = parse_fleet_text("manager: {ip: 10.0.0.2}\nregistry: 10.0.0.2:5000\n"
+                             "robots:\n  - {name: r1, hosts: {main: {ip: 10.1.1.1}}}\n", robot)
+    instance = dict(fleet_instances(robot, fleet))["r1"]
+    assert isinstance(instance, Robot)
+    project = Project(root=tmp_path / "proj", robot=robot)
+    release = plan.Release(version="v1", components={"cam": {"amd64": "10.0.0.2:5000/proj-cam" + DIGEST},
+                                                     "tool": {"amd64": "10.0.0.2:5000/proj-tool" + DIGEST}},
+                           base={"amd64": "10.0.0.2:5000/proj-base" + DIGEST})
+    found = {s.component: s for s in plan.robot_services(project, "r1", instance, release)}
+    assert found["cam"].image == "10.0.0.2:5000/proj-cam" + DIGEST and found["tool"].image.endswith(DIGEST)
+    assert "/params" not in [m.target for m in found["cam"].mounts]
+    bare = plan.Release(version="v0", components={}, base=release.base)
+    with pytest.raises(KeyError, match="cam for amd64"):
+        plan.robot_services(project, "r1", instance, bare)
+    only_tool = plan.Release(version="v0", components={"cam": release.components["cam"]}, base=release.base)
+    tool = {s.component: s for s in plan.robot_services(project, "r1", instance, only_tool)}["tool"]
+    assert tool.image == "vendor/tool:3"
+
+
+def test_only_a_real_change_of_mode_makes_a_service_anew() -> None:
+    """The daemon answers ``Global`` where docker-py sent ``global``: the same mode, never a reason to remove a
+    service (its old task would still be stopping beside the new service's)."""
+    from robocore.adapters.swarm import mode_of
+
+    assert mode_of({"Spec": {"Mode": {"Global": {}}}}) == mode_of({"Spec": {"Mode": {"global": {}}}}) == {"global"}
+    assert mode_of({"Spec": {"Mode": {"Replicated": {"Replicas": 1}}}}) != mode_of({"Spec": {"Mode": {"global": {}}}})

@@ -164,7 +164,9 @@ def service_kwargs(spec: ServiceSpec, config_ids: dict[str, str]) -> dict[str, A
         # (no replacement waits elsewhere, which Swarm's scheduler may leave pending after the node is back) and
         # gets the service's current spec when it returns. A one-shot probe is one replica.
         "mode": ServiceMode("replicated", 1) if spec.restart == "none" else ServiceMode("global"),
-        "init": spec.role != "discovery",
+        # an init as PID 1 for every task: it passes SIGTERM on, so a process with no handler of its own (the
+        # discovery server) stops at once instead of being killed after the grace period
+        "init": True,
         # what the daemon fills in on an update when absent: given from the start, the first update of an
         # unchanged service replaces no task
         "stop_grace_period": STOP_GRACE_NS,
@@ -215,18 +217,36 @@ def _service(attrs: dict[str, Any]) -> ServiceInfo:
                                                                             or 0), attrs=attrs)
 
 
+#: Service label: a digest of everything robocore sends of a service but its labels (its tasks' template, mode and
+#: update order). An update whose digest equals the stored one changes labels only, so Swarm replaces no task: a
+#: service a release does not change (a discovery server, a component of the same image) keeps its container.
+LABEL_TEMPLATE = "dev.robocore.fleet.template"
+
+
+def template_digest(kwargs: dict[str, Any]) -> str:
+    """The digest of ``service_kwargs``' output without its labels (docker-py's types are dicts: JSON as sent)."""
+    import hashlib
+    import json
+
+    sent = {key: value for key, value in kwargs.items() if key != "labels"}
+    return hashlib.sha256(json.dumps(sent, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
 def apply_service(client: docker.DockerClient, spec: ServiceSpec, config_ids: dict[str, str]) -> str:
     """Create ``spec``'s service, or update it in place when it exists (stop-first); return the service id.
 
-    A one-shot service (restart condition ``none``, such as a probe) is only ever created: its one task is its
-    result."""
+    An existing service whose stored template digest (:data:`LABEL_TEMPLATE`) is the wanted one gets its labels
+    only, with the rest of its stored spec sent back as it is: no task of it is replaced. A one-shot service
+    (restart condition ``none``, such as a probe) is only ever created: its one task is its result."""
     from docker.errors import APIError, NotFound
 
     kwargs = service_kwargs(spec, config_ids)
+    digest = template_digest(kwargs)
+    kwargs["labels"] = {**kwargs["labels"], LABEL_TEMPLATE: digest}
     with swarm_errors(f"docker service update {spec.name}"):
         try:
             service = client.services.get(spec.name)  # type: ignore[no-untyped-call]
-            if set((service.attrs.get("Spec") or {}).get("Mode") or {}) != set(kwargs["mode"]):
+            if mode_of(service.attrs) != mode_of({"Spec": {"Mode": kwargs["mode"]}}):
                 service.remove()  # Swarm never changes a service's mode (replicated, global): made anew
                 raise NotFound(spec.name)
         except NotFound:
@@ -236,16 +256,40 @@ def apply_service(client: docker.DockerClient, spec: ServiceSpec, config_ids: di
             # The daemon fills defaults into a service's first update (an empty Resources), which would make the
             # first update of an unchanged service replace its task: that update is made now, at creation.
             service.reload()
+            unchanged = False
+        else:
+            unchanged = ((service.attrs.get("Spec") or {}).get("Labels") or {}).get(LABEL_TEMPLATE) == digest
         name = kwargs.pop("name")
         for attempt in range(1, UPDATE_ATTEMPTS + 1):
             try:
-                service.update(name=name, **kwargs)
+                if unchanged:
+                    _send_labels(client, service.attrs, kwargs["labels"])
+                else:
+                    service.update(name=name, **kwargs)
                 break
             except APIError as exc:
                 if attempt == UPDATE_ATTEMPTS or not out_of_sequence(exc):
                     raise
                 service.reload()  # the manager moved the service on since it was read: update the new version
         return str(service.id)
+
+
+def mode_of(attrs: dict[str, Any]) -> set[str]:
+    """A service's mode (``global`` or ``replicated``) from its inspected ``attrs``. The daemon stores the mode
+    under Go's field names (``Global``) while docker-py sends ``global``: compared as they are, every service would
+    look changed in mode and be removed and made anew on each update, its old task still stopping beside the new
+    one (two copies of one node, two discovery servers on one port)."""
+    return {str(key).lower() for key in ((attrs.get("Spec") or {}).get("Mode") or {})}
+
+
+def _send_labels(client: docker.DockerClient, attrs: dict[str, Any], labels: dict[str, str]) -> None:
+    """Update the service of ``attrs`` (as inspected, without defaults filled in) to ``labels``, every other part
+    of its spec sent back exactly as stored: its task template does not change, so no task is replaced."""
+    spec = attrs.get("Spec") or {}
+    client.api.update_service(
+        attrs["ID"], attrs["Version"]["Index"], task_template=spec.get("TaskTemplate"), name=spec.get("Name"),
+        labels=labels, mode=spec.get("Mode"), update_config=spec.get("UpdateConfig"),
+        rollback_config=spec.get("RollbackConfig"), endpoint_spec=spec.get("EndpointSpec"))
 
 
 #: How many times an update refused as "out of sequence" is tried again on the service's new version.
@@ -272,12 +316,19 @@ def updating(client: docker.DockerClient, name: str) -> bool:
 
 
 def set_labels(client: docker.DockerClient, name: str, labels: dict[str, str]) -> None:
-    """Set ``name``'s service labels only: the stored task template is sent back as it is, so no task changes."""
+    """Set ``name``'s service labels only: the stored spec is sent back as it is, so no task changes."""
+    from docker.errors import APIError
+
     with swarm_errors(f"docker service update --label-add {name}"):
-        attrs = client.api.inspect_service(name)  # type: ignore[no-untyped-call]
-        merged = {**((attrs.get("Spec") or {}).get("Labels") or {}), **labels}
-        client.api.update_service(attrs["ID"], attrs["Version"]["Index"], labels=merged,
-                                  fetch_current_spec=True)
+        for attempt in range(1, UPDATE_ATTEMPTS + 1):
+            attrs = client.api.inspect_service(name)  # type: ignore[no-untyped-call]
+            merged = {**((attrs.get("Spec") or {}).get("Labels") or {}), **labels}
+            try:
+                _send_labels(client, attrs, merged)
+                return
+            except APIError as exc:
+                if attempt == UPDATE_ATTEMPTS or not out_of_sequence(exc):
+                    raise
 
 
 def remove_service(client: docker.DockerClient, name: str) -> None:

@@ -201,12 +201,15 @@ def robot_services(project: Project, robot: str, instance: Robot, release: Relea
                                  image=image, role=naming.ROLE_DISCOVERY, configs=()))
     for component in instance.components:
         arch = instance.host(component.runs_on).arch.value
-        image = component.image or release.image(component.name, arch)
+        baked = baked_targets(component)
+        # the release's image first: for a component with its own image (robot.yaml ``image:``) too, it is that
+        # image plus the read-only project files the service no longer mounts, by digest; the bare image only
+        # when nothing is baked (a release record without the component), never with its files missing
+        image = release.image(component.name, arch) or (component.image if not baked else None)
         if image is None:
             raise KeyError(f"{component.name} for {arch}")
         services.append(_service(component_spec(here, component), project=project.name, robot=robot, arch=arch,
-                                 image=image, role=naming.ROLE_COMPONENT, configs=configs,
-                                 baked=baked_targets(component)))
+                                 image=image, role=naming.ROLE_COMPONENT, configs=configs, baked=baked))
     return services
 
 
