@@ -121,3 +121,43 @@ def test_without_a_wave_deadline_only_the_robots_own_timeout_applies(gate: Any) 
     the_gate.run(wave)
     assert [c.verdict for c in wave] == [FAILED, FAILED]
     assert all(c.reason.startswith("not running after 1000 s") for c in wave), [c.reason for c in wave]
+
+
+def _ended_probe(gate: Any, monkeypatch: pytest.MonkeyPatch, state: str, code: int, logs: list[str]) -> _Change:
+    """r1's change with a probe that has ended in ``state`` with exit ``code``; each read of its output through the
+    manager gives the next of ``logs`` (the last one from then on)."""
+    _, fleet_project, clock, _ = gate
+    change = changes(fleet_project, clock)[0]
+    change.probe = "p-r1-probe-1"
+    probe = swarm.TaskInfo(id="tp", node_id="nr1", state=state, desired="shutdown", image=RELEASE.base["amd64"],
+                           created="1", error="", exit_code=code, container="c")
+    monkeypatch.setattr(swarm, "tasks", lambda _client, _service: [probe])
+    monkeypatch.setattr(swarm, "service_logs", lambda _client, _service: logs.pop(0) if len(logs) > 1 else logs[0])
+    monkeypatch.setattr(swarm, "remove_service", lambda _client, _service: None)
+    return change
+
+
+def test_a_probe_whose_output_comes_late_is_read_again(gate: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    the_gate, _, clock, _ = gate
+    missing = '{"ok": false, "missing": ["/listener"], "silent": []}'
+    change = _ended_probe(gate, monkeypatch, "failed", 1, ["", missing])
+    the_gate._probe(change, clock.now)  # exited 1: no grace, and its output says why when there is one
+    assert (change.verdict, change.reason) == (FAILED, "the health probe printed no verdict (failed)")
+    change = _ended_probe(gate, monkeypatch, "complete", 0, ["", "", '{"ok": true}'])
+    for _ in range(3):
+        the_gate._probe(change, clock.now)
+        clock.sleep(1)
+    assert change.verdict == HEALTHY
+
+
+def test_a_probe_that_exited_0_with_no_output_passes_after_the_wait(gate: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    """It exits 0 only when every node was seen and every topic heard: its exit code is the verdict when its output
+    never reaches the manager (seen on a robot that had just reconnected)."""
+    the_gate, _, clock, _ = gate
+    change = _ended_probe(gate, monkeypatch, "complete", 0, [""])
+    started = clock.now
+    while change.verdict is None:
+        the_gate._probe(change, clock.now)
+        clock.sleep(0.5)
+    assert change.verdict == HEALTHY
+    assert clock.now - started >= fleet_rollout.PROBE_LOG_WAIT

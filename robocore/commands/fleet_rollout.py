@@ -38,6 +38,8 @@ if TYPE_CHECKING:
 
 #: Seconds between two looks at the tasks while gating.
 POLL = 0.5
+#: Seconds the output of a probe that exited 0 is read again, when it has not reached the manager yet.
+PROBE_LOG_WAIT = 5.0
 #: Health verdicts kept in the services' labels.
 HEALTHY, FAILED, PENDING, ROLLED_BACK = "healthy", "failed", "pending", "rolled-back"
 #: States of a task that ended on its own (a crash, an exit, a refusal), not because robocore replaced it.
@@ -71,6 +73,7 @@ class _Change:
     running_since: float | None = None
     task_ids: dict[str, str] = field(default_factory=dict)
     probe: str | None = None
+    probe_ended: float | None = None  # when the probe's end was first seen with no verdict in its output
     verdict: str | None = None
     reason: str = ""
     ended: float = 0.0
@@ -223,8 +226,16 @@ class Gate:
                 self._decide(change, FAILED, f"the health probe did not end within {self.timeouts.robot} s")
             return
         verdict = plan.probe_verdict(swarm.service_logs(self.client, change.probe))
-        if verdict is None:
-            task = ended[0]
+        task = ended[0]
+        if verdict is None and task.state == "complete" and task.exit_code in (0, None):
+            # it exited 0, which it does only when every node was seen and every topic heard; its output reaches
+            # the manager later than its end (a robot that has just reconnected): read again for a while, then
+            # take the exit code as the verdict
+            change.probe_ended = change.probe_ended or clock
+            if clock - change.probe_ended < PROBE_LOG_WAIT:
+                return
+            self._decide(change, HEALTHY)
+        elif verdict is None:
             self._decide(change, FAILED, f"the health probe printed no verdict ({task.state}"
                          + (f": {task.error}" if task.error else "") + ")")
         elif verdict.get("ok") is True:
