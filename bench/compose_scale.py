@@ -22,8 +22,8 @@ from pathlib import Path
 import yaml
 from harness import Figure, record
 
-from robocore.commands.composefiles import write_compose_files
-from robocore.commands.state import with_local_build
+from robocore.commands.support.composefiles import write_compose_files
+from robocore.commands.support.state import with_local_build
 from robocore.plan import compose, yaml_text
 from robocore.plan.containers import host_specs
 from robocore.project import Project

@@ -75,7 +75,7 @@ def robot_as(root: Path, kind: str) -> Path:
 
 def memo_as(root: Path, kind: str) -> Path:
     """Something planted at the name of ``validate``'s memo (predictable from the project's path)."""
-    from robocore.commands import noop
+    from robocore.commands.support import noop
 
     project(root)
     path = noop.Memo(root, "validate", [], line=[str(Path.cwd()), "-p", str(root), "validate"]).path

@@ -60,8 +60,8 @@ def scratch_base(project: Path) -> float:
     """The project's base Dockerfile built through robocore's builder with Docker's cache off."""
     from robocore.adapters.docker_hosts import local_client
     from robocore.adapters.image_builder import build_image
-    from robocore.commands.base_image import plan_base
-    from robocore.commands.machine import native_arch
+    from robocore.commands.prepare_base import plan_base
+    from robocore.commands.support.machine import native_arch
     from robocore.plan.dockerfiles import ImagePlan
     from robocore.project import Project
 

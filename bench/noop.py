@@ -6,7 +6,7 @@ loaded machine, where bare start-up itself is slow, the same goal as a ratio: <=
 - each task by its ordinary path (``ROBOCORE_NO_MEMO=1``: configuration loaded, images asked for,
   sources hashed) and by the no-op memo (``.robocore/noop``: one stat pass, one raw Docker API call);
   ``status`` asks the daemon for the live containers every time, its memo holds only robot.yaml's plan
-  (:mod:`robocore.commands.status_memo`: the project's hosts must all be this machine).
+  (:mod:`robocore.commands.support.status_memo`: the project's hosts must all be this machine).
 
 Usage: python bench/noop.py [PROJECT] [--runs N]
 PROJECT is a project after prepare-base, stage and build (default: a new template project in a temporary

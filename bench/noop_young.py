@@ -30,7 +30,7 @@ from pathlib import Path
 
 from harness import Figure, record
 
-from robocore.commands import noop
+from robocore.commands.support import noop
 
 GOAL_S = 0.1
 

@@ -26,7 +26,7 @@ from typing import Any
 import pytest
 from deploy_helpers import HEARD, PUBLISHED, free_udp_port, log_lines, wait_for
 
-from robocore.commands.composefiles import write_compose_files
+from robocore.commands.support.composefiles import write_compose_files
 from robocore.plan import naming
 from robocore.plan.containers import ContainerSpec, host_specs
 from robocore.project import Project
@@ -63,7 +63,7 @@ class Deployment:
 
     def graph(self, what: str = "node") -> str:
         """``ros2 <what> list`` as a super client inside the discovery server container."""
-        from robocore.commands.observe import super_client_exec_env
+        from robocore.commands.status import super_client_exec_env
 
         code, out = self.containers["discovery-0"].exec_run(
             [naming.ENTRYPOINT, "ros2", what, "list", "--spin-time", "3"],

@@ -20,7 +20,7 @@ import yaml
 from local_registry import manifest, serve_registry
 
 from robocore.commands.fleet_release import load_release_record
-from robocore.commands.machine import native_arch
+from robocore.commands.support.machine import native_arch
 from robocore.project import Project
 
 if TYPE_CHECKING:

@@ -377,7 +377,7 @@ def test_build_runs_as_the_invoking_user_even_when_that_is_not_root(
     import shutil
 
     from robocore.commands import build
-    from robocore.commands.context import Options
+    from robocore.commands.support.context import Options
     from robocore.plan import arches
     from robocore.project import BUILD_STATE
 

@@ -216,7 +216,7 @@ def test_plain_status_of_an_unchanged_project_answers_from_its_memo(running: Pat
     """The second plain status prints the ordinary table from the plan the first recorded (without loading
     robot.yaml's model); a plan edited in the memo shows that it is read, and a touched robot.yaml (same
     content) takes the ordinary path again (negative control)."""
-    from robocore.commands import noop
+    from robocore.commands.support import noop
 
     ordinary = run_robocore(running, "status", env={"ROBOCORE_NO_MEMO": "1"}).stdout
     run_robocore(running, "status")  # records the plan (or answers from a plan an earlier test recorded)
@@ -281,7 +281,7 @@ def test_compose_up_runs_the_robot_and_run_keeps_it(project_copy: Any, docker_cl
                                                     compose_project: Callable[[str, Path], list[str]]) -> None:
     """The generated compose file is a working artifact: `docker-compose up` starts the robot, and robocore
     then sees exactly its own specs (same spec labels, same images) and recreates nothing."""
-    from robocore.commands.composefiles import write_compose_files
+    from robocore.commands.support.composefiles import write_compose_files
     from robocore.project import Project
 
     root = project_copy()

@@ -6,7 +6,7 @@ runs, from any folder. The project folder and the command line reach the tasks a
 settings (``robocore.project``, ``robocore.argv``), at the level of command-line overrides.
 Start-up stays light: only invoke and the task surface are imported before a task runs
 (pydantic, docker-py and copier load inside the tasks), and a command with remote steps
-starts its ssh connections first (:mod:`robocore.commands.warmup`).
+starts its ssh connections first (:mod:`robocore.commands.support.warmup`).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ VALUE_FLAGS = frozenset({
 })
 
 
-#: The tasks whose no-op may answer from :mod:`robocore.commands.noop`'s memo (the module decides; this only
+#: The tasks whose no-op may answer from :mod:`robocore.commands.support.noop`'s memo (the module decides; this only
 #: spares other command lines its import).
 MEMO_TASKS = frozenset({"validate", "stage", "build"})
 
@@ -219,7 +219,7 @@ def _program(namespace: Any, settings: dict[str, Any] | None = None) -> Any:
 
 def _run_recording(memo: Any, args: list[str]) -> None:
     """Run a memoisable command line, printing as usual; a success that changed nothing is memoised."""
-    from robocore.commands import noop
+    from robocore.commands.support import noop
 
     with noop.captured() as (out, err):
         try:
@@ -264,18 +264,18 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = list(sys.argv[1:] if argv is None else argv)
     memo = None
     if argv is None and MEMO_TASKS & set(args[:3]):  # an unchanged project's no-op answers from its memo
-        from robocore.commands import noop
+        from robocore.commands.support import noop
 
         memo = noop.for_command(args)
         if memo is not None and memo.replay(sys.stdout, sys.stderr):
             return
     if argv is None and "status" in args[:4]:  # an unchanged all-local project's status answers from its memo
-        from robocore.commands import status_memo
+        from robocore.commands.support import status_memo
 
         if status_memo.answer(args):
             return
     if argv is None:  # a real command line: start the robot hosts' ssh handshakes while the rest loads
-        from robocore.commands.warmup import warm_recorded
+        from robocore.commands.support.warmup import warm_recorded
 
         warm_recorded(args)
     if memo is not None:

@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from robocore.commands.context import Options
+from robocore.commands.support.context import Options
 from robocore.errors import RobocoreError
 from robocore.ui import console
 
@@ -49,7 +49,7 @@ def create_project(path: Path) -> None:
 
 def heard_lines(options: Options, component: str = "listener", tail: int = 200) -> list[str]:
     """Lines of ``component``'s container log that show a received message."""
-    from robocore.commands.hosts import connect
+    from robocore.commands.support.hosts import connect
     from robocore.plan import naming
 
     project = options.load()
@@ -81,11 +81,11 @@ def wait_for_messages(options: Options, timeout: float, *, count: int = 3) -> li
             if len(lines) >= count:
                 return lines
             time.sleep(1.0)
-    from robocore.commands import observe
+    from robocore.commands import status
 
     console().print("[red]no messages in time; the last lines of every container:[/]")
     try:
-        observe.logs(options, component=None, follow=False, tail=10)
+        status.logs(options, component=None, follow=False, tail=10)
     except RobocoreError as error:
         console().print(f"(logs unavailable: {error.lines()[0]})")
     raise DemoFailed(
@@ -104,19 +104,19 @@ def main(argv: list[str] | None = None) -> int:
 
     path = Path(args.dir).resolve()
     options = Options(project_dir=path)
-    from robocore.commands import base_image, build, component_images, observe, run
+    from robocore.commands import build, prepare_base, run, stage, status
 
     try:
         _step(f"init {path}", lambda: create_project(path))
-        _step("prepare-base", lambda: base_image.prepare_base(options, force=False))
-        _step("stage", lambda: component_images.stage(options, refresh=False, component=None, force=False))
+        _step("prepare-base", lambda: prepare_base.prepare_base(options, force=False))
+        _step("stage", lambda: stage.stage(options, refresh=False, component=None, force=False))
         _step("build", lambda: build.build(options, component=None))
         _step("run", lambda: run.run(options, host=None, tag=None))
         lines = wait_for_messages(options, args.timeout)
         console().rule("[bold]the listener hears the talker through the discovery server")
         for line in lines[-5:]:
             print(f"listener | {line}")
-        observe.status(options, nodes_too=True)
+        status.status(options, nodes_too=True)
         if args.down:
             _step("down", lambda: run.down(options, host=None))
         else:

@@ -20,7 +20,7 @@ from invoke.tasks import task
 from robocore.errors import RobocoreError
 
 if TYPE_CHECKING:
-    from robocore.commands.context import Options
+    from robocore.commands.support.context import Options
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -117,7 +117,7 @@ def _count(value: str, flag: str) -> int:
 
 
 def _options(c: Context, task_name: str, **flags: Any) -> Options:
-    from robocore.commands.context import Options
+    from robocore.commands.support.context import Options
 
     if "dry_run" in flags and _setting(c, "argv") is None and any(
             arg == "--dry-run" or arg.startswith("--dry-run=") for arg in command_line(c)):
@@ -191,10 +191,10 @@ def prepare_base(
     c: Context, force: bool = False, dry_run: bool = False, quiet: bool = False, json: bool = False
 ) -> None:
     """Build the base image: ROS distro + common_packages; only when its inputs changed."""
-    from robocore.commands import base_image
+    from robocore.commands import prepare_base as command
 
     options = _options(c, "prepare-base", dry_run=dry_run, quiet=quiet, json=json)
-    _execute(options, lambda: base_image.prepare_base(options, force=force))
+    _execute(options, lambda: command.prepare_base(options, force=force))
 
 
 @task(help={"refresh": "Only rewrite the per-host compose files.", "component": "Stage only this component.",
@@ -204,10 +204,10 @@ def prepare_base(
 def stage(c: Context, refresh: bool = False, component: str | None = None, force: bool = False,
           dry_run: bool = False, quiet: bool = False, json: bool = False) -> None:
     """Build one image per component (dependencies, no user code) and write compose files."""
-    from robocore.commands import component_images
+    from robocore.commands import stage as command
 
     options = _options(c, "stage", dry_run=dry_run, quiet=quiet, json=json)
-    _execute(options, lambda: component_images.stage(
+    _execute(options, lambda: command.stage(
         options, refresh=refresh, component=_given(component, "--component"), force=force))
 
 
@@ -234,10 +234,10 @@ def test(c: Context, component: str | None = None, packages_select: list[str] | 
          no_build: bool = False, quiet: bool = False, json: bool = False) -> None:
     """Build what is stale, then colcon-test each component's packages inside its staged image; one result per
     package (exit 9 on failure)."""
-    from robocore.commands import package_tests
+    from robocore.commands import test as command
 
     options = _options(c, "test", dry_run=dry_run, quiet=quiet, json=json)
-    _execute(options, lambda: package_tests.test(options, component=_given(component, "--component"),
+    _execute(options, lambda: command.test(options, component=_given(component, "--component"),
                                                  packages=[_given(p, "--packages-select") or ""
                                                            for p in packages_select or []],
                                                  build_first=not no_build))
@@ -250,10 +250,10 @@ def test(c: Context, component: str | None = None, packages_select: list[str] | 
 def dev(c: Context, component: str | None = None, dry_run: bool = False, quiet: bool = False) -> None:
     """build, sync and run, then again on every save (quick saves coalesce); a failed build leaves the robot on
     the last good release and says why in one line. Ctrl-C stops."""
-    from robocore.commands import watch
+    from robocore.commands import dev as command
 
     options = _options(c, "dev", dry_run=dry_run, quiet=quiet)
-    watch.dev(options, component=_given(component, "--component"))
+    command.dev(options, component=_given(component, "--component"))
 
 
 @task(help={"host": "Sync only this host.", "dry_run": "Print the rsync commands only.", "quiet": "Only errors.",
@@ -296,10 +296,10 @@ def down(c: Context, host: str | None = None, dry_run: bool = False, quiet: bool
 @reported
 def status(c: Context, json: bool = False, dry_run: bool = False, nodes: bool = False) -> None:
     """Table of components (host, state, uptime, restarts, image); with --nodes the live ROS nodes too."""
-    from robocore.commands import observe
+    from robocore.commands import status as command
 
     options = _options(c, "status", json=json, dry_run=dry_run)
-    _execute(options, lambda: observe.status(options, nodes_too=nodes))
+    _execute(options, lambda: command.status(options, nodes_too=nodes))
 
 
 @task(help={"component": "Only this component.", "follow": "Keep following.",
@@ -309,10 +309,10 @@ def status(c: Context, json: bool = False, dry_run: bool = False, nodes: bool = 
 def logs(c: Context, component: str | None = None, follow: bool = False, tail: str = "100", dry_run: bool = False,
          json: bool = False) -> None:
     """Logs of the robot's containers on all hosts, each line prefixed by its component."""
-    from robocore.commands import observe
+    from robocore.commands import status as command
 
     options = _options(c, "logs", dry_run=dry_run, json=json)
-    _execute(options, lambda: observe.logs(options, component=_given(component, "--component"), follow=follow,
+    _execute(options, lambda: command.logs(options, component=_given(component, "--component"), follow=follow,
                                            tail=_count(tail, "--tail")))
 
 
@@ -326,10 +326,10 @@ def shell(c: Context, component: str | None = None, cmd: str | None = None, new:
           dry_run: bool = False) -> None:
     """Interactive dev container in a component's environment (source mounted, ROS sourced)."""
     component = _require(component, "shell")
-    from robocore.commands import devshell
+    from robocore.commands import shell as command
 
     options = _options(c, "shell", dry_run=dry_run)
-    code = _execute(options, lambda: devshell.run(
+    code = _execute(options, lambda: command.run(
         options, component=component, cmd=_given(cmd, "--cmd"), new=new, devices=_given(devices, "--devices"),
         gpus=True if gpus else (False if no_gpus else None), privileged=privileged))
     if code:
@@ -342,10 +342,10 @@ def shell(c: Context, component: str | None = None, cmd: str | None = None, new:
 def connect(c: Context, component: str | None = None, cmd: str | None = None, dry_run: bool = False) -> None:
     """Shell inside the running container of a component on its host, as a ROS super client."""
     component = _require(component, "connect")
-    from robocore.commands import observe
+    from robocore.commands import status as command
 
     options = _options(c, "connect", dry_run=dry_run)
-    code = _execute(options, lambda: observe.connect(options, component=component, cmd=_given(cmd, "--cmd")))
+    code = _execute(options, lambda: command.connect(options, component=component, cmd=_given(cmd, "--cmd")))
     if code:
         raise Exit(code=code)
 
@@ -425,7 +425,7 @@ def doctor(c: Context, host: str | None = None, json: bool = False) -> None:
 @reported
 def desktop_password(c: Context) -> None:
     """Print the project's VNC password (made once, kept 0600 in .robocore/desktop/), which noVNC asks for."""
-    from robocore.commands import displays
+    from robocore.commands.support import displays
 
     options = _options(c, "desktop-password")
     print(_execute(options, lambda: displays.desktop_password(options.load())))

@@ -40,7 +40,7 @@ def make_project(tmp_path: Path) -> MakeProject:
 def built_project(root: Path, text: str, components: Iterable[str] = ("talker", "listener")) -> Project:
     """A project at ``root`` as after stage and build: robot.yaml = ``text``, one package per component's
     workspace (``components/<c>/src/<c>_pkg``), compose files and DDS profiles written, install trees made."""
-    from robocore.commands.composefiles import write_compose_files
+    from robocore.commands.support.composefiles import write_compose_files
 
     for comp in components:
         pkg = root / "components" / comp / "src" / f"{comp}_pkg"

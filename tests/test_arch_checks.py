@@ -1,4 +1,4 @@
-"""Refusals about arches (robocore.commands.arch_checks): install trees of another arch, daemons that cannot run
+"""Refusals about arches (robocore.commands.support.arch_checks): install trees of another arch, daemons that cannot run
 their host's arch; and the build's per-arch records (ccache folder, install marker, clean build on an arch change)."""
 
 from __future__ import annotations
@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from robocore.commands import arch_checks, build, images, machine
+from robocore.commands import build
+from robocore.commands.support import arch_checks, images, machine
 from robocore.config.model import Host
 from robocore.errors import ArchMismatch
 from robocore.plan import arches, containers, dockerfiles, naming

@@ -8,9 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from robocore.commands import base_image, machine
-from robocore.commands.context import Options
-from robocore.commands.reporting import Outcome
+from robocore.commands import prepare_base
+from robocore.commands.support import machine
+from robocore.commands.support.context import Options
+from robocore.commands.support.reporting import Outcome
 from robocore.errors import DockerError, ToolMissing
 
 ROOT_WAIT = 10.0  # seconds the emulated root waits for the native base before it gives up
@@ -46,7 +47,7 @@ class Steps:
 
 def test_the_native_base_is_built_while_the_emulated_root_is_made() -> None:
     steps = Steps()
-    outcomes = base_image.bases_as_roots_arrive(["amd64", "arm64"], steps.make_root, steps.build_base)
+    outcomes = prepare_base.bases_as_roots_arrive(["amd64", "arm64"], steps.make_root, steps.build_base)
     assert "root arm64 saw the amd64 base: True" in steps.events  # one after the other, it would have waited
     assert steps.events.index("base amd64 built") < steps.events.index("root arm64 done")
     assert steps.events.index("root arm64 done") < steps.events.index("base arm64 built")
@@ -56,7 +57,7 @@ def test_the_native_base_is_built_while_the_emulated_root_is_made() -> None:
 def test_a_root_that_cannot_be_had_fails_the_command_after_the_other_arch_is_built() -> None:
     steps = Steps(failing_root="arm64")
     with pytest.raises(DockerError, match="no root for arm64"):
-        base_image.bases_as_roots_arrive(["amd64", "arm64"], steps.make_root, steps.build_base)
+        prepare_base.bases_as_roots_arrive(["amd64", "arm64"], steps.make_root, steps.build_base)
     assert "base amd64 built" in steps.events
     assert "base arm64 built" not in steps.events
 
@@ -83,4 +84,4 @@ def test_emulation_is_checked_before_any_root_or_docker(tmp_path: Path, monkeypa
     monkeypatch.setattr(machine, "BINFMT_DIR", tmp_path / "binfmt_misc")
     monkeypatch.setenv("DOCKER_HOST", f"unix://{tmp_path}/no-docker.sock")
     with pytest.raises(ToolMissing, match=r"robot\.yaml: hosts of arch"):  # the arch this machine does not run
-        base_image.prepare_base(Options(project_dir=tmp_path, task="prepare-base"), force=False)
+        prepare_base.prepare_base(Options(project_dir=tmp_path, task="prepare-base"), force=False)

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from robocore.commands import base_image, build, component_images
-from robocore.commands.workspace import check_wheels_packages, wheels_cmake_packages
+from robocore.commands import build, prepare_base, stage
+from robocore.commands.support.workspace import check_wheels_packages, wheels_cmake_packages
 from robocore.errors import BuildError, ConfigError
 from robocore.plan import cmake_packages, colcon, dockerfiles
 from robocore.plan.cmake_packages import read_manifest, wheels_refusals
@@ -221,26 +221,26 @@ def _project(tmp_path: Path, distro: str = "jazzy", extra: dict[str, str] | None
 
 def test_stage_plans_the_tool_chain_only_where_a_workspace_needs_it(tmp_path: Path) -> None:
     project = _project(tmp_path)
-    base = component_images.BaseRef(ref="p-base:latest", arch="amd64", inputs="x")
-    msgs = component_images.plan_component(project, project.component("msgs"), base, dry_run=True)
-    py = component_images.plan_component(project, project.component("py"), base, dry_run=True)
+    base = stage.BaseRef(ref="p-base:latest", arch="amd64", inputs="x")
+    msgs = stage.plan_component(project, project.component("msgs"), base, dry_run=True)
+    py = stage.plan_component(project, project.component("py"), base, dry_run=True)
     assert "# CMake packages (my_msgs)" in msgs.plan.dockerfile
     assert "toolchain" not in py.plan.dockerfile
-    planned = base_image.plan_base(project, None, "amd64", dry_run=True)
+    planned = prepare_base.plan_base(project, None, "amd64", dry_run=True)
     assert "# CMake packages (shared_msgs)" in planned.plan.dockerfile
 
 
 def test_stage_and_validate_refuse_rclcpp_in_one_line_naming_the_file(tmp_path: Path) -> None:
     project = _project(tmp_path, extra={"components/py/src/cpp_node/package.xml": CPP_NODE,
                                         "components/py/src/cpp_node/CMakeLists.txt": "project(cpp_node)\n"})
-    base = component_images.BaseRef(ref="p-base:latest", arch="amd64", inputs="x")
+    base = stage.BaseRef(ref="p-base:latest", arch="amd64", inputs="x")
     with pytest.raises(ConfigError) as raised:
-        component_images.plan_component(project, project.component("py"), base, dry_run=True)
+        stage.plan_component(project, project.component("py"), base, dry_run=True)
     assert raised.value.lines() == [f"components/py/src/cpp_node/package.xml:6: depend: {CPP_REFUSAL}"]
     with pytest.raises(ConfigError) as validated:
         check_wheels_packages(project)
     assert validated.value.lines() == raised.value.lines()
-    component_images.plan_component(project, project.component("msgs"), base, dry_run=True)  # the other one is fine
+    stage.plan_component(project, project.component("msgs"), base, dry_run=True)  # the other one is fine
 
 
 def test_the_refusal_is_one_line_on_the_command_line(tmp_path: Path) -> None:
@@ -311,7 +311,7 @@ def test_an_interface_or_header_edit_always_runs_colcon() -> None:
 def test_the_wheels_base_context_holds_robocores_files_at_their_image_paths(tmp_path: Path) -> None:
     """The one ``COPY tree/ /`` of the wheels base puts the entrypoint, setup.bash and ros2 where the image
     uses them (executables stay executable)."""
-    planned = base_image.plan_base(_project(tmp_path), None, "amd64", dry_run=True)
+    planned = prepare_base.plan_base(_project(tmp_path), None, "amd64", dry_run=True)
     files = {f.dest: f for f in planned.files}
     assert {"tree/robocore/entrypoint.sh", "tree/opt/ros/jazzy/setup.bash", "tree/opt/ros/jazzy/venv/bin/ros2"} <= set(
         files)

@@ -10,7 +10,7 @@ import pytest
 import yaml
 from golden_files import check_golden
 
-from robocore.commands.composefiles import write_compose_files
+from robocore.commands.support.composefiles import write_compose_files
 from robocore.config.model import Robot
 from robocore.files import WRITTEN_RECORD
 from robocore.plan import compose, containers, yaml_text

@@ -595,7 +595,7 @@ def test_problems_found_after_loading_get_their_lines(make_project: MakeProject)
 
 def test_validate_reports_what_the_wheels_base_cannot_build(make_project: MakeProject) -> None:
     from robocore.commands import validate
-    from robocore.commands.context import Options
+    from robocore.commands.support.context import Options
 
     project = make_project(edit({1: "ros_distro: humble\nbase: {kind: wheels}"}), FOLDERS)
     with pytest.raises(ConfigError) as caught:
@@ -608,13 +608,13 @@ def test_validate_prepare_base_and_stage_refuse_the_same_robot_shape_in_the_same
         make_project: MakeProject) -> None:
     """A wheels robot whose Fast DDS server (on the first host, arm64) would need an arm64 wheels base: validate
     says so, in the one line prepare-base and stage say it (one check, made where each of them starts)."""
-    from robocore.commands import base_image, component_images, validate
-    from robocore.commands.context import Options
+    from robocore.commands import prepare_base, stage, validate
+    from robocore.commands.support.context import Options
 
     project = make_project(edit({1: "ros_distro: jazzy\nbase: {kind: wheels}", 15: "    runs_on: dev"}), FOLDERS)
     seen = []
-    steps = [(validate.run, False), (lambda o: base_image.prepare_base(o, force=False), True),
-             (lambda o: component_images.stage(o, refresh=False, component=None, force=False), True)]
+    steps = [(validate.run, False), (lambda o: prepare_base.prepare_base(o, force=False), True),
+             (lambda o: stage.stage(o, refresh=False, component=None, force=False), True)]
     for step, dry_run in steps:  # the image steps' dry runs: they refuse before contacting any daemon
         with pytest.raises(ConfigError) as caught:
             step(Options(project_dir=project, dry_run=dry_run))

@@ -275,7 +275,7 @@ def test_compose_escapes_dollars_run_does_not() -> None:
 def test_uptime_text() -> None:
     from datetime import datetime, timezone
 
-    from robocore.commands.status_table import uptime_text
+    from robocore.commands.support.status_table import uptime_text
 
     now = datetime(2026, 1, 2, 3, 4, 5, tzinfo=timezone.utc)
     assert uptime_text("2026-01-02T03:04:00.123456789Z", now) == "5s"  # whole seconds

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from robocore.adapters import docker_hosts, ssh
-from robocore.commands import context, hosts, warmup
+from robocore.commands.support import context, hosts, warmup
 from robocore.config.model import Host, Robot
 from robocore.project import Project, ProjectFolder
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import yaml
 
-from robocore.commands.workspace import debian_dependency_warnings
+from robocore.commands.support.workspace import debian_dependency_warnings
 from robocore.config.loader import load_robot
 from robocore.plan.cmake_packages import read_manifest
 from robocore.plan.debian_packages import applies, debian_candidates, unresolved

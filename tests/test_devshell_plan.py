@@ -367,8 +367,8 @@ def test_dry_run_prints_the_plan_without_docker(project: Project, monkeypatch: p
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     import json
 
-    from robocore.commands import devshell
-    from robocore.commands.context import Options
+    from robocore.commands import shell
+    from robocore.commands.support.context import Options
 
     monkeypatch.setenv("DOCKER_HOST", "unix:///nonexistent/docker.sock")  # would fail if contacted
     monkeypatch.setenv("ROBOCORE_UID", "1234")
@@ -376,7 +376,7 @@ def test_dry_run_prints_the_plan_without_docker(project: Project, monkeypatch: p
     monkeypatch.setenv("USER", "carol")
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
-    code = devshell.run(Options(project_dir=project.root, dry_run=True), component="viz", cmd="true", new=False,
+    code = shell.run(Options(project_dir=project.root, dry_run=True), component="viz", cmd="true", new=False,
                         devices="all", gpus=None, privileged=False)
     assert code == 0
     out = json.loads(capsys.readouterr().out)
@@ -389,22 +389,22 @@ def test_dry_run_prints_the_plan_without_docker(project: Project, monkeypatch: p
 
 
 def test_devices_flag_only_takes_all(project: Project) -> None:
-    from robocore.commands import devshell
-    from robocore.commands.context import Options
+    from robocore.commands import shell
+    from robocore.commands.support.context import Options
     from robocore.errors import UsageError
 
     with pytest.raises(UsageError, match="--devices"):
-        devshell.run(Options(project_dir=project.root, dry_run=True), component="viz", cmd=None, new=False,
+        shell.run(Options(project_dir=project.root, dry_run=True), component="viz", cmd=None, new=False,
                      devices="/dev/robocore-absent-tty", gpus=None, privileged=False)
 
 
 def test_missing_component_device_is_a_usage_error(project: Project, monkeypatch: pytest.MonkeyPatch) -> None:
-    from robocore.commands import devshell
-    from robocore.commands.context import Options
+    from robocore.commands import shell
+    from robocore.commands.support.context import Options
     from robocore.errors import UsageError
 
     with pytest.raises(UsageError, match="device /dev/robocore-absent-tty does not exist"):
-        devshell.run(Options(project_dir=project.root, dry_run=True), component="arm", cmd=None, new=False,
+        shell.run(Options(project_dir=project.root, dry_run=True), component="arm", cmd=None, new=False,
                      devices=None, gpus=None, privileged=False)
 
 

@@ -10,10 +10,10 @@ import yaml
 from fakes import FakeContainer, FakeDocker
 
 from robocore.commands import run
-from robocore.commands.composefiles import write_dds_profiles
-from robocore.commands.observe import super_client_exec_env
-from robocore.commands.reporting import Reporter
 from robocore.commands.run import wait_server_ready
+from robocore.commands.status import super_client_exec_env
+from robocore.commands.support.composefiles import write_dds_profiles
+from robocore.commands.support.reporting import Reporter
 from robocore.config.loader import parse_robot_text
 from robocore.config.model import Robot
 from robocore.errors import ConfigError, DockerError

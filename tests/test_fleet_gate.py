@@ -13,9 +13,9 @@ import pytest
 
 from robocore.adapters import swarm
 from robocore.commands import fleet_rollout
-from robocore.commands.context import Options
 from robocore.commands.fleet_rollout import FAILED, HEALTHY, Gate, _Change
 from robocore.commands.fleet_swarm import FleetProject
+from robocore.commands.support.context import Options
 from robocore.config.fleet import parse_fleet_text
 from robocore.config.loader import parse_robot_text
 from robocore.plan import swarm_services as plan

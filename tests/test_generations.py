@@ -13,7 +13,7 @@ import pytest
 from golden_files import check_golden
 
 from robocore import resources
-from robocore.commands import images
+from robocore.commands.support import images
 from robocore.config.generations import generation_problems
 from robocore.config.loader import parse_robot_text
 from robocore.config.model import Robot

@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 import yaml
 
-from robocore.commands.displays import prepare_host_displays
+from robocore.commands.support.displays import prepare_host_displays
 from robocore.config.desktop import Desktop, display_host
 from robocore.config.loader import parse_robot_text, robot_warnings
 from robocore.config.model import Robot
@@ -193,7 +193,7 @@ def test_a_desktop_mounts_the_projects_password_file_read_only_and_gets_only_its
 def test_the_password_is_made_once_private_and_never_in_argv_env_or_compose(tmp_path: Path) -> None:
     import stat
 
-    from robocore.commands.displays import desktop_password, ensure_desktop_password
+    from robocore.commands.support.displays import desktop_password, ensure_desktop_password
 
     p = project([desktop(), {"name": "viz", "runs_on": "dev", "gui": "vnc"}], root=tmp_path)
     old = os.umask(0o022)
@@ -222,7 +222,7 @@ def test_the_password_is_made_once_private_and_never_in_argv_env_or_compose(tmp_
 
 
 def test_the_password_is_never_written_through_a_link(tmp_path: Path) -> None:
-    from robocore.commands.displays import ensure_desktop_password
+    from robocore.commands.support.displays import ensure_desktop_password
     from robocore.errors import UnsafePath
 
     outside = tmp_path / "outside"
@@ -408,7 +408,7 @@ def test_compose_file_of_a_gui_robot_is_plain_yaml() -> None:
 
 def test_sync_ships_the_password_folder_to_a_robots_desktop_with_its_modes(tmp_path: Path) -> None:
     from robocore.commands import sync as sync_command
-    from robocore.commands.composefiles import write_compose_files
+    from robocore.commands.support.composefiles import write_compose_files
     from robocore.errors import UsageError as Usage
 
     p = project([desktop(name="pidesk", runs_on="pi")], root=tmp_path)

@@ -11,7 +11,7 @@ from pathlib import Path, PurePosixPath
 
 import pytest
 
-from robocore.commands import host_build, state
+from robocore.commands.support import host_build, state
 from robocore.commands.sync import plan_host
 from robocore.config.checks import check_robot
 from robocore.config.model import Host, Robot

@@ -5,13 +5,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from robocore.commands import build, component_images, machine
+from robocore.commands import build, stage
+from robocore.commands.support import machine
 from robocore.config.model import Robot
 from robocore.plan import colcon
 from robocore.plan.inputs import FileDigest, inputs_hash, tree_hash
 from robocore.project import Project
 
-BASE = component_images.BaseRef(ref="proj-base:latest", arch="amd64", inputs="sha256:base1")
+BASE = stage.BaseRef(ref="proj-base:latest", arch="amd64", inputs="sha256:base1")
 
 
 def make_project(root: Path, kind: str = "wheels", **changes: Any) -> Project:
@@ -31,8 +32,8 @@ def make_project(root: Path, kind: str = "wheels", **changes: Any) -> Project:
     return Project(root=root, robot=robot)
 
 
-def hashes(project: Project, base: component_images.BaseRef = BASE) -> dict[str, str]:
-    return {c.name: component_images.plan_component(project, c, base).inputs for c in project.robot.components}
+def hashes(project: Project, base: stage.BaseRef = BASE) -> dict[str, str]:
+    return {c.name: stage.plan_component(project, c, base).inputs for c in project.robot.components}
 
 
 def test_inputs_hash_is_order_independent_and_content_sensitive() -> None:
@@ -80,13 +81,13 @@ def test_package_xml_changes_the_hash_only_where_rosdep_reads_it(tmp_path: Path)
 
 def test_official_component_context_holds_only_package_xml(tmp_path: Path) -> None:
     project = make_project(tmp_path, kind="official")
-    planned = component_images.plan_component(project, project.robot.component("talker"), BASE)
+    planned = stage.plan_component(project, project.robot.component("talker"), BASE)
     assert [f.dest for f in planned.files] == ["rosdep/src/pkg_talker/package.xml"]
 
 
 def test_a_new_base_changes_every_component_hash(tmp_path: Path) -> None:
     project = make_project(tmp_path)
-    other = component_images.BaseRef(ref=BASE.ref, arch="amd64", inputs="sha256:base2")
+    other = stage.BaseRef(ref=BASE.ref, arch="amd64", inputs="sha256:base2")
     before, after = hashes(project), hashes(project, other)
     assert all(before[name] != after[name] for name in before)
 
@@ -148,19 +149,19 @@ def _git_repo(path: Path, text: str) -> str:
 
 def test_repositories_are_fetched_into_the_context_and_pinned_versions_hash(tmp_path: Path, monkeypatch: Any) -> None:
     # a local (file://) repository: as if the entry said allow_protocol: file
-    monkeypatch.setattr(component_images, "allowed_protocol", lambda entry: "file")
+    monkeypatch.setattr(stage, "allowed_protocol", lambda entry: "file")
     upstream = tmp_path / "upstream"
     first = _git_repo(upstream, "one")
     second = _git_repo(upstream, "two")
     url = upstream.as_uri()
     project = make_project(tmp_path / "p", talker={"repositories": [{"url": url, "version": first}]})
-    planned = component_images.plan_component(project, project.robot.component("talker"), BASE)
+    planned = stage.plan_component(project, project.robot.component("talker"), BASE)
     dests = [f.dest for f in planned.files]
     assert dests == ["repos/upstream/package.xml"]  # no .git in the context
     assert b"one" in planned.files[0].data
     assert "COPY repos /tmp/robocore/deps" in planned.plan.dockerfile
     other = make_project(tmp_path / "p", talker={"repositories": [{"url": url, "version": second}]})
-    again = component_images.plan_component(other, other.robot.component("talker"), BASE)
+    again = stage.plan_component(other, other.robot.component("talker"), BASE)
     assert b"two" in again.files[0].data and again.inputs != planned.inputs
 
 

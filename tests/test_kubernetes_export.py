@@ -17,8 +17,8 @@ from k8s_checks import by_kind, render, validate
 from template_repo import hide_origin
 
 from robocore.commands import init
-from robocore.commands.context import Options
 from robocore.commands.export import export_kubernetes
+from robocore.commands.support.context import Options
 from robocore.errors import RobocoreError
 
 TAG = "v1"

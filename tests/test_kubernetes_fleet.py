@@ -13,8 +13,8 @@ import pytest
 import yaml
 from k8s_checks import by_kind, render, validate
 
-from robocore.commands.context import Options
 from robocore.commands.export import export_kubernetes
+from robocore.commands.support.context import Options
 from robocore.plan.fleet_release import ReleaseRecord
 
 AMR = """\

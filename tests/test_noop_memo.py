@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from robocore.commands import noop
+from robocore.commands.support import noop
 
 
 def make(tmp_path: Path) -> tuple[Path, Path]:

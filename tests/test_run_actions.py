@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from datetime import datetime, timezone
 
-from robocore.commands.status_table import Row, not_registered
+from robocore.commands.support.status_table import Row, not_registered
 from robocore.plan.actions import Action, Existing, servers_started, with_node_restarts
 from robocore.plan.containers import ContainerSpec
 from robocore.plan.naming import ROLE_COMPONENT, ROLE_DISCOVERY

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from robocore.commands import state
+from robocore.commands.support import state
 from robocore.config.model import Robot
 from robocore.plan.containers import host_specs
 from robocore.project import Project, ProjectFolder

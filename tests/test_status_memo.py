@@ -17,8 +17,8 @@ from typing import Any
 import pytest
 
 from robocore.adapters import docker_socket
-from robocore.commands import noop, status_memo
-from robocore.commands.status_table import NOT_ASKED, host_rows, print_status
+from robocore.commands.support import noop, status_memo
+from robocore.commands.support.status_table import NOT_ASKED, host_rows, print_status
 
 PLANNED = ["discovery-0", "talker", "listener"]
 

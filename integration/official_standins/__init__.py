@@ -36,7 +36,7 @@ from typing import Any
 from robocore import resources
 from robocore.adapters import rootfs
 from robocore.adapters.image_builder import image_state, proxy_buildargs
-from robocore.commands.machine import find_ca_bundle
+from robocore.commands.support.machine import find_ca_bundle
 from robocore.config.model import BaseKind
 from robocore.plan import arches, dockerfiles, naming
 
@@ -169,7 +169,7 @@ def ensure(client: Any, standin: Standin, say: Callable[[str], None] = lambda _:
     """The stand-in's image ID, built when its own name does not hold its inputs hash, and named
     :attr:`Standin.reference`, as ``docker pull --platform linux/<arch>`` of the real image would leave it. A missing
     root is made by robocore's own bootstrap."""
-    from robocore.commands.base_image import ROOTFS_KINDS
+    from robocore.commands.prepare_base import ROOTFS_KINDS
 
     assert standin.kind in ROOTFS_KINDS
     packages = dockerfiles.DEBIAN_APT if standin.kind is BaseKind.debian else dockerfiles.WHEELS_APT

@@ -1,6 +1,6 @@
 """Read-only Docker Engine API calls over the local unix socket, with the standard library only.
 
-The no-op memo (:mod:`robocore.commands.noop`) must know whether the local images changed, and
+The no-op memo (:mod:`robocore.commands.support.noop`) must know whether the local images changed, and
 ``status`` what the local containers are doing, without paying for docker-py's import (requests,
 urllib3: a large part of a no-op task's time). This adapter
 answers only for a daemon on a unix socket (no ``DOCKER_HOST``, or ``unix://``); for any other

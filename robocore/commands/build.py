@@ -3,7 +3,7 @@
 The workspace and the outputs (``.robocore/build/<c>/{build,install,log}``) are bind-mounted
 into a throw-away container of the component's staged image, which runs as the invoking user.
 A package is rebuilt only when its source hash differs from the last successful build's, which
-is recorded in the component's build state (:mod:`robocore.commands.state`) together with the
+is recorded in the component's build state (:mod:`robocore.commands.support.state`) together with the
 source file list and the plain copies colcon made of them. When an edit only touches files that
 colcon copies verbatim (Python modules of ament_python packages, launch and config files), the new
 contents are written over those copies and colcon is not started at all
@@ -21,14 +21,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from robocore.commands import host_build
-from robocore.commands.colcon_output import colcon_listener
-from robocore.commands.context import DRY_RUN_UNKNOWN, Options
-from robocore.commands.hosts import in_parallel, lock_holder
-from robocore.commands.machine import MAX_PARALLEL, check_emulation, local_docker, native_arch
-from robocore.commands.reporting import Outcome, Reporter, report_outcomes
-from robocore.commands.state import read_build_state, write_build_state
-from robocore.commands.workspace import check_workspace, selected_components, wheels_cmake_packages, workspace_files
+from robocore.commands.support import host_build
+from robocore.commands.support.colcon_output import colcon_listener
+from robocore.commands.support.context import DRY_RUN_UNKNOWN, Options
+from robocore.commands.support.hosts import in_parallel, lock_holder
+from robocore.commands.support.machine import MAX_PARALLEL, check_emulation, local_docker, native_arch
+from robocore.commands.support.reporting import Outcome, Reporter, report_outcomes
+from robocore.commands.support.state import read_build_state, write_build_state
+from robocore.commands.support.workspace import (
+    check_workspace,
+    selected_components,
+    wheels_cmake_packages,
+    workspace_files,
+)
 from robocore.config.model import Component
 from robocore.errors import BuildError, UnsafePath, UsageError
 from robocore.files import SHARED, check_no_links, make_folder, read_project_file, remove_tree, write_atomic

@@ -14,9 +14,9 @@ from typing import Any, ClassVar
 
 from robocore.adapters import ssh
 from robocore.adapters.docker_hosts import client_for, describe
-from robocore.commands.arch_checks import host_arch
-from robocore.commands.context import Options
-from robocore.commands.hosts import for_each_host, select_hosts
+from robocore.commands.support.arch_checks import host_arch
+from robocore.commands.support.context import Options
+from robocore.commands.support.hosts import for_each_host, select_hosts
 from robocore.config.model import DockerAccess, Host
 from robocore.errors import GroupError, HostError, RobocoreError
 from robocore.project import Project

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
 
-from robocore.commands.context import Options
+from robocore.commands.support.context import Options
 from robocore.config.loader import located
 from robocore.errors import ConfigError, Problem, UsageError
 from robocore.files import PRIVATE, write_tree

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from robocore.commands.context import Options
+from robocore.commands.support.context import Options
 from robocore.errors import UsageError
 
 #: The verbs of ``robocore fleet``.

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from robocore.adapters import swarm
-from robocore.commands.context import Options
 from robocore.commands.fleet_swarm import FleetProject, load, manager_client, project_label
-from robocore.commands.hosts import in_parallel, short_error
+from robocore.commands.support.context import Options
+from robocore.commands.support.hosts import in_parallel, short_error
 from robocore.config.model import Host
 from robocore.errors import GroupError, HostError, RobocoreError
 from robocore.plan import swarm_services as plan

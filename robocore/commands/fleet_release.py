@@ -19,10 +19,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
 
-from robocore.commands.arch_checks import refuse_foreign_install
-from robocore.commands.context import Options
-from robocore.commands.machine import native_arch
 from robocore.commands.release import default_tag, released_images
+from robocore.commands.support.arch_checks import refuse_foreign_install
+from robocore.commands.support.context import Options
+from robocore.commands.support.machine import native_arch
 from robocore.config.model import Component, read_only_project_path
 from robocore.errors import ConfigError, UnsafePath, UsageError
 from robocore.files import PRIVATE, read_project_file, refuse_links_leaving, write_atomic

@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from robocore.adapters import swarm
-from robocore.commands.context import Options
 from robocore.commands.fleet_swarm import FleetProject, load, manager_client, now, offline, project_label, robot_nodes
+from robocore.commands.support.context import Options
 from robocore.errors import RobocoreError, UsageError
 from robocore.plan import naming
 from robocore.plan import swarm_services as plan

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from robocore.adapters import swarm
-from robocore.commands.context import Options
 from robocore.commands.fleet_swarm import load, manager_client, offline, project_label, robot_nodes
+from robocore.commands.support.context import Options
 from robocore.plan import naming
 from robocore.plan import swarm_services as plan
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 from typing import TYPE_CHECKING, Any
 
-from robocore.commands.context import Options
+from robocore.commands.support.context import Options
 from robocore.config.model import Robot
 from robocore.errors import ConfigError, UsageError
 from robocore.plan import swarm_services as plan

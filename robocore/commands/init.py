@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from robocore.adapters import origin
-from robocore.commands.reporting import Reporter
+from robocore.commands.support.reporting import Reporter
 from robocore.config.generations import base_problem
 from robocore.config.model import Arch, BaseKind, RosDistro
 from robocore.errors import UsageError

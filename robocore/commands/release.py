@@ -7,7 +7,7 @@ manifest list, :mod:`robocore.plan.release`). ``run --tag V`` then has each host
 ``<registry>/<image>:V`` for its own arch.
 
 Every successful ``run`` appends what a host now runs (image tag, synced release per
-component) to the host's release history (:mod:`robocore.commands.state`). ``rollback`` takes
+component) to the host's release history (:mod:`robocore.commands.support.state`). ``rollback`` takes
 each host back to the entry before the last one: it switches each component's ``current``
 symlink back to the release it ran then (still on the host: sync keeps the last
 :data:`~robocore.plan.sync.KEEP_RELEASES` releases) and re-runs that host with the tag it ran
@@ -21,11 +21,11 @@ import subprocess
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from robocore.commands.context import Options
-from robocore.commands.hosts import for_each_host, select_hosts
-from robocore.commands.images import base_arches
 from robocore.commands.run import deploy_host
-from robocore.commands.state import history, read_synced, record_run, with_synced_release, write_synced
+from robocore.commands.support.context import Options
+from robocore.commands.support.hosts import for_each_host, select_hosts
+from robocore.commands.support.images import base_arches
+from robocore.commands.support.state import history, read_synced, record_run, with_synced_release, write_synced
 from robocore.config.model import Host
 from robocore.errors import DockerError, GroupError, HostError, RobocoreError, UsageError
 from robocore.plan import arches, naming

@@ -17,12 +17,12 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from robocore.commands.arch_checks import allowing_emulation, refuse_daemon_arch
-from robocore.commands.composefiles import write_compose_files
-from robocore.commands.context import DRY_RUN_UNKNOWN, Options
-from robocore.commands.hosts import connect, for_each_host, managed_containers, select_hosts, short_error
-from robocore.commands.reporting import Reporter
-from robocore.commands.state import history, record_run, with_local_build, with_synced_release
+from robocore.commands.support.arch_checks import allowing_emulation, refuse_daemon_arch
+from robocore.commands.support.composefiles import write_compose_files
+from robocore.commands.support.context import DRY_RUN_UNKNOWN, Options
+from robocore.commands.support.hosts import connect, for_each_host, managed_containers, select_hosts, short_error
+from robocore.commands.support.reporting import Reporter
+from robocore.commands.support.state import history, record_run, with_local_build, with_synced_release
 from robocore.config.model import Host
 from robocore.errors import DockerError, GroupError, RobocoreError, UsageError
 from robocore.plan import discovery, naming
@@ -301,7 +301,7 @@ def run(options: Options, *, host: str | None, tag: str | None) -> None:
             # nothing to start and nothing this project could have left there: an offline spare
             # machine in robot.yaml must not fail the run
             return HostOutcome(h.name, notes=[NOT_CONTACTED])
-        from robocore.commands.displays import prepare_host_displays  # cookies of gui: true components
+        from robocore.commands.support.displays import prepare_host_displays  # cookies of gui: true components
 
         display_notes = prepare_host_displays(project, h, dry_run=options.dry_run)
         outcome = deploy_host(project, h, specs, dry_run=options.dry_run, report=options.report,

@@ -8,7 +8,7 @@ parallel; a host that fails is named and the others still get their files. Compo
 machine use the build output in place: nothing is copied.
 
 What each host received is recorded (release id and a digest of the trees per component, see
-:mod:`robocore.commands.state`); ``run`` uses the release id to restart a container whose files
+:mod:`robocore.commands.support.state`); ``run`` uses the release id to restart a container whose files
 changed.
 """
 
@@ -24,11 +24,11 @@ from pathlib import Path, PurePosixPath
 from typing import ClassVar
 
 from robocore.adapters import rsync, ssh
-from robocore.commands.arch_checks import refuse_foreign_install
-from robocore.commands.context import Options
-from robocore.commands.hosts import for_each_host, lock_holder, lock_refused, select_hosts
-from robocore.commands.reporting import Reporter
-from robocore.commands.state import read_build_state, read_synced, write_synced
+from robocore.commands.support.arch_checks import refuse_foreign_install
+from robocore.commands.support.context import Options
+from robocore.commands.support.hosts import for_each_host, lock_holder, lock_refused, select_hosts
+from robocore.commands.support.reporting import Reporter
+from robocore.commands.support.state import read_build_state, read_synced, write_synced
 from robocore.config.model import Component, Host, read_only_project_path
 from robocore.errors import GroupError, HostError, UnsafePath, UsageError
 from robocore.files import make_folder, read_own_file, refuse_links_leaving, remove_tree

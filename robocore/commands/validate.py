@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from robocore.commands.context import Options
+from robocore.commands.support.context import Options
 
 if TYPE_CHECKING:
     from robocore.project import Project
@@ -65,7 +65,7 @@ def run(options: Options) -> None:
     from robocore.plan.dockerfiles import refuse_robot_shape
 
     refuse_robot_shape(project)  # what prepare-base and stage refuse for the robot's shape
-    from robocore.commands.workspace import check_wheels_packages, debian_dependency_warnings
+    from robocore.commands.support.workspace import check_wheels_packages, debian_dependency_warnings
 
     check_wheels_packages(project)
     for warning in [*robot_warnings(project.robot_file, robot, project.root), *debian_dependency_warnings(project)]:

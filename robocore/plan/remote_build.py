@@ -37,7 +37,7 @@ DONE = "robocore-build-done"
 ARCH_PREFIX = "arch="
 
 #: Top-level names of a workspace that are never sent (colcon's own output) and names never sent anywhere
-#: in it (hidden files and folders, byte code): what :func:`robocore.commands.workspace.workspace_files` skips.
+#: in it (hidden files and folders, byte code): what :func:`robocore.commands.support.workspace.workspace_files` skips.
 _TOP_EXCLUDES = ("/build/", "/install/", "/log/")
 _EXCLUDES = (".*", "*.pyc", "*.pyo", "__pycache__/")
 

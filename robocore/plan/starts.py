@@ -1,7 +1,7 @@
 """Containers' start times as Docker reports them, and which containers started before their discovery servers.
 
 Pure and light (no configuration model): ``run`` uses it to restart the nodes a ROS master does not know, and
-``status`` to say which they are, also on its fast path (:mod:`robocore.commands.status_memo`).
+``status`` to say which they are, also on its fast path (:mod:`robocore.commands.support.status_memo`).
 """
 
 from __future__ import annotations

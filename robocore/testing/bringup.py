@@ -151,12 +151,12 @@ def build_lock(project: Project) -> Iterator[None]:
 
 def build_images(project_dir: Path) -> None:
     """prepare-base, stage and build, quietly; each does nothing when its inputs did not change."""
-    from robocore.commands import base_image, build, component_images
-    from robocore.commands.context import Options
+    from robocore.commands import build, prepare_base, stage
+    from robocore.commands.support.context import Options
 
     options = Options(project_dir=project_dir, quiet=True)
-    base_image.prepare_base(options, force=False)
-    component_images.stage(options, refresh=False, component=None, force=False)
+    prepare_base.prepare_base(options, force=False)
+    stage.stage(options, refresh=False, component=None, force=False)
     build.build(options, component=None, full=False)
 
 
@@ -384,8 +384,8 @@ def bring_up(project_dir: Path, *, build: bool = True, servers: bool = True, gra
 def _start(robot: RobotUnderTest, source: Project, *, servers: bool) -> None:
     from testcontainers.core.network import Network
 
-    from robocore.commands.arch_checks import allowing_emulation
     from robocore.commands.run import SERVER_READY_TIMEOUT, wait_server_ready
+    from robocore.commands.support.arch_checks import allowing_emulation
 
     run = robot.run
     network = Network(docker_network_kw={"labels": run.labels, "driver": "bridge"})

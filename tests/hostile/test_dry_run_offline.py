@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 from conftest import built_project
 
-from robocore.commands import warmup
+from robocore.commands.support import warmup
 
 ROBOT_YAML = """\
 ros_distro: jazzy

@@ -150,7 +150,7 @@ def test_robot_yaml_that_leads_outside_or_is_not_a_file_is_one_line_at_once(tmp_
 
 
 def test_package_xml_fifo_or_link_out_is_one_line(tmp_path: Path) -> None:
-    from robocore.commands.workspace import package_manifests
+    from robocore.commands.support.workspace import package_manifests
 
     outside, _ = outside_folder(tmp_path)
     project = tmp_path / "project"

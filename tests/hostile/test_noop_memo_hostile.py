@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from robocore.commands import noop, status_memo, trees
+from robocore.commands.support import noop, status_memo, trees
 from robocore.files import is_private
 
 GOOD = ("ros_distro: jazzy\nhosts:\n  - name: dev\n    ip: 127.0.0.1\n    docker: local\n"

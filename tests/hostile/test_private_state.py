@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from robocore import files
-from robocore.commands import state
+from robocore.commands.support import state
 from robocore.config.loader import parse_robot_text
 from robocore.project import Project
 

@@ -15,7 +15,7 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from robocore.commands.composefiles import write_compose_files
+from robocore.commands.support.composefiles import write_compose_files
 from robocore.config import yamltext
 from robocore.config.loader import parse_robot_text
 from robocore.config.risks import risky_settings

@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 
 from robocore import files
-from robocore.commands import build, component_images
+from robocore.commands import build, stage
 from robocore.commands import sync as sync_command
-from robocore.commands.composefiles import write_compose_files
-from robocore.commands.context import Options
+from robocore.commands.support.composefiles import write_compose_files
+from robocore.commands.support.context import Options
 from robocore.errors import UnsafePath
 from robocore.project import Project
 
@@ -140,14 +140,14 @@ def test_a_workspace_symlink_leading_out_of_the_project_is_refused(tmp_path: Pat
     link.symlink_to(secret)
     talker = project.robot.component("talker")
     with pytest.raises(UnsafePath) as info:
-        component_images.plan_component(project, talker, component_images.BaseRef("b:latest", "amd64", "x"))
+        stage.plan_component(project, talker, stage.BaseRef("b:latest", "amd64", "x"))
     assert info.value.message.startswith("components/talker/src/pkg/key: a symlink to ")
     assert str(secret) in info.value.message and "outside the project" in info.value.message
     with pytest.raises(UnsafePath):
         build.plan_build(project, talker, "sha256:x")
     link.unlink()
     link.symlink_to("../../../listener/src/lpkg/package.xml")  # inside the project: fine
-    component_images.plan_component(project, talker, component_images.BaseRef("b:latest", "amd64", "x"))
+    stage.plan_component(project, talker, stage.BaseRef("b:latest", "amd64", "x"))
     build.plan_build(project, talker, "sha256:x")
 
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from robocore.commands.displays import ensure_desktop_password
-from robocore.commands.state import with_local_build
+from robocore.commands.support.displays import ensure_desktop_password
+from robocore.commands.support.state import with_local_build
 from robocore.files import PRIVATE, SHARED, write_generated
 from robocore.plan import compose, discovery
 from robocore.plan.containers import host_specs

@@ -42,7 +42,7 @@ from collections.abc import Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from robocore.commands.trees import MAX_YOUNG_BYTES, Snapshot, Untrusted, hash_file, inside, tree_digest
+from robocore.commands.support.trees import MAX_YOUNG_BYTES, Snapshot, Untrusted, hash_file, inside, tree_digest
 
 TYPE_CHECKING = False  # typing's constant, without importing typing on the memo's path (12M instructions)
 if TYPE_CHECKING:
@@ -84,7 +84,7 @@ def folders_digest(folders: Sequence[Path], boundary: Path) -> str:
 
 
 def _code_root() -> Path:
-    return Path(__file__).resolve().parents[1]
+    return Path(__file__).resolve().parents[2]  # robocore/ (this file is robocore/commands/support/noop.py)
 
 
 def snapshot(project: Path, *, images: bool, environ: dict[str, str] | None = None,

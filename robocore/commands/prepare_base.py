@@ -9,8 +9,8 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
-from robocore.commands.context import DRY_RUN_UNKNOWN, Options
-from robocore.commands.images import (
+from robocore.commands.support.context import DRY_RUN_UNKNOWN, Options
+from robocore.commands.support.images import (
     Planned,
     allowed_protocol,
     base_arches,
@@ -22,9 +22,9 @@ from robocore.commands.images import (
     show_plan,
     triage,
 )
-from robocore.commands.machine import check_emulation, find_ca_bundle, local_docker, native_arch
-from robocore.commands.reporting import Outcome, report_outcomes
-from robocore.commands.workspace import wheels_cmake_packages
+from robocore.commands.support.machine import check_emulation, find_ca_bundle, local_docker, native_arch
+from robocore.commands.support.reporting import Outcome, report_outcomes
+from robocore.commands.support.workspace import wheels_cmake_packages
 from robocore.config.model import BaseKind
 from robocore.files import ROBOT_FILE, refuse_links_leaving
 from robocore.plan import arches, dockerfiles, naming

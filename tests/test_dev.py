@@ -10,8 +10,8 @@ from typing import Any
 
 import pytest
 
-from robocore.commands import build, run, sync, watch
-from robocore.commands.context import Options
+from robocore.commands import build, dev, run, sync
+from robocore.commands.support.context import Options
 from robocore.errors import BuildError
 
 
@@ -36,12 +36,12 @@ class Robot:
         monkeypatch.setattr(build, "build", fake_build)
         monkeypatch.setattr(sync, "sync", lambda options, *, host: self.steps.append("sync"))
         monkeypatch.setattr(run, "run", lambda options, *, host, tag: self.steps.append("run"))
-        monkeypatch.setattr(watch, "watched", lambda options, component: paths)
+        monkeypatch.setattr(dev, "watched", lambda options, component: paths)
 
 
 def start(tmp_path: Path, rounds: int, settle: float) -> threading.Thread:
     def loop() -> None:
-        watch.dev(Options(project_dir=tmp_path, quiet=True), component=None, rounds=rounds, poll=0.02,
+        dev.dev(Options(project_dir=tmp_path, quiet=True), component=None, rounds=rounds, poll=0.02,
                   settle=settle, say=said.append)
 
     said: list[str] = []
@@ -105,26 +105,26 @@ def test_a_dry_run_plans_one_deploy_and_watches_nothing(tmp_path: Path, monkeypa
                         lambda options, *, component, full=False: seen.append(("build", options.dry_run)))
     monkeypatch.setattr(sync, "sync", lambda options, *, host: seen.append(("sync", options.dry_run)))
     monkeypatch.setattr(run, "run", lambda options, *, host, tag: seen.append(("run", options.dry_run)))
-    monkeypatch.setattr(watch, "watched", lambda options, component: pytest.fail("a dry run watched"))
-    watch.dev(Options(project_dir=tmp_path, dry_run=True), component="talker", say=lambda line: None)
+    monkeypatch.setattr(dev, "watched", lambda options, component: pytest.fail("a dry run watched"))
+    dev.dev(Options(project_dir=tmp_path, dry_run=True), component="talker", say=lambda line: None)
     assert seen == [("build", True), ("sync", True), ("run", True)]
 
 
 def test_a_small_workspace_is_looked_at_every_poll() -> None:
-    assert watch.poll_pause(0.0005) == watch.POLL
-    assert watch.poll_pause(0.0005, 0.02) == 0.02
+    assert dev.poll_pause(0.0005) == dev.POLL
+    assert dev.poll_pause(0.0005, 0.02) == 0.02
 
 
 def test_a_costly_look_waits_in_proportion_so_watching_stays_a_fraction_of_a_core() -> None:
     look = 0.02
-    pause = watch.poll_pause(look)
-    assert pause == look * watch.POLL_COST_RATIO
+    pause = dev.poll_pause(look)
+    assert pause == look * dev.POLL_COST_RATIO
     assert look / (look + pause) <= 0.1
 
 
 def test_the_pause_has_a_ceiling() -> None:
-    assert watch.poll_pause(10.0) == watch.POLL_MAX
-    assert watch.poll_pause(10.0, 2.0) == 2.0  # a longer least pause asked for is kept
+    assert dev.poll_pause(10.0) == dev.POLL_MAX
+    assert dev.poll_pause(10.0, 2.0) == 2.0  # a longer least pause asked for is kept
 
 
 def linked_project(tmp_path: Path) -> tuple[Path, Path, Path]:
@@ -149,7 +149,7 @@ def test_the_watch_never_reads_or_watches_outside_the_project_through_a_link(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     import os
 
-    from robocore.commands import noop
+    from robocore.commands.support import noop
 
     project, ws, outside = linked_project(tmp_path)
     looked: list[str] = []  # every path the look stats, lists or opens
@@ -177,7 +177,7 @@ def test_the_watch_never_reads_or_watches_outside_the_project_through_a_link(
 
 
 def test_a_retargeted_link_and_a_linked_component_folder_count_by_the_link_itself(tmp_path: Path) -> None:
-    from robocore.commands import noop
+    from robocore.commands.support import noop
 
     project, ws, outside = linked_project(tmp_path)
     linked_ws = project / "linked-ws"

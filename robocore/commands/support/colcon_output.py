@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from robocore.commands.reporting import Reporter
+from robocore.commands.support.reporting import Reporter
 from robocore.plan import colcon
 
 

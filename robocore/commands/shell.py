@@ -25,10 +25,10 @@ from typing import TYPE_CHECKING, Any
 
 from robocore.adapters import x11
 from robocore.adapters.docker_hosts import local_client
-from robocore.commands.context import Options
-from robocore.commands.host_build import fetch_install
-from robocore.commands.machine import check_emulation, native_arch
-from robocore.commands.reporting import Reporter
+from robocore.commands.support.context import Options
+from robocore.commands.support.host_build import fetch_install
+from robocore.commands.support.machine import check_emulation, native_arch
+from robocore.commands.support.reporting import Reporter
 from robocore.errors import DockerError, ToolMissing, UsageError
 from robocore.files import PRIVATE, SHARED, make_folder, remove_tree, write_atomic
 from robocore.plan import devshell as plan

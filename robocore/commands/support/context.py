@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
-from robocore.commands.reporting import Reporter
+from robocore.commands.support.reporting import Reporter
 from robocore.project import Project
 
 #: What a dry run says where the plan needs an answer only a Docker daemon or a host could give.
@@ -44,9 +44,9 @@ class Options:
 def warm_remote_hosts(project: Project, argv: list[str]) -> None:
     """When ``argv`` names a step that uses the robot hosts (and is not a dry run): open the ssh
     connections to the hosts that run something, once per process, and record them for the next
-    command (see :mod:`robocore.commands.warmup`); when it names a step that uses their Docker
+    command (see :mod:`robocore.commands.support.warmup`); when it names a step that uses their Docker
     daemons, open those connections too, for the step to take."""
-    from robocore.commands import warmup
+    from robocore.commands.support import warmup
     from robocore.config.model import DockerAccess
 
     if not warmup.wants_remote(argv):
@@ -55,6 +55,6 @@ def warm_remote_hosts(project: Project, argv: list[str]) -> None:
                  if h.access is DockerAccess.ssh]
     warmup.warm_loaded(project.root, endpoints, argv)
     if warmup.wants_docker(argv):
-        from robocore.commands.hosts import prefetch_connections
+        from robocore.commands.support.hosts import prefetch_connections
 
         prefetch_connections(project)

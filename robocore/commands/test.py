@@ -28,12 +28,12 @@ from pathlib import Path
 from typing import ClassVar
 
 from robocore.commands.build import plan_build, workspace_packages
-from robocore.commands.colcon_output import colcon_listener
-from robocore.commands.context import Options
-from robocore.commands.hosts import in_parallel
-from robocore.commands.machine import MAX_PARALLEL, check_emulation, local_docker, native_arch
-from robocore.commands.reporting import Reporter
-from robocore.commands.workspace import selected_components
+from robocore.commands.support.colcon_output import colcon_listener
+from robocore.commands.support.context import Options
+from robocore.commands.support.hosts import in_parallel
+from robocore.commands.support.machine import MAX_PARALLEL, check_emulation, local_docker, native_arch
+from robocore.commands.support.reporting import Reporter
+from robocore.commands.support.workspace import selected_components
 from robocore.config.model import Component
 from robocore.errors import BuildError, TestFailure, UnsafePath, UsageError
 from robocore.files import make_folder, remove_file, remove_tree, write_atomic

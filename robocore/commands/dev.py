@@ -20,9 +20,10 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from robocore.commands import build, noop, run, sync
-from robocore.commands.context import Options
-from robocore.commands.workspace import selected_components
+from robocore.commands import build, run, sync
+from robocore.commands.support import noop
+from robocore.commands.support.context import Options
+from robocore.commands.support.workspace import selected_components
 from robocore.errors import RobocoreError
 from robocore.ui import clean
 

@@ -27,7 +27,7 @@ from robocore.project import ProjectFolder
 
 #: Steps that talk to the robot hosts over ssh.
 REMOTE_STEPS = frozenset({"dev", "sync", "run", "status", "logs", "connect", "doctor", "down", "rollback"})
-#: Steps that connect to the robot hosts' Docker daemons with :func:`robocore.commands.hosts.connect`'s
+#: Steps that connect to the robot hosts' Docker daemons with :func:`robocore.commands.support.hosts.connect`'s
 #: settings (status and logs use others).
 DOCKER_STEPS = frozenset({"dev", "run", "down", "rollback"})
 

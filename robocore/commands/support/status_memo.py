@@ -4,9 +4,10 @@ What ``status`` lists comes from two places: robot.yaml says which containers ea
 and the hosts' Docker daemons say which run. When every host of the robot is this machine, an ordinary
 ``status`` records its plan (each host's planned names, the discovery servers, whether the discovery kind's
 nodes register only when they start) in ``.robocore/noop/``, under the same snapshot of the project and
-robocore's code that the no-op memo of ``validate`` uses (:mod:`robocore.commands.noop`). The next plain
+robocore's code that the no-op memo of ``validate`` uses (:mod:`robocore.commands.support.noop`). The next plain
 ``robocore status`` whose fresh snapshot equals it takes the plan from there, asks the daemon over its unix
-socket (:mod:`robocore.adapters.docker_socket`) and prints the same table (:mod:`robocore.commands.status_table`).
+socket (:mod:`robocore.adapters.docker_socket`) and prints the same table
+(:mod:`robocore.commands.support.status_table`).
 
 Anything else takes the ordinary path: a flag (``--json``, ``--nodes``, ``--dry-run``), a changed file, a host
 that is not this machine, a daemon that does not answer on its socket. The plan is only ever read from a memo
@@ -19,7 +20,7 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Sequence
 
-from robocore.commands import noop
+from robocore.commands.support import noop
 
 #: The task, and the flags its fast path takes (none: ``--json``, ``--nodes`` and ``--dry-run`` go the ordinary way).
 TASK = "status"
@@ -66,7 +67,14 @@ def answer(argv: Sequence[str]) -> bool:
         return False
     project, hosts, servers, register_once = plan
     from robocore.adapters import docker_socket
-    from robocore.commands.status_table import NOT_ASKED, host_rows, managed, not_registered, print_status, stale_line
+    from robocore.commands.support.status_table import (
+        NOT_ASKED,
+        host_rows,
+        managed,
+        not_registered,
+        print_status,
+        stale_line,
+    )
     from robocore.plan.naming import LABEL_PROJECT
 
     found = docker_socket.containers(f"{LABEL_PROJECT}={project}")
@@ -74,7 +82,7 @@ def answer(argv: Sequence[str]) -> bool:
         return False
     documents = managed(found)
     rows = [row for host, planned in hosts for row in host_rows(host, planned, documents)]
-    from robocore.commands.reporting import Reporter
+    from robocore.commands.support.reporting import Reporter
 
     report = Reporter(TASK)
     print_status(rows, {}, None, NOT_ASKED, report=report)

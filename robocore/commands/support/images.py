@@ -1,9 +1,9 @@
-"""What prepare-base (:mod:`.base_image`) and stage (:mod:`.component_images`) share: an image plan
-with its resolved context and inputs hash, the decision to build it, and the builds themselves.
+"""What prepare-base (:mod:`robocore.commands.prepare_base`) and stage (:mod:`robocore.commands.stage`) share: an
+image plan with its resolved context and inputs hash, the decision to build it, and the builds themselves.
 
 Images are rebuilt only when the content hash of their inputs (label ``dev.robocore.inputs``)
 changes. A dry run contacts no daemon and fetches nothing: what it cannot know is
-:data:`~robocore.commands.context.DRY_RUN_UNKNOWN`.
+:data:`~robocore.commands.support.context.DRY_RUN_UNKNOWN`.
 """
 
 from __future__ import annotations
@@ -14,10 +14,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from robocore.commands.context import DRY_RUN_UNKNOWN
-from robocore.commands.hosts import in_parallel
-from robocore.commands.machine import MAX_PARALLEL, local_docker, native_arch
-from robocore.commands.reporting import Outcome, Reporter, report_outcomes
+from robocore.commands.support.context import DRY_RUN_UNKNOWN
+from robocore.commands.support.hosts import in_parallel
+from robocore.commands.support.machine import MAX_PARALLEL, local_docker, native_arch
+from robocore.commands.support.reporting import Outcome, Reporter, report_outcomes
 from robocore.config.model import Component
 from robocore.errors import BuildError
 from robocore.plan import discovery, naming

@@ -21,12 +21,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from robocore.adapters import rsync, ssh
-from robocore.commands.arch_checks import refuse_daemon_arch
-from robocore.commands.colcon_output import colcon_listener
-from robocore.commands.context import DRY_RUN_UNKNOWN
-from robocore.commands.hosts import connect, lock_refused
-from robocore.commands.reporting import Outcome, Reporter
-from robocore.commands.state import read_build_state, write_build_state
+from robocore.commands.support.arch_checks import refuse_daemon_arch
+from robocore.commands.support.colcon_output import colcon_listener
+from robocore.commands.support.context import DRY_RUN_UNKNOWN
+from robocore.commands.support.hosts import connect, lock_refused
+from robocore.commands.support.reporting import Outcome, Reporter
+from robocore.commands.support.state import read_build_state, write_build_state
 from robocore.config.model import Component, Host
 from robocore.errors import BuildError, HostError, RobocoreError
 from robocore.files import make_folder

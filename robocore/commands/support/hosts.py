@@ -13,7 +13,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from robocore.adapters.docker_hosts import is_connection_error
-from robocore.commands.status_table import managed
+from robocore.commands.support.status_table import managed
 from robocore.config.model import Host
 from robocore.errors import HostError, RobocoreError
 from robocore.plan import naming

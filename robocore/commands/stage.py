@@ -11,10 +11,10 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING
 
-from robocore.commands.base_image import plan_base
-from robocore.commands.composefiles import write_compose_files
-from robocore.commands.context import DRY_RUN_UNKNOWN, Options
-from robocore.commands.images import (
+from robocore.commands.prepare_base import plan_base
+from robocore.commands.support.composefiles import write_compose_files
+from robocore.commands.support.context import DRY_RUN_UNKNOWN, Options
+from robocore.commands.support.images import (
     Planned,
     allowed_protocol,
     base_arches,
@@ -25,9 +25,14 @@ from robocore.commands.images import (
     show_plan,
     triage,
 )
-from robocore.commands.machine import check_emulation, local_docker, native_arch
-from robocore.commands.reporting import Outcome, Reporter, report_outcomes
-from robocore.commands.workspace import check_workspace, selected_components, wheels_cmake_packages, workspace_files
+from robocore.commands.support.machine import check_emulation, local_docker, native_arch
+from robocore.commands.support.reporting import Outcome, Reporter, report_outcomes
+from robocore.commands.support.workspace import (
+    check_workspace,
+    selected_components,
+    wheels_cmake_packages,
+    workspace_files,
+)
 from robocore.config.model import BaseKind, Component
 from robocore.errors import BuildError
 from robocore.plan import arches, dockerfiles, naming

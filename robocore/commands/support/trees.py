@@ -1,6 +1,6 @@
-"""Trees of files as the no-op memo (:mod:`robocore.commands.noop`) and the dev loop see them: one stat row per entry,
-a digest of the rows, and the content hashes of the young files (changed too recently for their times to show the
-next change).
+"""Trees of files as the no-op memo (:mod:`robocore.commands.support.noop`) and the dev loop see them: one stat
+row per entry, a digest of the rows, and the content hashes of the young files (changed too recently for their
+times to show the next change).
 
 The walk never leaves its boundary through a link: a symlink to a folder outside raises :class:`Untrusted` at
 once (one ``realpath``, whatever the size of the tree behind it), and nothing outside is opened.

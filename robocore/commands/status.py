@@ -12,18 +12,18 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from robocore.commands import status_memo
-from robocore.commands.context import Options
-from robocore.commands.hosts import connect as connect_host
-from robocore.commands.hosts import (
+from robocore.commands.support import status_memo
+from robocore.commands.support.context import Options
+from robocore.commands.support.hosts import connect as connect_host
+from robocore.commands.support.hosts import (
     for_each_host,
     local_documents,
     managed_containers,
     managed_documents,
     select_hosts,
 )
-from robocore.commands.reporting import Reporter
-from robocore.commands.status_table import (
+from robocore.commands.support.reporting import Reporter
+from robocore.commands.support.status_table import (
     GRAPH_SPIN_SECONDS,
     NOT_ASKED,
     Row,

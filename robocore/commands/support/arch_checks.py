@@ -12,8 +12,8 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from robocore.commands import machine as dev_machine
-from robocore.commands.machine import binfmt_problem, emulation_hint
+from robocore.commands.support import machine as dev_machine
+from robocore.commands.support.machine import binfmt_problem, emulation_hint
 from robocore.config.model import Host, docker_arch, kernel_arch
 from robocore.errors import ArchMismatch, RobocoreError
 from robocore.plan import arches

@@ -16,8 +16,9 @@ from typing import Any
 import pytest
 from fakes import FakeDocker
 
-from robocore.commands import build, package_tests
-from robocore.commands.context import Options
+from robocore.commands import build
+from robocore.commands import test as test_command
+from robocore.commands.support.context import Options
 from robocore.errors import BuildError, TestFailure, UsageError
 from robocore.plan import colcon, junit
 from robocore.project import Project
@@ -62,7 +63,7 @@ def project(tmp_path: Path) -> Project:
 def _plans(project: Project, select: Sequence[str] = (), component: str | None = None) -> dict[str, Any]:
     comps = [project.robot.component(component)] if component else \
         [c for c in project.robot.components if c.folder is not None]
-    return {p.component.name: p for p in package_tests.plan_tests(project, comps, select)}
+    return {p.component.name: p for p in test_command.plan_tests(project, comps, select)}
 
 
 # ------------------------------------------------------------------------------------------- argv and mounts
@@ -142,16 +143,16 @@ def test_the_tests_need_a_current_build(project: Project) -> None:
     plan = _plans(project)["talker"]
     with pytest.raises(BuildError, match=r"component talker: not built yet \(no .robocore/build/talker/install\)") \
             as caught:
-        package_tests.check_current(project, plan, "img1")
+        test_command.check_current(project, plan, "img1")
     assert caught.value.hint is not None and "robocore build --component talker" in caught.value.hint
     _record_build(project)
-    package_tests.check_current(project, plan, "img1")  # current: no error
+    test_command.check_current(project, plan, "img1")  # current: no error
     with pytest.raises(BuildError, match=r"out of date \(image changed\)"):
-        package_tests.check_current(project, plan, "img2")
+        test_command.check_current(project, plan, "img2")
     (project.root / "ws/talker/src/talker_msgs/test/test_a.py").write_text("def test_one():\n    assert False\n")
     with pytest.raises(BuildError, match=r"out of date \(changed: talker_msgs\); the tests would run the old code"):
-        package_tests.check_current(project, plan, "img1")
-    package_tests.check_current(project, _plans(project)["listener"], "img1")  # the other one is still current
+        test_command.check_current(project, plan, "img1")
+    test_command.check_current(project, _plans(project)["listener"], "img1")  # the other one is still current
 
 
 # ------------------------------------------------------------------------------------------- results
@@ -169,8 +170,8 @@ def test_results_are_read_merged_and_written_per_package(project: Project) -> No
     _write_result(project, "talker", "demo_talker", FAIL)
     _write_result(project, "talker", "talker_msgs", PASS, "test_results/talker_msgs/a.xunit.xml")
     _write_result(project, "talker", "talker_msgs", b"<testsuite><oops", "test_results/talker_msgs/b.xml")
-    outcome = package_tests.ComponentOutcome(component="talker", exit_code=0)
-    package_tests.read_results(project, plan, outcome, failed=[])
+    outcome = test_command.ComponentOutcome(component="talker", exit_code=0)
+    test_command.read_results(project, plan, outcome, failed=[])
     talker, msgs = outcome.packages
     assert (talker.package, talker.tests, talker.failures, talker.errors) == ("demo_talker", 2, 1, 0)
     assert (msgs.package, msgs.tests, msgs.errors) == ("talker_msgs", 2, 1)
@@ -187,15 +188,15 @@ def test_results_are_read_merged_and_written_per_package(project: Project) -> No
 def test_a_package_colcon_reports_failed_is_an_error_even_with_clean_results(project: Project) -> None:
     plan = _plans(project)["listener"]
     _write_result(project, "listener", "demo_listener", PASS)
-    outcome = package_tests.ComponentOutcome(component="listener", exit_code=1)
-    package_tests.read_results(project, plan, outcome, failed=["demo_listener"])
+    outcome = test_command.ComponentOutcome(component="listener", exit_code=1)
+    test_command.read_results(project, plan, outcome, failed=["demo_listener"])
     [results] = outcome.packages
     assert results.problems == ("colcon test failed for demo_listener "
                                 "(log: .robocore/build/listener/log/latest_test/demo_listener)",)
     assert not results.ok
     # negative control: the same results, not reported failed, pass
-    outcome = package_tests.ComponentOutcome(component="listener", exit_code=0)
-    package_tests.read_results(project, plan, outcome, failed=[])
+    outcome = test_command.ComponentOutcome(component="listener", exit_code=0)
+    test_command.read_results(project, plan, outcome, failed=[])
     assert outcome.packages[0].ok and outcome.ok
 
 
@@ -210,28 +211,28 @@ def test_stale_results_are_removed_before_a_run_and_symlinks_never_followed(proj
     (outside / "precious.xml").write_bytes(PASS)
     linked = project.build_dir("talker") / "build" / "demo_talker" / "test_results"
     linked.symlink_to(outside)
-    assert package_tests.result_files(linked.parent) == [old]
-    package_tests.clear_results(plan)
+    assert test_command.result_files(linked.parent) == [old]
+    test_command.clear_results(plan)
     assert not old.exists() and not nested.exists() and keep.exists()
     assert (outside / "precious.xml").exists()  # the link was not followed into
     (linked.parent / "pytest.xml").symlink_to(outside / "precious.xml")
-    assert package_tests.result_files(linked.parent / "missing") == []
-    assert linked.parent / "pytest.xml" not in package_tests.result_files(linked.parent)
+    assert test_command.result_files(linked.parent / "missing") == []
+    assert linked.parent / "pytest.xml" not in test_command.result_files(linked.parent)
 
 
 # ------------------------------------------------------------------------------------------- report
 
 
-def _outcomes(project: Project) -> list[package_tests.ComponentOutcome]:
+def _outcomes(project: Project) -> list[test_command.ComponentOutcome]:
     good = junit.package_results("demo_listener", [("p.xml", PASS.replace(b"{pkg}", b"demo_listener"))])
     bad = junit.package_results("demo_talker", [("p.xml", FAIL.replace(b"{pkg}", b"demo_talker"))])
-    return [package_tests.ComponentOutcome("talker", 0, [bad], result_files={"demo_talker": "x.xml"}),
-            package_tests.ComponentOutcome("listener", 0, [good])]
+    return [test_command.ComponentOutcome("talker", 0, [bad], result_files={"demo_talker": "x.xml"}),
+            test_command.ComponentOutcome("listener", 0, [good])]
 
 
 def test_the_report_is_a_table_then_each_failing_test_with_its_message(project: Project,
                                                                       capsys: pytest.CaptureFixture[str]) -> None:
-    package_tests.print_report(project, _outcomes(project))
+    test_command.print_report(project, _outcomes(project))
     out = capsys.readouterr().out
     rows = [line.split() for line in out.splitlines() if "demo_" in line and "│" in line]
     assert [[cell for cell in row if cell != "│"] for row in rows] == [
@@ -244,7 +245,7 @@ def test_the_report_is_a_table_then_each_failing_test_with_its_message(project: 
 
 
 def test_json_is_one_document(project: Project) -> None:
-    doc = [dataclasses.asdict(r) for r in package_tests.results(_outcomes(project))]
+    doc = [dataclasses.asdict(r) for r in test_command.results(_outcomes(project))]
     assert [c["ok"] for c in doc] == [False, True]
     talker = doc[0]["packages"][0]
     assert talker == {"package": "demo_talker", "ok": False, "tests": 2, "failures": 1, "errors": 0, "skipped": 0,
@@ -256,18 +257,18 @@ def test_json_is_one_document(project: Project) -> None:
 
 def test_the_error_counts_what_failed_and_names_tests_only_without_a_report(project: Project) -> None:
     outcomes = _outcomes(project)
-    error = package_tests.failure(project, outcomes, details=False)
+    error = test_command.failure(project, outcomes, details=False)
     assert isinstance(error, TestFailure) and error.exit_code == 9
     assert error.lines() == ["tests did not pass: 1 failed, 0 errored in demo_talker "
                              "(JUnit XML in .robocore/test-results/)"]
-    detailed = package_tests.failure(project, outcomes, details=True)
+    detailed = test_command.failure(project, outcomes, details=True)
     assert detailed is not None and detailed.lines()[0].endswith(
         "\ndemo_talker: failed demo_talker.test.test_a::test_wrong: AssertionError: assert 'hello from talker #1' "
         "== 'wrong'")
-    broken = [package_tests.ComponentOutcome("listener", 2, [], output=["colcon: error: unrecognized"])]
-    error = package_tests.failure(project, broken, details=False)
+    broken = [test_command.ComponentOutcome("listener", 2, [], output=["colcon: error: unrecognized"])]
+    error = test_command.failure(project, broken, details=False)
     assert error is not None and "colcon test exited 2 in component listener" in error.message
-    assert package_tests.failure(project, outcomes[1:], details=True) is None  # all passed
+    assert test_command.failure(project, outcomes[1:], details=True) is None  # all passed
 
 
 # ------------------------------------------------------------------------------------------- the command
@@ -298,7 +299,7 @@ def _fake_docker(monkeypatch: pytest.MonkeyPatch, project: Project, results: Map
 
     monkeypatch.setattr(image_builder, "run_streaming", run_streaming)
     monkeypatch.setattr(image_builder, "image_state", lambda client, ref: FakeState())
-    monkeypatch.setattr(package_tests, "local_docker", lambda: FakeDocker())
+    monkeypatch.setattr(test_command, "local_docker", lambda: FakeDocker())
 
 
 def test_the_command_runs_colcon_test_as_the_user_and_fails_on_a_failing_test(
@@ -310,7 +311,7 @@ def test_the_command_runs_colcon_test_as_the_user_and_fails_on_a_failing_test(
     calls: list[dict[str, Any]] = []
     _fake_docker(monkeypatch, project, {"demo_talker": FAIL, "talker_msgs": PASS, "demo_listener": PASS}, calls)
     with pytest.raises(TestFailure, match=r"^tests did not pass: 1 failed, 0 errored in demo_talker \(JUnit"):
-        package_tests.test(Options(project_dir=project.root), component=None, build_first=False)
+        test_command.test(Options(project_dir=project.root), component=None, build_first=False)
     assert sorted(c["image"] for c in calls) == ["robot-listener:latest", "robot-talker:latest"]
     assert {c["user"] for c in calls} == {f"{os.getuid()}:{os.getgid()}"}
     assert all(c["environment"] == colcon.CONTAINER_ENV and c["labels"]["dev.robocore.role"] == "test"
@@ -330,7 +331,7 @@ def test_the_command_passes_and_prints_json(project: Project, monkeypatch: pytes
     calls: list[dict[str, Any]] = []
     _fake_docker(monkeypatch, project, {"demo_talker": PASS, "talker_msgs": PASS, "demo_listener": PASS}, calls)
     options = Options(project_dir=project.root, json=True, task="test")
-    package_tests.test(options, component="talker", packages=["talker_msgs"], build_first=False)
+    test_command.test(options, component="talker", packages=["talker_msgs"], build_first=False)
     options.report.finish()
     [call] = calls
     assert call["argv"][10:12] == ["--packages-select", "talker_msgs"]
@@ -343,7 +344,7 @@ def test_colcon_failing_to_run_is_a_test_failure(project: Project, monkeypatch: 
     _record_build(project)
     _fake_docker(monkeypatch, project, {}, [], code=2)
     with pytest.raises(TestFailure, match="colcon test exited 2 in component listener"):
-        package_tests.test(Options(project_dir=project.root, quiet=True), component="listener", build_first=False)
+        test_command.test(Options(project_dir=project.root, quiet=True), component="listener", build_first=False)
 
 
 def test_a_stale_build_is_refused_before_any_container(project: Project, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -351,7 +352,7 @@ def test_a_stale_build_is_refused_before_any_container(project: Project, monkeyp
     calls: list[dict[str, Any]] = []
     _fake_docker(monkeypatch, project, {"demo_listener": PASS}, calls)
     with pytest.raises(BuildError, match="component listener: the build is out of date"):
-        package_tests.test(Options(project_dir=project.root), component="listener", build_first=False)
+        test_command.test(Options(project_dir=project.root), component="listener", build_first=False)
     assert calls == []
 
 
@@ -360,8 +361,8 @@ def test_dry_run_prints_the_plan_without_docker(project: Project, monkeypatch: p
     def no_docker() -> None:
         raise AssertionError("the dry run contacted Docker")
 
-    monkeypatch.setattr(package_tests, "local_docker", no_docker)
-    package_tests.test(Options(project_dir=project.root, dry_run=True), component=None, packages=["demo_talker"],
+    monkeypatch.setattr(test_command, "local_docker", no_docker)
+    test_command.test(Options(project_dir=project.root, dry_run=True), component=None, packages=["demo_talker"],
                        build_first=False)
     out = capsys.readouterr().out
     assert "# talker: demo_talker in robot-talker:latest as" in out and "(not built yet: run build first)" in out
@@ -398,9 +399,9 @@ def test_the_project_collection_has_the_task() -> None:
 
 def test_dry_run_json_is_one_document(project: Project, monkeypatch: pytest.MonkeyPatch,
                                       capsys: pytest.CaptureFixture[str]) -> None:
-    monkeypatch.setattr(package_tests, "local_docker", lambda: pytest.fail("the dry run contacted Docker"))
+    monkeypatch.setattr(test_command, "local_docker", lambda: pytest.fail("the dry run contacted Docker"))
     options = Options(project_dir=project.root, dry_run=True, json=True, task="test")
-    package_tests.test(options, component="listener", build_first=False)
+    test_command.test(options, component="listener", build_first=False)
     options.report.finish()
     doc = json.loads(capsys.readouterr().out)
     [listener] = doc["results"]
@@ -423,7 +424,7 @@ def test_test_builds_the_selected_component_first_then_tests(project: Project, m
         _record_build(project)  # what a real build leaves: a current build record
 
     monkeypatch.setattr(build, "build", fake_build)
-    package_tests.test(Options(project_dir=project.root, quiet=True), component="listener")
+    test_command.test(Options(project_dir=project.root, quiet=True), component="listener")
     assert order == ["build listener"]
     assert [c["image"] for c in calls] == ["robot-listener:latest"]
 
@@ -437,20 +438,20 @@ def test_a_failed_build_first_runs_no_test(project: Project, monkeypatch: pytest
 
     monkeypatch.setattr(build, "build", failing_build)
     with pytest.raises(BuildError, match="colcon build failed"):
-        package_tests.test(Options(project_dir=project.root, quiet=True), component="listener")
+        test_command.test(Options(project_dir=project.root, quiet=True), component="listener")
     assert calls == []
 
 
 def test_an_unknown_package_is_refused_before_building(project: Project, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(build, "build", lambda *a, **k: pytest.fail("built before the packages were checked"))
     with pytest.raises(UsageError, match="unknown package 'nope'"):
-        package_tests.test(Options(project_dir=project.root, quiet=True), component=None, packages=["nope"])
+        test_command.test(Options(project_dir=project.root, quiet=True), component=None, packages=["nope"])
 
 
 def test_dry_run_shows_the_build_that_would_come_first(project: Project, monkeypatch: pytest.MonkeyPatch,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
-    monkeypatch.setattr(package_tests, "local_docker", lambda: pytest.fail("the dry run contacted Docker"))
-    package_tests.test(Options(project_dir=project.root, dry_run=True), component="listener")
+    monkeypatch.setattr(test_command, "local_docker", lambda: pytest.fail("the dry run contacted Docker"))
+    test_command.test(Options(project_dir=project.root, dry_run=True), component="listener")
     out = capsys.readouterr().out
     assert out.index("# listener (first build) in") < out.index("# listener: demo_listener in")
 
@@ -461,7 +462,7 @@ def test_with_json_the_build_first_leaves_one_document_of_test_results(
     _fake_docker(monkeypatch, project, {"demo_listener": PASS}, calls)
 
     def fake_build(options: Options, *, component: str | None, full: bool = False) -> None:
-        from robocore.commands.reporting import Outcome
+        from robocore.commands.support.reporting import Outcome
 
         options.report.add(Outcome(what="listener", role="build", action="up-to-date"))
         options.report.warn("a build warning")
@@ -469,7 +470,7 @@ def test_with_json_the_build_first_leaves_one_document_of_test_results(
 
     monkeypatch.setattr(build, "build", fake_build)
     options = Options(project_dir=project.root, json=True, task="test")
-    package_tests.test(options, component="listener")
+    test_command.test(options, component="listener")
     options.report.finish()
     doc = json.loads(capsys.readouterr().out)
     assert doc["task"] == "test" and [r["kind"] for r in doc["results"]] == ["tests"]

@@ -1,7 +1,7 @@
 """The status table: a row per container of the robot on each host, from Docker's inspect documents.
 
 Pure and light (no configuration model, docker-py or invoke): the ordinary ``status`` builds its rows here
-from robot.yaml's plan, and so does its fast path (:mod:`robocore.commands.status_memo`) from a recorded plan.
+from robot.yaml's plan, and so does its fast path (:mod:`robocore.commands.support.status_memo`) from a recorded plan.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 from typing import Any, ClassVar
 
-from robocore.commands.reporting import Reporter
+from robocore.commands.support.reporting import Reporter
 from robocore.errors import RobocoreError
 from robocore.plan import naming
 from robocore.plan.starts import docker_time, started_before_servers
