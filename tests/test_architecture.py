@@ -15,10 +15,13 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "robocore"
 #: Layers from the top down: a module may import its own layer's modules and any layer below it.
 #: The command line (cli, tasks) and the pytest plugin (testing) are the front ends; demo is one too.
+#: commands.support holds what several task modules share: it sits below them, so it never imports a task
+#: module (each module of robocore.commands outside support/ is a task, or a fleet verb).
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("robocore.cli", "robocore.__main__"),
     ("robocore.tasks", "robocore.testing", "robocore.demo"),
     ("robocore.commands",),
+    ("robocore.commands.support",),
     ("robocore.adapters", "robocore.plan"),
     ("robocore.project",),
     ("robocore.config",),
@@ -180,3 +183,23 @@ def test_the_checks_see_a_planted_cycle_an_upward_import_and_a_private_name(tmp_
     assert cycles_in(fake) == [["robocore.commands.b", "robocore.plan.a", "robocore.commands.b"]]
     assert upward_imports(fake) == ["robocore/plan/a.py:2: robocore.plan.a imports robocore.commands.b (a layer above)"]
     assert private_imports(fake) == ["robocore/commands/b.py:1: imports robocore.plan.a._hidden"]
+
+
+def test_a_support_module_that_imports_a_task_module_is_caught(tmp_path: Path) -> None:
+    """Negative control of the support/task split: a shared helper that imports a task module, at the top or
+    inside a function, is an upward import; a task module importing a support module is not."""
+    fake = tmp_path / "robocore"
+    support = fake / "commands" / "support"
+    support.mkdir(parents=True)
+    for init in (fake / "__init__.py", fake / "commands" / "__init__.py", support / "__init__.py"):
+        init.write_text("")
+    (fake / "commands" / "build.py").write_text("from robocore.commands.support import helper\n")
+    (fake / "commands" / "stage.py").write_text("from robocore.commands.support.helper import shared\n")
+    (support / "helper.py").write_text("from robocore.commands import build\n\n\n"
+                                       "def shared():\n    from robocore.commands.stage import plan\n")
+    assert upward_imports(fake) == [
+        "robocore/commands/support/helper.py:1: robocore.commands.support.helper imports robocore.commands.build "
+        "(a layer above)",
+        "robocore/commands/support/helper.py:5: robocore.commands.support.helper imports robocore.commands.stage "
+        "(a layer above)",
+    ]
