@@ -175,3 +175,43 @@ def prepull(hosts: RobotFleet, base: str, indexes: Sequence[int]) -> None:
     small layers (the talker's and listener's images are the base plus a few)."""
     with parallel(len(indexes)) as pool:
         list(pool.map(lambda i: hosts.hosts[i].ssh(hosts, "docker", "pull", "-q", base, timeout=900), indexes))
+
+
+def container_lives(hosts: RobotFleet, index: int) -> list[tuple[str, float, float | None]]:
+    """Every Swarm task container on host ``index`` that ever started, the stopped ones too (Swarm keeps a few
+    tasks of each service, and their containers, as history): (service, started, stopped or None while it runs),
+    in seconds since the epoch (the hosts share this machine's clock). Read on the host, not through the manager."""
+    fmt = ('{{index .Config.Labels "com.docker.swarm.service.name"}} {{.State.Running}} {{.State.StartedAt}} '
+           "{{.State.FinishedAt}}")
+    out = hosts.hosts[index].ssh(hosts, "sh", "-c", "docker ps -aq --filter label=com.docker.swarm.service.name "
+                                 f"| xargs -r docker inspect --format '{fmt}'")
+    lives = []
+    for line in out.splitlines():
+        service, running, started, finished = line.split()
+        if started.startswith("0001-"):  # made, never started
+            continue
+        lives.append((service, _epoch(started), None if running == "true" else _epoch(finished)))
+    return lives
+
+
+def _epoch(stamp: str) -> float:
+    """Docker's RFC 3339 time (nanoseconds, Z) as seconds since the epoch."""
+    from datetime import datetime
+
+    head, _, fraction = stamp.rstrip("Z").partition(".")
+    return datetime.fromisoformat(head + "+00:00").timestamp() + float(f"0.{fraction or '0'}")
+
+
+def overlaps(lives: Sequence[tuple[str, float, float | None]], since: float,
+             until: float) -> list[tuple[str, float, float]]:
+    """Where two containers of one service ran at once between ``since`` and ``until`` (service, from, to)."""
+    found = []
+    for i, (service, start, stop) in enumerate(lives):
+        for other, start2, stop2 in lives[i + 1:]:
+            if other != service:
+                continue
+            begin = max(start, start2, since)
+            end = min(stop if stop is not None else until, stop2 if stop2 is not None else until, until)
+            if begin < end:
+                found.append((service, begin, end))
+    return found

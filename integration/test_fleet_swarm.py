@@ -17,7 +17,8 @@ releases are pushed. The two fleets' rollouts run side by side.
 The tests run in order on the same swarm: join (twice: the second changes nothing); v1 to every robot, heard on
 each; v2 with r4 cut off (pending, its containers untouched, then converging alone once reconnected) and heard on
 every robot; a canary whose v3 crashes (the rollout stops, the canary is back on v2 and heard, nothing else
-changed); a component with a device refused before anything changes.
+changed); a fleet rollback of both fleets to v1, every robot back by digest and heard, with no two containers of
+one service at once on any robot host meanwhile; a component with a device refused before anything changes.
 """
 
 from __future__ import annotations
@@ -39,10 +40,12 @@ from deploy_helpers import wait_for
 from local_registry import registry_tunnels, serve_registry
 from robot_host.hosts import RobotFleet
 from swarm_fleet import (
+    container_lives,
     cut,
     listener_lines,
     make_project,
     make_releases,
+    overlaps,
     parallel,
     prepull,
     push_base,
@@ -262,6 +265,52 @@ def test_canary_that_crashes_stops_the_rollout_and_goes_back(fleets: Swarm, run_
     assert service_specs(fleets, SOLO, later) == before  # the later wave untouched: no service of it changed
     assert service_specs(fleets, SOLO, ["r1"]) != canary  # (the canary's were: the comparison sees a change)
     assert wait_for(lambda: any("hello v2" in line for line in fleets.heard("r1")), 30), fleets.heard("r1")
+
+
+def test_fleet_rollback_returns_every_robot_stop_first(fleets: Swarm, run_robocore: RobocoreCli) -> None:
+    """Both fleets from v2 back to v1: every robot healthy, runs v1's talker by digest and is heard saying v1; no
+    two containers of one service ran at once on any robot host during the rollback (read from each host's task
+    containers, whose start and stop times Swarm's task history keeps)."""
+    started = time.time()
+    done = both(run_robocore, fleets, "rollback")
+    ended = time.time()
+    for project, proc in done.items():
+        assert proc.returncode == 0, proc.stderr
+        assert verdicts(proc) == {robot: "healthy" for robot in ROBOTS[project]}, proc.stderr
+    assert ended - started < 120, ended - started  # the goal for a fleet's rollback (bench/fleet.py: 10 robots)
+    v1 = json.loads((fleets.roots[SOLO] / ".robocore/releases/v1.json").read_text())["components"]["talker"]
+    for project, robots in ROBOTS.items():
+        rows = status_rows(run_robocore, fleets.roots[project])
+        assert {r: (row["running"], row["target"], row["health"]) for r, row in rows.items()} == \
+            {robot: ("v1", "v1", "healthy") for robot in robots}, rows
+        for robot in robots:
+            host = fleets.hosts.hosts[fleets.talker_host(robot)]
+            image = host.ssh(fleets.hosts, "sh", "-c", "docker ps -q --filter label=com.docker.swarm.service.name="
+                             f"{project}-{robot}-talker | xargs docker inspect --format '{{{{.Config.Image}}}}'")
+            assert image.split() == [v1["amd64"]], image  # one talker, v1's, by digest
+
+    def heard_v1(robot: str) -> bool:
+        return wait_for(lambda: any("hello from talker" in line for line in fleets.heard(robot)[-3:]), 60)
+
+    everyone = [*ROBOTS[SOLO], *ROBOTS[DUO]]
+    with parallel(len(everyone)) as pool:
+        heard = dict(zip(everyone, pool.map(heard_v1, everyone), strict=True))
+    assert all(heard.values()), {robot: fleets.heard(robot) for robot, ok in heard.items() if not ok}
+    now = time.time()
+    with parallel(HOSTS - 1) as pool:  # every robot host at once
+        read = dict(zip(range(1, HOSTS), pool.map(lambda i: container_lives(fleets.hosts, i), range(1, HOSTS)),
+                        strict=True))
+    lives_of = {i: [life for life in lives if "-probe-" not in life[0]] for i, lives in read.items()}
+    assert overlaps([("s", 1.0, 3.0), ("s", 2.0, None), ("t", 0.0, None)], 0.0, 5.0) == [("s", 2.0, 3.0)]  # control
+    for robots in ROBOTS.values():
+        for robot, indexes in robots.items():
+            for index in indexes:
+                lives = lives_of[index]
+                assert not overlaps(lives, started, now), (robot, index, sorted(lives, key=lambda life: life[1]))
+            talker = [life for life in lives_of[indexes[0]] if life[0].endswith("-talker")]
+            # the check saw the swap: the v2 talker stopped and the v1 talker started within the rollback
+            assert any(stop is not None and started <= stop <= ended for _, _, stop in talker), talker
+            assert any(started <= start <= ended for _, start, _ in talker), talker
 
 
 def test_device_component_is_refused_before_anything_changes(fleets: Swarm, run_robocore: RobocoreCli) -> None:
