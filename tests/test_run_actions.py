@@ -2,10 +2,16 @@
 
 from __future__ import annotations
 
+import threading
 from datetime import datetime, timezone
 
+import pytest
+
+from robocore.commands.run import SIDE_BY_SIDE
+from robocore.commands.support.hosts import each_or_first_error
 from robocore.commands.support.status_table import Row, not_registered
-from robocore.plan.actions import Action, Existing, servers_started, with_node_restarts
+from robocore.errors import DockerError
+from robocore.plan.actions import Action, Existing, in_stages, servers_started, with_node_restarts
 from robocore.plan.containers import ContainerSpec
 from robocore.plan.naming import ROLE_COMPONENT, ROLE_DISCOVERY
 from robocore.plan.starts import docker_time
@@ -104,3 +110,32 @@ def test_status_names_the_nodes_a_restarted_master_does_not_know() -> None:
     assert not_registered(rows, ["discovery-0"]) == ["talker"]
     # a stopped master dates nothing (status says it is down instead)
     assert not_registered([row("discovery-0", None), *rows[1:]], ["discovery-0"]) == []
+
+
+def test_stages_take_removals_then_each_server_alone_then_everything_else() -> None:
+    actions = [Action("remove", "p-old", "no longer planned"), Action("replace", "p-discovery-0", "new image"),
+               Action("create", "p-discovery-1"), Action("create", "p-talker"), Action("keep", "p-listener"),
+               Action("start", "p-camera", "was stopped")]
+    stages = in_stages(actions, {"p-discovery-0", "p-discovery-1"})
+    assert [[a.name for a in stage] for stage in stages] == [
+        ["p-old"], ["p-discovery-0"], ["p-discovery-1"], ["p-talker", "p-camera"]]
+    # control: with nothing to remove and the servers kept, one stage holds every component
+    kept = [Action("keep", "p-discovery-0"), Action("create", "p-talker"), Action("create", "p-listener")]
+    assert in_stages(kept, {"p-discovery-0"}) == [[kept[1], kept[2]]]
+    assert in_stages([Action("keep", "p-talker")], set()) == []
+
+
+def test_a_stage_overlaps_and_raises_the_first_failure_after_all_ran() -> None:
+    barrier = threading.Barrier(SIDE_BY_SIDE, timeout=10)  # broken unless SIDE_BY_SIDE run at the same time
+    done: list[str] = []
+
+    def apply(action: Action) -> None:
+        barrier.wait()
+        done.append(action.name)
+        if action.name in ("c1", "c3"):
+            raise DockerError(f"{action.name} failed")
+
+    actions = [Action("create", f"c{i}") for i in range(SIDE_BY_SIDE)]
+    with pytest.raises(DockerError, match="c1 failed"):
+        each_or_first_error(actions, apply, limit=SIDE_BY_SIDE)
+    assert sorted(done) == [a.name for a in actions]

@@ -20,13 +20,20 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from robocore.commands.support.arch_checks import allowing_emulation, refuse_daemon_arch
 from robocore.commands.support.composefiles import write_compose_files
 from robocore.commands.support.context import DRY_RUN_UNKNOWN, Options
-from robocore.commands.support.hosts import connect, for_each_host, managed_containers, select_hosts, short_error
+from robocore.commands.support.hosts import (
+    connect,
+    each_or_first_error,
+    for_each_host,
+    managed_containers,
+    select_hosts,
+    short_error,
+)
 from robocore.commands.support.reporting import Reporter
 from robocore.commands.support.state import history, record_run, with_local_build, with_synced_release
 from robocore.config.model import Host
 from robocore.errors import DockerError, GroupError, RobocoreError, UsageError
 from robocore.plan import discovery, naming
-from robocore.plan.actions import Action, Existing, decide, servers_started, with_node_restarts
+from robocore.plan.actions import Action, Existing, decide, in_stages, servers_started, with_node_restarts
 from robocore.plan.containers import ContainerSpec, host_specs, state_volumes
 from robocore.plan.naming import ROLE_DISCOVERY
 from robocore.plan.release import is_released
@@ -40,9 +47,8 @@ if TYPE_CHECKING:
 UNKNOWN = "unknown"
 #: Note of a host ``run`` leaves alone: nothing planned there, and no run of this project ever reached it.
 NOT_CONTACTED = "nothing planned, never deployed here: not contacted"
-
-
-# --------------------------------------------------------------------------- run
+#: Containers of one host created and started at once: the connections a Docker client over ssh keeps open.
+SIDE_BY_SIDE = 4
 
 
 @dataclass
@@ -62,14 +68,10 @@ class HostOutcome:
 
 
 def _existing(container: Any) -> Existing:
-    return Existing(
-        name=container.name,
-        spec_hash=container.labels.get(naming.LABEL_SPEC),
-        image_id=container.attrs.get("Image", ""),
-        running=container.status == "running",
-        role=container.labels.get(naming.LABEL_ROLE, ""),
-        started_at=_started_at(container),
-    )
+    labels, attrs = container.labels, container.attrs
+    return Existing(name=container.name, spec_hash=labels.get(naming.LABEL_SPEC), image_id=attrs.get("Image", ""),
+                    running=container.status == "running", role=labels.get(naming.LABEL_ROLE, ""),
+                    started_at=_started_at(container))
 
 
 def _started_at(container: Any) -> str:
@@ -175,9 +177,11 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
         if dry_run:
             return outcome
         by_name = {s.name: s for s in specs}
-        for action in actions:
-            _apply(client, action, by_name.get(action.name), containers.get(action.name), host, report=report,
-                   kind=kind, ready_timeout=allowing_emulation(SERVER_READY_TIMEOUT, emulated=emulated))
+        timeout = allowing_emulation(SERVER_READY_TIMEOUT, emulated=emulated)
+        for stage in in_stages(actions, {s.name for s in specs if s.role == ROLE_DISCOVERY}):
+            each_or_first_error(stage, lambda a: _apply(client, a, by_name.get(a.name), containers.get(a.name), host,
+                                                        report=report, kind=kind, ready_timeout=timeout),
+                                limit=SIDE_BY_SIDE, name="robocore-start")
     finally:
         client.close()
         if local is not None:

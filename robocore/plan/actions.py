@@ -63,6 +63,19 @@ def decide(specs: Sequence[ContainerSpec], existing: Sequence[Existing], image_i
     return actions
 
 
+def in_stages(actions: Sequence[Action], servers: Collection[str]) -> list[list[Action]]:
+    """``actions`` of one host grouped in the order ``run`` takes them: the removals, then each discovery server
+    of ``servers`` alone (one is serving before anything after it starts), then every other container.
+
+    The actions inside a stage do not depend on each other, so they can be taken side by side; ``keep`` actions
+    (nothing to do) and empty stages are left out.
+    """
+    removals = [a for a in actions if a.verb == "remove"]
+    serving = [[a] for a in actions if a.name in servers and a.verb not in ("remove", "keep")]
+    rest = [a for a in actions if a.name not in servers and a.verb not in ("remove", "keep")]
+    return [stage for stage in (removals, *serving, rest) if stage]
+
+
 #: The verbs that (re)start a container.
 STARTS = frozenset({"create", "replace", "start"})
 

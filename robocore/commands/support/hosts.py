@@ -107,6 +107,14 @@ def in_parallel(items: Sequence[T], work: Callable[[T], R], *, limit: int,
     return done
 
 
+def each_or_first_error(items: Sequence[T], work: Callable[[T], object], *, limit: int, name: str = "robocore") -> None:
+    """``work(item)`` for every item, at most ``limit`` at a time (:func:`in_parallel`); once every item has been
+    tried, the first exception, in the order of ``items``, is raised."""
+    for _item, outcome in in_parallel(items, work, limit=limit, name=name):
+        if isinstance(outcome, BaseException):
+            raise outcome
+
+
 def for_each_host(hosts: Sequence[Host], work: Callable[[Host], T]) -> tuple[dict[str, T], dict[str, RobocoreError]]:
     """Run ``work(host)`` for every host in parallel; return (results, failures) by host name.
 
