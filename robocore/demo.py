@@ -81,11 +81,11 @@ def wait_for_messages(options: Options, timeout: float, *, count: int = 3) -> li
             if len(lines) >= count:
                 return lines
             time.sleep(1.0)
-    from robocore.commands import status
+    from robocore.commands import logs
 
     console().print("[red]no messages in time; the last lines of every container:[/]")
     try:
-        status.logs(options, component=None, follow=False, tail=10)
+        logs.logs(options, component=None, follow=False, tail=10)
     except RobocoreError as error:
         console().print(f"(logs unavailable: {error.lines()[0]})")
     raise DemoFailed(
@@ -104,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
 
     path = Path(args.dir).resolve()
     options = Options(project_dir=path)
-    from robocore.commands import build, prepare_base, run, stage, status
+    from robocore.commands import build, down, prepare_base, run, stage, status
 
     try:
         _step(f"init {path}", lambda: create_project(path))
@@ -118,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"listener | {line}")
         status.status(options, nodes_too=True)
         if args.down:
-            _step("down", lambda: run.down(options, host=None))
+            _step("down", lambda: down.down(options, host=None))
         else:
             console().print(f"\nstill running; follow with `robocore -p {path} logs -f`, "
                             f"stop with `robocore -p {path} down`")

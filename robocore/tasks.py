@@ -285,7 +285,7 @@ def run(
 @reported
 def down(c: Context, host: str | None = None, dry_run: bool = False, quiet: bool = False) -> None:
     """Stop and remove the robot's containers."""
-    from robocore.commands import run as command
+    from robocore.commands import down as command
 
     options = _options(c, "down", dry_run=dry_run, quiet=quiet)
     _execute(options, lambda: command.down(options, host=_given(host, "--host")))
@@ -309,7 +309,7 @@ def status(c: Context, json: bool = False, dry_run: bool = False, nodes: bool = 
 def logs(c: Context, component: str | None = None, follow: bool = False, tail: str = "100", dry_run: bool = False,
          json: bool = False) -> None:
     """Logs of the robot's containers on all hosts, each line prefixed by its component."""
-    from robocore.commands import status as command
+    from robocore.commands import logs as command
 
     options = _options(c, "logs", dry_run=dry_run, json=json)
     _execute(options, lambda: command.logs(options, component=_given(component, "--component"), follow=follow,
@@ -342,7 +342,7 @@ def shell(c: Context, component: str | None = None, cmd: str | None = None, new:
 def connect(c: Context, component: str | None = None, cmd: str | None = None, dry_run: bool = False) -> None:
     """Shell inside the running container of a component on its host, as a ROS super client."""
     component = _require(component, "connect")
-    from robocore.commands import status as command
+    from robocore.commands import connect as command
 
     options = _options(c, "connect", dry_run=dry_run)
     code = _execute(options, lambda: command.connect(options, component=component, cmd=_given(cmd, "--cmd")))
@@ -373,7 +373,7 @@ def release(c: Context, tag: str | None = None, dry_run: bool = False, fleet: bo
 @reported
 def rollback(c: Context, host: str | None = None, dry_run: bool = False) -> None:
     """Return each host to the version it ran before the last run."""
-    from robocore.commands import release as command
+    from robocore.commands import rollback as command
 
     options = _options(c, "rollback", dry_run=dry_run)
     _execute(options, lambda: command.rollback(options, host=_given(host, "--host")))
@@ -425,10 +425,10 @@ def doctor(c: Context, host: str | None = None, json: bool = False) -> None:
 @reported
 def desktop_password(c: Context) -> None:
     """Print the project's VNC password (made once, kept 0600 in .robocore/desktop/), which noVNC asks for."""
-    from robocore.commands.support import displays
+    from robocore.commands import desktop_password as command
 
     options = _options(c, "desktop-password")
-    print(_execute(options, lambda: displays.desktop_password(options.load())))
+    print(_execute(options, lambda: command.desktop_password(options.load())))
 
 
 @task(iterable=["robot"], help={"verb": "join | rollout | status | rollback", "robot": "rollback: only this robot."})

@@ -203,3 +203,18 @@ def test_a_support_module_that_imports_a_task_module_is_caught(tmp_path: Path) -
         "robocore/commands/support/helper.py:5: robocore.commands.support.helper imports robocore.commands.stage "
         "(a layer above)",
     ]
+
+
+#: Tasks with no module in robocore/commands/: ``schema`` prints a pure function of the config model
+#: (:func:`robocore.config.schema.schema_json`); it loads no project and executes nothing.
+NO_COMMAND_MODULE = {"schema"}
+
+
+def test_each_task_has_a_module_named_after_it() -> None:
+    """What a user types is where its code is: ``robocore prepare-base`` -> robocore/commands/prepare_base.py."""
+    from robocore.tasks import cli_namespace
+
+    names = sorted(set(cli_namespace.task_names) - NO_COMMAND_MODULE)
+    missing = [n for n in names if not (PACKAGE / "commands" / f"{n.replace('-', '_')}.py").is_file()]
+    assert {"prepare-base", "desktop-password", "down"} <= set(names)  # the collection was read
+    assert missing == [], f"tasks with no robocore/commands/<task>.py: {missing}"

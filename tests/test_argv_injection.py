@@ -18,7 +18,7 @@ from pathlib import Path, PurePosixPath
 import pytest
 
 from robocore.adapters import ssh, vcs
-from robocore.commands import status
+from robocore.commands import connect
 from robocore.config.model import Component, DockerAccess, Host, Robot, TlsFiles
 from robocore.config.values import is_ipv6
 from robocore.errors import BuildError, ConfigError, HostError, UsageError
@@ -93,14 +93,14 @@ def test_rsh_command_splits_back_into_robocores_options_only(monkeypatch: pytest
 def test_interactive_connect_over_ssh_quotes_the_docker_argv(tmp_path: Path) -> None:
     marker = tmp_path / "MARKER"
     env = {f"K{i}": v for i, v in enumerate(values(marker))}
-    docker_argv = status.docker_exec_argv("proj-talker", ["sh", "-c", "echo hi"], env, tty=True)
+    docker_argv = connect.docker_exec_argv("proj-talker", ["sh", "-c", "echo hi"], env, tty=True)
     assert before_marker(docker_argv)[:3] == ["docker", "exec", "-it"]
     flags = before_marker(docker_argv)[3:]
     assert all(arg.startswith("--env=") for arg in flags)
     assert {arg.removeprefix("--env=") for arg in flags} == {f"{k}={v}" for k, v in env.items()}
     assert after_marker(docker_argv) == ["proj-talker", "sh", "-c", "echo hi"]
     project = Project(root=tmp_path, robot=Robot.model_construct())
-    full, extra = status.interactive_argv(project, host("-oProxyCommand=x"), docker_argv, tty=True)
+    full, extra = connect.interactive_argv(project, host("-oProxyCommand=x"), docker_argv, tty=True)
     assert extra == {}
     assert after_marker(full)[0] == "pi@-oProxyCommand=x"
     assert shlex.split(after_marker(full)[1]) == docker_argv
@@ -110,7 +110,7 @@ def test_interactive_connect_over_tls_attaches_paths_to_their_flags(tmp_path: Pa
     tls = TlsFiles.model_construct(ca_cert="-ca.pem", client_cert="--cert", client_key="/k ey;x")
     target = host("2001:db8::7", docker=DockerAccess.tls, tls=tls, docker_port=2376)
     project = Project(root=tmp_path, robot=Robot.model_construct())
-    full, extra = status.interactive_argv(project, target, ["docker", "exec", "-i", "--", "c", "sh"], tty=False)
+    full, extra = connect.interactive_argv(project, target, ["docker", "exec", "-i", "--", "c", "sh"], tty=False)
     assert full[:5] == ["docker", "--tlsverify", f"--tlscacert={tmp_path}/-ca.pem", f"--tlscert={tmp_path}/--cert",
                         "--tlskey=/k ey;x"]
     assert extra == {"DOCKER_HOST": "tcp://[2001:db8::7]:2376"}

@@ -193,7 +193,8 @@ def test_a_desktop_mounts_the_projects_password_file_read_only_and_gets_only_its
 def test_the_password_is_made_once_private_and_never_in_argv_env_or_compose(tmp_path: Path) -> None:
     import stat
 
-    from robocore.commands.support.displays import desktop_password, ensure_desktop_password
+    from robocore.commands.desktop_password import desktop_password
+    from robocore.commands.support.displays import ensure_desktop_password
 
     p = project([desktop(), {"name": "viz", "runs_on": "dev", "gui": "vnc"}], root=tmp_path)
     old = os.umask(0o022)

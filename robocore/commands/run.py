@@ -1,4 +1,4 @@
-"""run and down: create, replace or remove each host's containers.
+"""run: create, replace or remove each host's containers (``down`` removes them all: :mod:`robocore.commands.down`).
 
 ``run`` compares each planned :class:`~robocore.plan.containers.ContainerSpec` with what the
 host runs: a container whose spec hash label and image ID match is left alone, a changed
@@ -10,7 +10,6 @@ with a per-host summary and a :class:`~robocore.errors.GroupError`.
 
 from __future__ import annotations
 
-import contextlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -34,7 +33,7 @@ from robocore.config.model import Host
 from robocore.errors import DockerError, GroupError, RobocoreError, UsageError
 from robocore.plan import discovery, naming
 from robocore.plan.actions import Action, Existing, decide, in_stages, servers_started, with_node_restarts
-from robocore.plan.containers import ContainerSpec, host_specs, state_volumes
+from robocore.plan.containers import ContainerSpec, host_specs
 from robocore.plan.naming import ROLE_DISCOVERY
 from robocore.plan.release import is_released
 from robocore.plan.starts import latest_start
@@ -390,59 +389,3 @@ def _report(report: Reporter, outcomes: Sequence[HostOutcome], *, dry_run: bool)
         table.add_row(out.host, "[green]ok[/]", *(str(out.count(v)) for v in ("create", "replace", "start", "keep",
                                                                                "remove")), detail)
     report.table(table)
-
-
-# --------------------------------------------------------------------------- down
-
-
-def stop_host(project: Project, host: Host, *, dry_run: bool, report: Reporter, forget_servers: bool) -> HostOutcome:
-    """Remove this project's containers from one host: components first, discovery servers last.
-
-    ``forget_servers`` also removes the discovery servers' state volumes, so that the next start is
-    a first start (no restart hold): right when every host goes down, wrong when clients elsewhere
-    keep running. ``dry_run`` contacts no host: which containers it runs is unknown.
-    """
-    from docker.errors import NotFound
-    from rich.markup import escape
-
-    outcome = HostOutcome(host.name)
-    if dry_run:
-        outcome.notes.append(f"would remove every container labelled {naming.LABEL_PROJECT}={project.name}; "
-                             f"which ones: {DRY_RUN_UNKNOWN}")
-        return outcome
-    client = connect(project, host)
-    try:
-        containers = managed_containers(client, project.name)
-        containers.sort(key=lambda c: (c.labels.get(naming.LABEL_ROLE) == ROLE_DISCOVERY, c.name))
-        for container in containers:
-            outcome.actions.append(Action("remove", container.name))
-            container.remove(force=True)
-            report.info(f"[bold]{host.name}[/]: removed {escape(container.name)}", markup=True)
-        if forget_servers:
-            for volume in state_volumes(project, host.name):
-                with contextlib.suppress(NotFound):
-                    client.volumes.get(volume).remove(force=True)
-    finally:
-        client.close()
-    return outcome
-
-
-def down(options: Options, *, host: str | None) -> None:
-    """Stop and remove this project's containers on every host (or ``--host``)."""
-    project = options.load()
-    report = options.report
-    hosts = select_hosts(project, host)
-    forget = host is None  # every host goes down: the next start of each server is a first start
-
-    def work(h: Host) -> HostOutcome:
-        return stop_host(project, h, dry_run=options.dry_run, report=report, forget_servers=forget)
-
-    results, failures = for_each_host(hosts, work)
-    report.add(*results.values())
-    for name, out in results.items():
-        for note in out.notes:
-            report.out(f"{name}: {note}")
-        if not options.dry_run and not out.actions:
-            report.info(f"[bold]{name}[/]: nothing to remove", markup=True)
-    if failures:
-        raise GroupError(failures, list(results))

@@ -15,7 +15,7 @@ import subprocess
 from pathlib import Path
 
 from robocore.config.model import Host
-from robocore.errors import HostError, UsageError
+from robocore.errors import HostError
 from robocore.files import PRIVATE, read_own_file, write_atomic
 from robocore.plan import gui
 from robocore.project import Project
@@ -27,7 +27,8 @@ PASSWORD_LENGTH = 8
 PASSWORD_ALPHABET = string.ascii_letters + string.digits
 
 
-def _valid_password(data: bytes | None) -> str | None:
+def valid_password(data: bytes | None) -> str | None:
+    """``data`` as a password robocore made (its length and alphabet), else None."""
     text = (data or b"").decode("ascii", errors="replace")
     ok = len(text) == PASSWORD_LENGTH and all(ch in PASSWORD_ALPHABET for ch in text)
     return text if ok else None
@@ -43,23 +44,11 @@ def ensure_desktop_password(project: Project) -> Path | None:
     if not any(gui.needs_password(c) for c in project.robot.components):
         return None
     path = gui.password_file(project)
-    password = _valid_password(read_own_file(path))
+    password = valid_password(read_own_file(path))
     if password is None:
         password = "".join(secrets.choice(PASSWORD_ALPHABET) for _ in range(PASSWORD_LENGTH))
     write_atomic(path, password, mode=PRIVATE)
     return path
-
-
-def desktop_password(project: Project) -> str:
-    """The project's VNC password (made if it is not there yet), which noVNC and VNC viewers ask for."""
-    path = ensure_desktop_password(project)
-    if path is None:
-        desktops = [c.name for c in project.robot.components if c.desktop is not None]
-        raise UsageError("no desktop of this project asks for a password" +
-                         (f" ({', '.join(desktops)}: desktop.open: true)" if desktops else " (no desktop component)"))
-    password = _valid_password(read_own_file(path))
-    assert password is not None, "ensure_desktop_password just wrote it"
-    return password
 
 
 def prepare_host_displays(project: Project, host: Host, *, dry_run: bool) -> list[str]:

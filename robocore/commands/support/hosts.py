@@ -57,6 +57,17 @@ def managed_containers(client: docker.DockerClient, project: str) -> list[Any]:
     return [c for c in found if c.labels.get(naming.LABEL_ROLE) in naming.MANAGED_ROLES]
 
 
+def running_container(client: docker.DockerClient, name: str) -> Any:
+    """The container ``name`` on ``client``'s host when it is running, else None (status --nodes, connect)."""
+    from docker.errors import NotFound
+
+    try:
+        container = client.containers.get(name)
+    except NotFound:
+        return None
+    return container if container.status == "running" else None
+
+
 def local_documents(project: Project, host: Host) -> list[dict[str, Any]] | None:
     """The inspect documents of the project's managed containers on a local host, read over the daemon's unix
     socket without docker-py (whose import was most of a status' time); None for other hosts or when the
