@@ -3,7 +3,9 @@
 ``test_arm64.py`` and ``test_host_build.py`` share one project name (``robocore-it-arm64``) and so one set of
 images: a Debian root per arch (``robocore/<arch>/debian:bookworm-debian``), a debian base per arch, and the
 talker's (arm64) and listener's (amd64) staged images. Made from nothing they take about ten minutes, most of it
-the arm64 root's bootstrap under qemu, on one core.
+the arm64 root's bootstrap under qemu, on one core. Then ``test_official_arm64.py``'s images, on that arm64 root: the
+arm64 noetic stand-in of the official image (:mod:`official_standins`), and its project's base and talker image
+(minutes more under qemu, off the suites' critical path).
 
 Run as a script (``python integration/arm64_project.py``), this module makes those images in a throw-away copy of
 the project (``prepare-base`` and ``stage``, which contact no robot host), holding :data:`LOCK` while it works.
@@ -107,17 +109,42 @@ def make_images() -> None:
                  {"name": "robot-arm", "ip": NO_HOSTS[1], "user": "root", "arch": "arm64"}]
         init_project(root, hosts, talker_host="robot-arm", server_host="robot-x86")
         for step in ("prepare-base", "stage"):
-            started = time.monotonic()
-            argv = [sys.executable, "-m", "robocore", "-p", str(root), step, "--quiet"]
-            proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, start_new_session=True)
-            try:
-                code = proc.wait()
-            except BaseException:  # stopped: stop the step and what it started (mmdebstrap, docker build)
-                stop(proc, signal.SIGINT, 30)
-                raise
-            if code != 0:
-                raise subprocess.CalledProcessError(code, argv)
-            print(f"{step}: {time.monotonic() - started:.1f} s", flush=True)
+            _step(root, step)
+        _official_arm64(Path(parent))
+
+
+def _step(root: Path, step: str, *extra: str) -> None:
+    """One robocore step on the project at ``root``, timed; stopped with what it started when this script is."""
+    started = time.monotonic()
+    argv = [sys.executable, "-m", "robocore", "-p", str(root), step, "--quiet", *extra]
+    proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, start_new_session=True)
+    try:
+        code = proc.wait()
+    except BaseException:  # stopped: stop the step and what it started (mmdebstrap, docker build)
+        stop(proc, signal.SIGINT, 30)
+        raise
+    if code != 0:
+        raise subprocess.CalledProcessError(code, argv)
+    print(f"{root.name} {step}: {time.monotonic() - started:.1f} s", flush=True)
+
+
+def _official_arm64(parent: Path) -> None:
+    """test_official_arm64's images: the arm64 noetic stand-in (FROM the arm64 root just made; named with robocore's
+    per-arch name only, so ``ros:noetic-ros-base``, which another suite may hold on amd64 meanwhile, stays), then
+    prepare-base and stage of the talker in a copy of that suite's project."""
+    import docker
+    import official_standins
+
+    started = time.monotonic()
+    client = docker.from_env(timeout=600)  # a step under emulation can be silent for minutes
+    official_standins.ensure(client, official_standins.Standin("noetic", "arm64"), pin=True)
+    print(f"arm64 noetic stand-in: {time.monotonic() - started:.1f} s", flush=True)
+    root = parent / official_standins.ARM64_PROJECT
+    subprocess.run([sys.executable, "-m", "robocore", "init", str(root), "--defaults", "--distro", "noetic"],
+                   check=True, capture_output=True, text=True)
+    official_standins.arm64_project(root, domain=0, port=11311)
+    _step(root, "prepare-base")
+    _step(root, "stage", "--component", "talker")
 
 
 def stop(proc: subprocess.Popen[bytes], first: signal.Signals, grace: float) -> None:

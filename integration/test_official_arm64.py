@@ -5,6 +5,11 @@ arm64 suites bootstrap (:mod:`arm64_project`; this module runs after them, ``RUN
 ``ros:noetic-ros-base`` as ``docker pull --platform linux/arm64`` would. robocore's ``prepare-base`` then resolves
 the arm64 root from that name (its per-arch name ``robocore/arm64/ros:noetic-ros-base`` removed first).
 
+:mod:`arm64_project` makes the stand-in, and the project's base and talker image (``prepare-base`` and ``stage`` of a
+copy of it), in the background while the other suites run, as it does for the other arm64 suites: this module's
+``prepare-base`` and ``stage`` then find them current by their content hash, and only ``build`` runs under emulation
+here. Nothing depends on that head start: without it, they are built here.
+
 The template's noetic project on one arm64 host (its ROS master there too): ``prepare-base`` makes the arm64 base on
 the stand-in (colcon from the stand-in's ROS apt repository, rosdep's offline database, the common package built
 under emulation), ``stage`` the talker's arm64 image through rosdep, ``build`` compiles the roscpp talker for arm64:
@@ -23,7 +28,6 @@ from typing import TYPE_CHECKING, Any
 
 import official_standins
 import pytest
-import yaml
 from deploy_helpers import free_tcp_port, remove_project_containers
 
 from robocore.plan import arches
@@ -33,9 +37,7 @@ if TYPE_CHECKING:
 
 pytestmark = [pytest.mark.docker, pytest.mark.timeout(3000)]
 
-NAME = "robocore-it-official-arm64"
-#: The arm64 host's address: prepare-base, stage and build contact no host (TEST-NET-1).
-ARM_HOST = "192.0.2.211"
+NAME = official_standins.ARM64_PROJECT
 
 
 @pytest.fixture(scope="module")
@@ -47,13 +49,7 @@ def arm64_official(arm64_images: None, docker_client: Any, run_robocore: Robocor
     parent = Path(tempfile.mkdtemp(prefix="robocore-it-"))
     root = parent / NAME
     run_robocore(None, "init", str(root), "--defaults", "--distro", "noetic")
-    data = yaml.safe_load((root / "robot.yaml").read_text())
-    data["ros_domain_id"] = random.randint(100, 230)
-    data["hosts"] = [{"name": "robot-arm", "ip": ARM_HOST, "user": "root", "arch": "arm64"}]
-    data["discovery"] = {"servers": [{"host": "robot-arm", "port": free_tcp_port()}]}
-    for comp in data["components"]:
-        comp["runs_on"] = "robot-arm"
-    (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    official_standins.arm64_project(root, domain=random.randint(100, 230), port=free_tcp_port())
     timings = {}
     for step, extra in (("prepare-base", ()), ("stage", ("--component", "talker")),
                         ("build", ("--component", "talker"))):

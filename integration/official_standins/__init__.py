@@ -34,6 +34,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from robocore import resources
 from robocore.adapters import rootfs
 from robocore.adapters.image_builder import image_state, proxy_buildargs
@@ -182,10 +184,14 @@ def _build(client: Any, standin: Standin, root: str, digest: str, say: Callable[
         container.remove(force=True)
 
 
-def ensure(client: Any, standin: Standin, say: Callable[[str], None] = lambda _: None) -> str:
+def ensure(client: Any, standin: Standin, say: Callable[[str], None] = lambda _: None, *, pin: bool = False) -> str:
     """The stand-in's image ID, built when its own name does not hold its inputs hash, and named
     :attr:`Standin.reference`, as ``docker pull --platform linux/<arch>`` of the real image would leave it. A missing
-    root is made by robocore's own bootstrap."""
+    root is made by robocore's own bootstrap.
+
+    ``pin``: name it :attr:`Standin.pinned` instead (the name robocore's ``prepare-base`` gives the root once it has
+    resolved it) and leave :attr:`Standin.reference` alone: Docker holds one arch of that name at a time, and a suite
+    may be using its other arch meanwhile (the arm64 images made in the background, :mod:`arm64_project`)."""
     from robocore.commands.prepare_base import ROOTFS_KINDS
 
     assert standin.kind in ROOTFS_KINDS
@@ -202,7 +208,7 @@ def ensure(client: Any, standin: Standin, say: Callable[[str], None] = lambda _:
         image_id = _build(client, standin, root, digest, say)
         repository, tag = arches.split_reference(standin.own_name)
         client.api.tag(image_id, repository, tag=tag, force=True)
-    repository, tag = arches.split_reference(standin.reference)
+    repository, tag = arches.split_reference(standin.pinned if pin else standin.reference)
     client.api.tag(image_id, repository, tag=tag, force=True)
     return image_id
 
@@ -214,3 +220,23 @@ def forget_pinned(client: Any, standin: Standin) -> None:
     if state is not None:
         client.images.remove(standin.pinned, noprune=True)
 
+
+#: The folder (and so image prefix) of ``test_official_arm64``'s project; :mod:`arm64_project` makes its images ahead
+#: of time in a copy of the same name.
+ARM64_PROJECT = "robocore-it-official-arm64"
+#: Its arm64 host's address: prepare-base, stage and build contact no host (TEST-NET-1).
+ARM64_HOST = "192.0.2.211"
+
+
+def arm64_project(root: Path, *, domain: int, port: int) -> None:
+    """Make the noetic project ``robocore init --defaults`` wrote at ``root`` the arm64 project of
+    ``test_official_arm64``: one arm64 host running every component and the ROS master (on ``port``), ROS domain
+    ``domain``. Neither number is an input of its images, so a copy made with other numbers has the same ones."""
+    robot_yaml = root / "robot.yaml"
+    data = yaml.safe_load(robot_yaml.read_text())
+    data["ros_domain_id"] = domain
+    data["hosts"] = [{"name": "robot-arm", "ip": ARM64_HOST, "user": "root", "arch": "arm64"}]
+    data["discovery"] = {"servers": [{"host": "robot-arm", "port": port}]}
+    for comp in data["components"]:
+        comp["runs_on"] = "robot-arm"
+    robot_yaml.write_text(yaml.safe_dump(data, sort_keys=False))
