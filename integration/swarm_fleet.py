@@ -177,21 +177,33 @@ def prepull(hosts: RobotFleet, base: str, indexes: Sequence[int]) -> None:
         list(pool.map(lambda i: hosts.hosts[i].ssh(hosts, "docker", "pull", "-q", base, timeout=900), indexes))
 
 
-def container_lives(hosts: RobotFleet, index: int) -> list[tuple[str, float, float | None]]:
-    """Every Swarm task container on host ``index`` that ever started, the stopped ones too (Swarm keeps a few
-    tasks of each service, and their containers, as history): (service, started, stopped or None while it runs),
-    in seconds since the epoch (the hosts share this machine's clock). Read on the host, not through the manager."""
-    fmt = ('{{index .Config.Labels "com.docker.swarm.service.name"}} {{.State.Running}} {{.State.StartedAt}} '
+def container_lives(hosts: RobotFleet, index: int, since: float, until: float) -> list[tuple[str, float, float | None]]:
+    """Every Swarm task container on host ``index`` that ran at some time from ``since`` to ``until`` (seconds since
+    the epoch; the hosts share this machine's clock): (service, started, stopped or None while it runs). Read on
+    the host, not through the manager: the containers it still has (Swarm keeps those of a service's last tasks,
+    stopped ones too) and, for those removed since (a removed service's), the daemon's start and die events of the
+    period. A container already running at ``since`` that is gone counts from ``since``."""
+    fmt = ('{{.Id}} {{index .Config.Labels "com.docker.swarm.service.name"}} {{.State.Running}} {{.State.StartedAt}} '
            "{{.State.FinishedAt}}")
-    out = hosts.hosts[index].ssh(hosts, "sh", "-c", "docker ps -aq --filter label=com.docker.swarm.service.name "
-                                 f"| xargs -r docker inspect --format '{fmt}'")
-    lives = []
-    for line in out.splitlines():
-        service, running, started, finished = line.split()
-        if started.startswith("0001-"):  # made, never started
+    events = ('{{.TimeNano}} {{.Action}} {{.ID}} {{index .Actor.Attributes "com.docker.swarm.service.name"}}')
+    script = ("docker ps -aq --filter label=com.docker.swarm.service.name | xargs -r docker inspect --format \"$1\"; "
+              "echo ---; docker events --since \"$3\" --until \"$4\" --filter type=container --filter event=start "
+              "--filter event=die --format \"$2\"")
+    out = hosts.hosts[index].ssh(hosts, "sh", "-c", script, "sh", fmt, events, str(int(since)), str(int(until) + 1))
+    kept, _, logged = out.partition("---\n")
+    lives: dict[str, tuple[str, float, float | None]] = {}
+    for line in kept.splitlines():
+        container, service, running, started, finished = line.split()
+        if not started.startswith("0001-"):  # made, never started
+            lives[container] = (service, _epoch(started), None if running == "true" else _epoch(finished))
+    for line in logged.splitlines():
+        stamp, action, container, *service = line.split()
+        if container in lives or not service:
             continue
-        lives.append((service, _epoch(started), None if running == "true" else _epoch(finished)))
-    return lives
+        when = int(stamp) / 1e9
+        name, begin, end = lives.get("removed-" + container, (service[0], since, None))
+        lives["removed-" + container] = (name, when, end) if action == "start" else (name, begin, when)
+    return [life for life in lives.values() if (life[2] is None or life[2] >= since) and life[1] <= until]
 
 
 def _epoch(stamp: str) -> float:

@@ -269,8 +269,8 @@ def test_canary_that_crashes_stops_the_rollout_and_goes_back(fleets: Swarm, run_
 
 def test_fleet_rollback_returns_every_robot_stop_first(fleets: Swarm, run_robocore: RobocoreCli) -> None:
     """Both fleets from v2 back to v1: every robot healthy, runs v1's talker by digest and is heard saying v1; no
-    two containers of one service ran at once on any robot host during the rollback (read from each host's task
-    containers, whose start and stop times Swarm's task history keeps)."""
+    two containers of one service ran at once on any robot host during the rollback (read on each host: the task
+    containers Swarm keeps, with their start and stop times, and the daemon's events for any removed since)."""
     started = time.time()
     done = both(run_robocore, fleets, "rollback")
     ended = time.time()
@@ -298,8 +298,8 @@ def test_fleet_rollback_returns_every_robot_stop_first(fleets: Swarm, run_roboco
     assert all(heard.values()), {robot: fleets.heard(robot) for robot, ok in heard.items() if not ok}
     now = time.time()
     with parallel(HOSTS - 1) as pool:  # every robot host at once
-        read = dict(zip(range(1, HOSTS), pool.map(lambda i: container_lives(fleets.hosts, i), range(1, HOSTS)),
-                        strict=True))
+        read = dict(zip(range(1, HOSTS), pool.map(lambda i: container_lives(fleets.hosts, i, started, now),
+                                                  range(1, HOSTS)), strict=True))
     lives_of = {i: [life for life in lives if "-probe-" not in life[0]] for i, lives in read.items()}
     assert overlaps([("s", 1.0, 3.0), ("s", 2.0, None), ("t", 0.0, None)], 0.0, 5.0) == [("s", 2.0, 3.0)]  # control
     for robots in ROBOTS.values():
