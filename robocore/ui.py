@@ -30,6 +30,12 @@ def _escape_char(match: re.Match[str]) -> str:
     return f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}"
 
 
+def without_sgr(text: str) -> str:
+    """``text`` without its colour sequences (``ESC [ ... m``): Docker's classic builder puts one before each
+    chunk of a step's stderr, and a line read for its words must not carry it."""
+    return _SGR.sub("", text)
+
+
 def clean(text: str, *, keep_sgr: bool = False) -> str:
     """``text`` with every control character written as a visible escape (ESC as ``\\x1b``, a carriage
     return as ``\\x0d``, a bidirectional override as ``\\u202e``); tabs and newlines are kept.

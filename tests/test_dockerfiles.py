@@ -90,6 +90,13 @@ def test_rosdep_unresolved_names_each_package_and_key() -> None:
     assert dockerfiles.rosdep_unresolved(["#All required rosdeps installed successfully"]) == []
 
 
+def test_rosdep_unresolved_reads_a_line_the_builder_coloured() -> None:
+    # Docker's classic builder starts a chunk of a step's stderr with a colour sequence
+    coloured = "\x1b[91mdemo_talker: Cannot locate rosdep definition for [robocore_no_such_key]\x1b[0m"
+    assert dockerfiles.rosdep_unresolved([coloured]) == [
+        "package demo_talker: no rosdep definition of 'robocore_no_such_key'"]
+
+
 def test_component_wheels_golden() -> None:
     r = robot(base={"kind": "wheels"})
     comp = r.component("driver")

@@ -31,6 +31,7 @@ from robocore.config.loader import ROBOT_FILE, located
 from robocore.config.model import Arch, BaseKind, Component, Repository, Robot
 from robocore.errors import ConfigError, Problem
 from robocore.plan import arches, cmake_packages, colcon, naming
+from robocore.ui import without_sgr
 
 if TYPE_CHECKING:
     from robocore.project import Project
@@ -228,7 +229,7 @@ def rosdep_unresolved(lines: Sequence[str]) -> list[str]:
     phrase per key: ``package demo_x: no rosdep definition of 'foo'``; empty when rosdep reported none."""
     found: list[str] = []
     for line in lines:
-        match = _ROSDEP_UNRESOLVED.match(line.strip())
+        match = _ROSDEP_UNRESOLVED.match(without_sgr(line).strip())
         if match:
             where = match["rest"].strip()
             found.append(f"package {match['package']}: no rosdep definition of {match['key']!r}"
