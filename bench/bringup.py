@@ -8,13 +8,15 @@ is), and ``robocore run`` timed:
 
 - **running**: from starting ``robocore run`` to its exit (it returns once every container is created and
   started, the discovery server answering first);
-- **all heard**: from starting ``robocore run`` until the probe has taken a message from each of the N
-  talkers (counted by their publishers' GIDs, so N identical programs are N talkers).
+- **all heard**: from starting ``robocore run`` until the probe's subscription has matched the publishers of all
+  N talkers (each known to it through the discovery server; a talker sends its first greeting as soon as a
+  listener matches, so matched is heard within one send; rclpy's message info carries no publisher GID to count
+  N identical talkers by their messages).
 
 Goals: 16 components on 3 hosts running in < 3 s and all heard in < 5 s; 64 components on 4 hosts running in
 < 10 s.
 
-    python bench/bringup.py [--shapes 16x3 64x4] [--repeat 3]
+    python bench/bringup.py [--shapes 16x3 64x4] [--repeat 3] [--against CHECKOUT]
 """
 
 from __future__ import annotations
@@ -41,20 +43,19 @@ from std_msgs.msg import String
 expected = int(sys.argv[1])
 rclpy.init()
 node = rclpy.create_node("bringup_probe")
-seen = {}
-
-def heard(msg, info):
-    gid = bytes(info["publisher_gid"]["data"]).hex() if isinstance(info["publisher_gid"], dict) else repr(
-        info["publisher_gid"])
-    if gid not in seen:
-        seen[gid] = time.time()
-        print(json.dumps({"talkers": len(seen), "at": seen[gid]}), flush=True)
-
-node.create_subscription(String, "chatter", heard, 100)
+heard = []
+sub = node.create_subscription(String, "chatter", lambda msg: heard.append(time.time()), 100)
 print(json.dumps({"ready": time.time()}), flush=True)
 deadline = time.time() + float(sys.argv[2])
-while len(seen) < expected and time.time() < deadline:
-    rclpy.spin_once(node, timeout_sec=0.1)
+matched = 0
+while time.time() < deadline:
+    rclpy.spin_once(node, timeout_sec=0.02)
+    now = sub.get_publisher_count()
+    if now != matched:
+        matched = now
+        print(json.dumps({"talkers": matched, "at": time.time()}), flush=True)
+    if matched >= expected:
+        break
 """
 
 GOALS = {"16x3": (3.0, 5.0), "64x4": (10.0, None)}
@@ -91,15 +92,28 @@ def probe_env(root: Path) -> dict[str, str]:
     return env
 
 
-def one_bring_up(root: Path, components: int, env: dict[str, str], timeout: float = 60) -> tuple[float, float | None]:
+def robocore_in(root: Path, *args: str, checkout: Path | None) -> None:
+    """``robocore -p ROOT ARGS`` with the robocore package of ``checkout`` (None: the installed one)."""
+    env = dict(os.environ)
+    if checkout is not None:
+        env["PYTHONPATH"] = os.pathsep.join([str(checkout), *filter(None, [env.get("PYTHONPATH")])])
+    done = subprocess.run([sys.executable, "-m", "robocore", "-p", str(root), *args], env=env, capture_output=True,
+                          text=True, check=False, timeout=600)
+    if done.returncode != 0:
+        raise SystemExit(f"robocore {' '.join(args)} failed ({done.returncode}):\n{done.stdout[-3000:]}\n"
+                         f"{done.stderr[-3000:]}")
+
+
+def one_bring_up(root: Path, components: int, env: dict[str, str], checkout: Path | None,
+                 timeout: float = 60) -> tuple[float, float | None]:
     """``robocore down``, then ``robocore run`` timed: (seconds to its exit, seconds until every talker heard)."""
-    robocore(root, "down", "--quiet")
+    robocore_in(root, "down", "--quiet", checkout=None)
     probe = subprocess.Popen([sys.executable, "-c", PROBE, str(components), str(timeout)], env=env,
                              stdout=subprocess.PIPE, text=True)
     assert probe.stdout is not None
     json.loads(probe.stdout.readline())  # its node exists: what is heard from now on counts
     start = time.time()
-    robocore(root, "run", "--quiet")
+    robocore_in(root, "run", "--quiet", checkout=checkout)
     running = time.time() - start
     last = None
     for line in probe.stdout:
@@ -110,35 +124,56 @@ def one_bring_up(root: Path, components: int, env: dict[str, str], timeout: floa
     return running, last
 
 
+def summary(runs: list[tuple[float, float | None]]) -> tuple[float, float | None, str]:
+    """Median running, median all heard (None unless every run heard all), and the runs as text."""
+    heard_all = [h for _, h in runs if h is not None]
+    heard = statistics.median(heard_all) if len(heard_all) == len(runs) else None
+    shown = ", ".join(f"{r:.2f}/{'-' if h is None else f'{h:.2f}'}" for r, h in runs)
+    return statistics.median(r for r, _ in runs), heard, shown
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--shapes", nargs="+", default=["16x3", "64x4"], help="COMPONENTSxHOSTS")
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--against", type=Path, metavar="CHECKOUT",
+                        help="another robocore checkout (e.g. a git worktree of an older commit) whose run is timed "
+                             "in turn with this one's on the same robot")
     args = parser.parse_args()
     rows: list[Figure] = []
-    print(f"{'robot':<28}{'running s':>12}{'all heard s':>14}   runs")
+    variants: list[tuple[str, Path | None]] = [("this checkout", None)]
+    if args.against:
+        head = subprocess.run(["git", "-C", str(args.against), "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True, check=False).stdout.strip()
+        variants.append((f"against {head or args.against}", args.against.resolve()))
+    print(f"{'robot':<28}{'robocore':<22}{'running s':>10}{'all heard s':>13}   runs (running/all heard)")
     with tempfile.TemporaryDirectory(prefix="robocore-bench-bringup-") as scratch:
         for shape in args.shapes:
             components, hosts = (int(x) for x in shape.split("x"))
+            label = f"{components} components on {hosts} hosts"
+            runs: dict[str, list[tuple[float, float | None]]] = {name: [] for name, _ in variants}
             with RobotFleet(hosts, tag=f"bu{components}") as fleet:
                 root = make_project(Path(scratch), components, fleet)
                 env = probe_env(root)
-                runs = [one_bring_up(root, components, env) for _ in range(args.repeat)]
-                robocore(root, "down", "--quiet")
-            running = statistics.median(r for r, _ in runs)
-            heard_all = [h for _, h in runs if h is not None]
-            heard = statistics.median(heard_all) if len(heard_all) == len(runs) else None
-            shown = ", ".join(f"{r:.2f}/{'-' if h is None else f'{h:.2f}'}" for r, h in runs)
-            print(f"{f'{components} components on {hosts} hosts':<28}{running:>12.2f}"
-                  f"{'-' if heard is None else f'{heard:.2f}':>14}   {shown}")
+                for _ in range(args.repeat):  # in turn, so that both see the same load
+                    for name, checkout in variants:
+                        runs[name].append(one_bring_up(root, components, env, checkout))
+                robocore_in(root, "down", "--quiet", checkout=None)
             goal_running, goal_heard = GOALS.get(shape, (None, None))
-            label = f"{components} components on {hosts} hosts"
-            rows.append(Figure(f"{label}: running", running, "s", f"< {goal_running:g} s" if goal_running else None,
-                               met=running < goal_running if goal_running else None,
-                               detail=f"median of {len(runs)}; runs (running/all heard): {shown}"))
-            rows.append(Figure(f"{label}: all heard", heard, "s", f"< {goal_heard:g} s" if goal_heard else None,
-                               met=(heard < goal_heard) if goal_heard and heard is not None else None,
-                               detail="- : a talker was not heard within 60 s" if heard is None else ""))
+            mine = summary(runs["this checkout"])[0]
+            for name, _ in variants:
+                running, heard, shown = summary(runs[name])
+                print(f"{label:<28}{name:<22}{running:>10.2f}{'-' if heard is None else f'{heard:.2f}':>13}   {shown}")
+                ratio = running / mine if name != "this checkout" else None
+                rows.append(Figure(f"{label}, {name}: running", running, "s",
+                                   f"< {goal_running:g} s" if goal_running else None,
+                                   ratio=ratio, ratio_of="x this checkout" if ratio else "",
+                                   met=running < goal_running if goal_running else None,
+                                   detail=f"median of {len(runs[name])}; runs (running/all heard): {shown}"))
+                rows.append(Figure(f"{label}, {name}: all heard", heard, "s",
+                                   f"< {goal_heard:g} s" if goal_heard else None,
+                                   met=(heard < goal_heard) if goal_heard and heard is not None else None,
+                                   detail="- : a talker was not heard within 60 s" if heard is None else ""))
     record("bringup", rows, goals=["16 components on 3 hosts running in < 3 s and all heard in < 5 s",
                                    "64 components on 4 hosts running in < 10 s"],
            notes=[f"median of {args.repeat} bring-ups each, from `robocore down` (images and trees on the hosts)"])
