@@ -7,7 +7,7 @@ what failed. Clients come from :mod:`robocore.adapters.docker_hosts` (ssh, TLS, 
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -238,7 +238,7 @@ def apply_service(client: docker.DockerClient, spec: ServiceSpec, config_ids: di
     An existing service whose stored template digest (:data:`LABEL_TEMPLATE`) is the wanted one gets its labels
     only, with the rest of its stored spec sent back as it is: no task of it is replaced. A one-shot service
     (restart condition ``none``, such as a probe) is only ever created: its one task is its result."""
-    from docker.errors import APIError, NotFound
+    from docker.errors import NotFound
 
     kwargs = service_kwargs(spec, config_ids)
     digest = template_digest(kwargs)
@@ -260,17 +260,14 @@ def apply_service(client: docker.DockerClient, spec: ServiceSpec, config_ids: di
         else:
             unchanged = ((service.attrs.get("Spec") or {}).get("Labels") or {}).get(LABEL_TEMPLATE) == digest
         name = kwargs.pop("name")
-        for attempt in range(1, UPDATE_ATTEMPTS + 1):
-            try:
-                if unchanged:
-                    _send_labels(client, service.attrs, kwargs["labels"])
-                else:
-                    service.update(name=name, **kwargs)
-                break
-            except APIError as exc:
-                if attempt == UPDATE_ATTEMPTS or not out_of_sequence(exc):
-                    raise
-                service.reload()  # the manager moved the service on since it was read: update the new version
+
+        def update() -> None:
+            if unchanged:
+                _send_labels(client, service.attrs, kwargs["labels"])
+            else:
+                service.update(name=name, **kwargs)
+
+        in_sequence(update, reread=service.reload)
         return str(service.id)
 
 
@@ -303,6 +300,23 @@ def out_of_sequence(exc: Exception) -> bool:
     return "update out of sequence" in str(getattr(exc, "explanation", None) or exc)
 
 
+def in_sequence(update: Callable[[], None], *, reread: Callable[[], object] | None = None) -> None:
+    """``update()``, made again when the manager refuses it as out of sequence (:func:`out_of_sequence`), after
+    ``reread()`` of the service it changes, up to :data:`UPDATE_ATTEMPTS` times in all; any other refusal, or the
+    last one, is raised."""
+    from docker.errors import APIError
+
+    for attempt in range(1, UPDATE_ATTEMPTS + 1):
+        try:
+            update()
+            return
+        except APIError as exc:
+            if attempt == UPDATE_ATTEMPTS or not out_of_sequence(exc):
+                raise
+            if reread is not None:
+                reread()
+
+
 def updating(client: docker.DockerClient, name: str) -> bool:
     """True while Swarm is still rolling ``name``'s last update out (its UpdateStatus is ``updating``)."""
     from docker.errors import NotFound
@@ -317,18 +331,12 @@ def updating(client: docker.DockerClient, name: str) -> bool:
 
 def set_labels(client: docker.DockerClient, name: str, labels: dict[str, str]) -> None:
     """Set ``name``'s service labels only: the stored spec is sent back as it is, so no task changes."""
-    from docker.errors import APIError
+    def update() -> None:  # reads the service each time: a retry updates its new version
+        attrs = client.api.inspect_service(name)  # type: ignore[no-untyped-call]
+        _send_labels(client, attrs, {**((attrs.get("Spec") or {}).get("Labels") or {}), **labels})
 
     with swarm_errors(f"docker service update --label-add {name}"):
-        for attempt in range(1, UPDATE_ATTEMPTS + 1):
-            attrs = client.api.inspect_service(name)  # type: ignore[no-untyped-call]
-            merged = {**((attrs.get("Spec") or {}).get("Labels") or {}), **labels}
-            try:
-                _send_labels(client, attrs, merged)
-                return
-            except APIError as exc:
-                if attempt == UPDATE_ATTEMPTS or not out_of_sequence(exc):
-                    raise
+        in_sequence(update)
 
 
 def remove_service(client: docker.DockerClient, name: str) -> None:
