@@ -97,11 +97,7 @@ def robocore_in(root: Path, *args: str, checkout: Path | None) -> None:
     env = dict(os.environ)
     if checkout is not None:
         env["PYTHONPATH"] = os.pathsep.join([str(checkout), *filter(None, [env.get("PYTHONPATH")])])
-    done = subprocess.run([sys.executable, "-m", "robocore", "-p", str(root), *args], env=env, capture_output=True,
-                          text=True, check=False, timeout=600)
-    if done.returncode != 0:
-        raise SystemExit(f"robocore {' '.join(args)} failed ({done.returncode}):\n{done.stdout[-3000:]}\n"
-                         f"{done.stderr[-3000:]}")
+    robocore(root, *args, timeout=600, env=env)
 
 
 def one_bring_up(root: Path, components: int, env: dict[str, str], checkout: Path | None,

@@ -40,14 +40,15 @@ LOAD_AT_START = os.getloadavg()
 
 
 def robocore(project: Path | None, *args: str, check: bool = True, timeout: float | None = None,
-             python: Sequence[str] = ()) -> subprocess.CompletedProcess[str]:
+             python: Sequence[str] = (), env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
     """Run ``python -m robocore [-p PROJECT] ARGS`` as a user would (a new process), its output captured.
 
     ``check``: a non-zero exit stops the bench with the command, the exit code and the output's tails.
     ``python``: options for the interpreter before ``-m robocore`` (e.g. ``-m cProfile -o FILE``).
+    ``env``: the process's environment (default: this one's).
     """
     argv = [sys.executable, *python, "-m", "robocore", *(["-p", str(project)] if project else []), *args]
-    done = subprocess.run(argv, capture_output=True, text=True, check=False, timeout=timeout)
+    done = subprocess.run(argv, capture_output=True, text=True, check=False, timeout=timeout, env=env)
     if check and done.returncode != 0:
         raise SystemExit(f"robocore {' '.join(args)} failed ({done.returncode}):\n{done.stdout[-3000:]}\n"
                          f"{done.stderr[-3000:]}")
