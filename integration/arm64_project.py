@@ -1,11 +1,12 @@
 """The mixed-architecture noetic project of the arm64 suites, and its images made ahead of time.
 
-``test_arm64.py`` and ``test_host_build.py`` share one project name (``robocore-it-arm64``) and so one set of
-images: a Debian root per arch (``robocore/<arch>/debian:bookworm-debian``), a debian base per arch, and the
-talker's (arm64) and listener's (amd64) staged images. Made from nothing they take about ten minutes, most of it
-the arm64 root's bootstrap under qemu, on one core. Then ``test_official_arm64.py``'s images, on that arm64 root: the
-arm64 noetic stand-in of the official image (:mod:`official_standins`), and its project's base and talker image
-(minutes more under qemu, off the suites' critical path).
+``test_arm64.py``, ``test_host_build.py`` and the arm64 fleet of ``test_fleet_swarm.py`` share one project name
+(``robocore-it-arm64``) and so one set of images: a Debian root per arch (``robocore/<arch>/debian:bookworm-debian``),
+a debian base per arch, the talker's (arm64) and listener's (amd64, and arm64 for the fleet) staged images. Made
+from nothing they take about ten minutes, most of it the arm64 root's bootstrap under qemu, on one core. Then
+``test_official_arm64.py``'s images, on that arm64 root: the arm64 noetic stand-in of the official image
+(:mod:`official_standins`), and its project's base and talker image (minutes more under qemu, off the suites'
+critical path).
 
 Run as a script (``python integration/arm64_project.py``), this module makes those images in a throw-away copy of
 the project (``prepare-base`` and ``stage``, which contact no robot host), holding :data:`LOCK` while it works.
@@ -110,6 +111,12 @@ def make_images() -> None:
         init_project(root, hosts, talker_host="robot-arm", server_host="robot-x86")
         for step in ("prepare-base", "stage"):
             _step(root, step)
+        # the Swarm suite's arm64 fleet runs this project on one arm64 host: its listener's image for arm64
+        fleet = Path(parent) / "fleet" / NAME
+        init_project(fleet, [{"name": "robot", "ip": NO_HOSTS[1], "user": "root", "arch": "arm64"}],
+                     talker_host="robot", server_host="robot")
+        for step in ("prepare-base", "stage"):
+            _step(fleet, step)
         _official_arm64(Path(parent))
 
 

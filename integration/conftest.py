@@ -62,7 +62,7 @@ _STARTED: list[subprocess.Popen[str]] = []
 
 
 #: Modules that run last, in this order: they need the arm64 images (:mod:`arm64_project`), made meanwhile.
-RUN_LAST = ("test_arm64.py", "test_fleet_arm64.py", "test_host_build.py", "test_official_arm64.py")
+RUN_LAST = ("test_arm64.py", "test_fleet_swarm.py", "test_host_build.py", "test_official_arm64.py")
 #: The background run of :mod:`arm64_project` this session started, if any.
 _IMAGES_AHEAD: list[subprocess.Popen[bytes]] = []
 
