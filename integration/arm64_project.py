@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -39,6 +40,9 @@ LOCK = Path(tempfile.gettempdir()) / f"robocore-it-arm64-images-{os.getuid()}.lo
 LOG = LOCK.with_suffix(".log")
 #: Placeholder addresses (TEST-NET-1) for the images-only copy: prepare-base and stage contact no host.
 NO_HOSTS = ("192.0.2.201", "192.0.2.202")
+#: Where the script leaves the Swarm suite's all-arm64 copy of the project, built (its install trees and ccache),
+#: for the suite to copy and build again (:func:`built_fleet_project`).
+FLEET_BUILT = LOCK.with_name(f"robocore-it-arm64-fleet-{os.getuid()}")
 
 
 def init_project(root: Path, hosts: Sequence[Mapping[str, object]], *, talker_host: str, server_host: str) -> None:
@@ -103,7 +107,8 @@ def wait_for_images(timeout: float = 3600) -> str | None:
 
 
 def make_images() -> None:
-    """prepare-base and stage a throw-away copy of the project (placeholder hosts), printing each step's time."""
+    """prepare-base and stage a throw-away copy of the project (placeholder hosts), then the other suites' copies
+    (:func:`_official_arm64`, and the fleet's, kept built at :data:`FLEET_BUILT`), printing each step's time."""
     with tempfile.TemporaryDirectory(prefix="robocore-it-images-") as parent:
         root = Path(parent) / NAME
         hosts = [{"name": "robot-x86", "ip": NO_HOSTS[0], "user": "root", "arch": "amd64"},
@@ -111,13 +116,22 @@ def make_images() -> None:
         init_project(root, hosts, talker_host="robot-arm", server_host="robot-x86")
         for step in ("prepare-base", "stage"):
             _step(root, step)
-        # the Swarm suite's arm64 fleet runs this project on one arm64 host: its listener's image for arm64
-        fleet = Path(parent) / "fleet" / NAME
+        _official_arm64(Path(parent))
+        # the Swarm suite's arm64 fleet runs this project on one arm64 host: its listener's image for arm64, and
+        # the build under qemu, kept for the suite
+        shutil.rmtree(FLEET_BUILT, ignore_errors=True)
+        FLEET_BUILT.mkdir(mode=0o700)
+        fleet = FLEET_BUILT / NAME
         init_project(fleet, [{"name": "robot", "ip": NO_HOSTS[1], "user": "root", "arch": "arm64"}],
                      talker_host="robot", server_host="robot")
-        for step in ("prepare-base", "stage"):
+        for step in ("prepare-base", "stage", "build"):
             _step(fleet, step)
-        _official_arm64(Path(parent))
+        (FLEET_BUILT / "built").write_text("")
+
+
+def built_fleet_project() -> Path | None:
+    """The all-arm64 copy of the project this script built, when its last run got that far, else None."""
+    return FLEET_BUILT / NAME if (FLEET_BUILT / "built").is_file() and wait_for_images(0) is None else None
 
 
 def _step(root: Path, step: str, *extra: str) -> None:

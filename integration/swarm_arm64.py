@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from arm64_project import NAME, init_project
+from arm64_project import NAME, built_fleet_project, init_project
 
 #: The arm64 fleet's project (the arm64 suites' project name, so their images are its images) and its robot.
 ARM = NAME
@@ -78,11 +78,12 @@ def record(root: Path, version: str) -> dict[str, Any]:
 class ArmReleases:
     """v1, v2 and v3 of the arm64 fleet, made one after the other on ``pool`` (one worker: they change the same
     project folder) from the moment this is made; :meth:`ready` waits for one. ``run`` is the suites'
-    ``run_robocore`` (root, *args)."""
+    ``run_robocore`` (root, *args); ``base_pushed`` waits for the early push of the arm64 base (:func:`pushed_early`),
+    which v1's release must not race: the registry answers two pushes of one layer at once with a 500."""
 
-    def __init__(self, root: Path, run: Callable[..., Any], pool: ThreadPoolExecutor,
-                 timings: dict[str, float]) -> None:
-        self.root, self._run, self.timings = root, run, timings
+    def __init__(self, root: Path, run: Callable[..., Any], pool: ThreadPoolExecutor, timings: dict[str, float],
+                 base_pushed: Callable[[], object]) -> None:
+        self.root, self._run, self.timings, self._base_pushed = root, run, timings, base_pushed
         self._made = {"v1": pool.submit(self._v1)}
         self._made["v2"] = pool.submit(self._v2)
         self._made["v3"] = pool.submit(self._v3)
@@ -99,6 +100,9 @@ class ArmReleases:
     def _v1(self) -> None:
         for step in ("prepare-base", "stage", "build"):
             self._timed(step, step, "--quiet")
+        started = time.monotonic()
+        self._base_pushed()
+        self.timings["base pushed early (waited for)"] = round(time.monotonic() - started, 1)
         self._timed("release v1", "release", "--fleet", "--tag", "v1")
 
     def _v2(self) -> None:
@@ -122,11 +126,16 @@ class ArmReleases:
 
 
 def make_arm_project(parent: Path, registry: str) -> Path:
-    """``robocore init`` the arm64 fleet's project under ``parent`` (placeholder addresses in its fleet file until
-    the hosts are up: :func:`write_fleet` again then)."""
+    """The arm64 fleet's project under ``parent``: a copy of the one the background script built (its install
+    trees and ccache: the suite's ``build`` then compiles nothing it need not), else ``robocore init`` anew;
+    placeholder addresses in its fleet file until the hosts are up (:func:`write_fleet` again then)."""
     root = parent / NAME
-    init_project(root, [{"name": "robot", "ip": PLACEHOLDER, "user": "root", "arch": "arm64"}],
-                 talker_host="robot", server_host="robot")
+    built = built_fleet_project()
+    if built is not None:
+        shutil.copytree(built, root, symlinks=True)
+    else:
+        init_project(root, [{"name": "robot", "ip": PLACEHOLDER, "user": "root", "arch": "arm64"}],
+                     talker_host="robot", server_host="robot")
     write_fleet(root, "192.0.2.2", PLACEHOLDER, registry)
     return root
 

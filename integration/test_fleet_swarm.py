@@ -137,7 +137,7 @@ def fleets(robot_fleets: Callable[..., RobotFleet], demo_project: Path, docker_c
                                                    based.result()))
         arm_root = make_arm_project(tmp_path_factory.mktemp("fleet-arm64"), registry)
         early = pool.submit(pushed_early, docker_client, f"{ARM}-base:latest-arm64", f"{registry}/{ARM}-base:early")
-        arm = ArmReleases(arm_root, run_robocore, arm_pool, timings)
+        arm = ArmReleases(arm_root, run_robocore, arm_pool, timings, early.result)
         try:
             hosts = started.result()
             write_fleet(arm_root, hosts.hosts[0].ip, hosts.hosts[ARM_HOST].ip, registry)
@@ -159,7 +159,6 @@ def fleets(robot_fleets: Callable[..., RobotFleet], demo_project: Path, docker_c
                             write_records(root, records)
 
                 def arm_pulled() -> None:  # the arm64 base (~800 MB) on its robot, as its model's robots hold it
-                    early.result()
                     arm.ready("v1")
                     prepull(hosts, record(arm_root, "v1")["base"]["arm64"], [ARM_HOST])
 
