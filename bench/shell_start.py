@@ -18,7 +18,8 @@ from pathlib import Path
 from harness import Figure, record
 
 #: Debian 12 images, the first one present is used (the Debian roots robocore makes for its bases come first).
-CANDIDATES = ("robocore/amd64/debian:bookworm-wheels", "robocore/amd64/debian:bookworm-debian",
+CANDIDATES = ("robocore/amd64/debian:bookworm-wheels-jazzy", "robocore/amd64/debian:bookworm-wheels",
+              "robocore/amd64/debian:bookworm-debian",
               "robocore/debian:bookworm", "debian:bookworm", "robocore-test/debian:bookworm")
 ROUNDS = 5
 

@@ -15,6 +15,8 @@ import time
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 
+from robocore.plan.arches import RootConfig
+
 #: Bytes read at a time, while hashing the layer and while streaming it.
 CHUNK = 1 << 20
 _BLOCK = 512
@@ -30,13 +32,18 @@ def file_digest(path: Path) -> str:
 
 
 def image_config(*, arch: str, diff_id: str, labels: Mapping[str, str], cmd: Sequence[str],
-                 created: str, comment: str) -> bytes:
-    """The image config JSON of a one-layer Linux image of ``arch`` (Docker's arch name, e.g. ``arm64``)."""
+                 created: str, comment: str, settings: RootConfig | None = None) -> bytes:
+    """The image config JSON of a one-layer Linux image of ``arch`` (Docker's arch name, e.g. ``arm64``); with
+    ``settings``, its environment, entrypoint, command and build shell (as a Dockerfile's ENV, ENTRYPOINT, CMD and
+    SHELL would set them), else ``cmd`` alone."""
+    run: dict[str, object] = {"Cmd": list(cmd), "Labels": dict(sorted(labels.items()))}
+    if settings is not None:
+        run.update(settings.image_config())
     config = {
         "architecture": arch,
         "os": "linux",
         "created": created,
-        "config": {"Cmd": list(cmd), "Labels": dict(sorted(labels.items()))},
+        "config": run,
         "rootfs": {"type": "layers", "diff_ids": [diff_id]},
         "history": [{"created": created, "created_by": comment}],
     }
@@ -62,14 +69,15 @@ class LoadArchive:
     needs no room for a second tarball."""
 
     def __init__(self, layer: Path, *, reference: str, arch: str, labels: Mapping[str, str],
-                 cmd: Sequence[str] = ("bash",), comment: str = "robocore: root file system") -> None:
+                 cmd: Sequence[str] = ("bash",), comment: str = "robocore: root file system",
+                 settings: RootConfig | None = None) -> None:
         self.layer = layer
         self.diff_id = file_digest(layer)
         self.layer_size = layer.stat().st_size
         now = int(time.time())
         created = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(now))
         config = image_config(arch=arch, diff_id=self.diff_id, labels=labels, cmd=cmd, created=created,
-                              comment=comment)
+                              comment=comment, settings=settings)
         config_name = hashlib.sha256(config).hexdigest() + ".json"
         self.layer_name = self.diff_id.removeprefix("sha256:") + "/layer.tar"
         manifest = json.dumps([{"Config": config_name, "RepoTags": [reference], "Layers": [self.layer_name]}])

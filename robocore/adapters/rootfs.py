@@ -45,6 +45,12 @@ def strap_hash(strap: RootStrap) -> str:
     return "sha256:" + hashlib.sha256(strap.key().encode()).hexdigest()
 
 
+def made_from(state: ImageState | None, strap: RootStrap) -> bool:
+    """Whether ``state`` is a root robocore bootstrapped from ``strap`` (its arch, role and inputs hash)."""
+    return (state is not None and state.arch == strap.arch and state.labels.get(naming.LABEL_ROLE) == ROLE_ROOT
+            and state.labels.get(naming.LABEL_INPUTS) == strap_hash(strap))
+
+
 def _usable(state: ImageState | None, arch: str, strap: RootStrap | None) -> bool:
     if state is None or state.arch != arch:
         return False
@@ -167,15 +173,17 @@ def _native() -> str:
 
 
 def image_from_tarball(client: docker.DockerClient, tarball: Path, strap: RootStrap, *, target: str) -> str:
-    """An image of ``strap.arch`` tagged ``target`` made from the root tarball, labelled with the strap's hash;
-    its ID. The tarball is loaded as the one layer of an archive that names its arch (one read after hashing,
-    for any arch: ``docker import`` would label it with the daemon's own arch on Docker 20.10)."""
+    """An image of ``strap.arch`` tagged ``target`` made from the root tarball, labelled with the strap's hash and
+    with its image settings (:attr:`RootStrap.config`); its ID. The tarball is loaded as the one layer of an archive
+    that names its arch (one read after hashing, for any arch: ``docker import`` would label it with the daemon's
+    own arch on Docker 20.10)."""
     from docker.errors import DockerException
 
     labels = {naming.LABEL_ROLE: ROLE_ROOT, naming.LABEL_INPUTS: strap_hash(strap)}
     repository, tag = arches.split_reference(target)
     archive = image_archive.LoadArchive(tarball, reference=f"{repository}:{tag}", arch=strap.arch, labels=labels,
-                                        comment=f"robocore: mmdebstrap --arch={strap.arch} {arches.SUITE}")
+                                        comment=f"robocore: mmdebstrap --arch={strap.arch} {arches.SUITE}",
+                                        settings=strap.config)
     try:
         client.images.load(archive)  # raises on an error reported in the load's progress stream
     except DockerException as exc:

@@ -27,7 +27,7 @@ from robocore.commands.support.reporting import Outcome, report_outcomes
 from robocore.commands.support.workspace import wheels_cmake_packages
 from robocore.config.model import BaseKind
 from robocore.files import ROBOT_FILE, refuse_links_leaving
-from robocore.plan import arches, dockerfiles, naming
+from robocore.plan import arches, dockerfiles, naming, wheels_venv
 from robocore.plan.dockerfiles import ContextEntry, ImagePlan
 from robocore.project import Project
 
@@ -39,12 +39,24 @@ ROOTFS_KINDS = frozenset({BaseKind.wheels, BaseKind.debian})
 
 
 def root_strap(project: Project, arch: str) -> arches.RootStrap | None:
-    """How the base's root is bootstrapped for ``arch`` (None: the official base and ``base.image`` are pulled)."""
+    """How the base's root is bootstrapped for ``arch`` (None: the official base and ``base.image`` are pulled).
+    The wheels base's root gets the base's venv and settings too, the venv installed where writes are cheap (see
+    :mod:`robocore.plan.wheels_venv`): on fuse-overlayfs that venv, and each build step on top of it, was most of
+    a first ``prepare-base``."""
     robot = project.robot
     if robot.base.kind not in ROOTFS_KINDS or robot.base.image:
         return None
-    packages = dockerfiles.DEBIAN_APT if robot.base.kind is BaseKind.debian else dockerfiles.WHEELS_APT
-    return arches.root_strap(robot.base.kind, arch, packages)
+    if robot.base.kind is BaseKind.debian:
+        return arches.root_strap(robot.base.kind, arch, dockerfiles.DEBIAN_APT)
+    from robocore.adapters.image_builder import PROXY_VARS
+
+    distro = robot.ros_distro.value
+    env = dockerfiles.venv(distro)
+    ca = find_ca_bundle()
+    hook = wheels_venv.root_hook(env, dockerfiles.wheels_pins(distro), ca=None if ca is None else str(ca),
+                                 passed=PROXY_VARS)
+    return arches.root_strap(robot.base.kind, arch, dockerfiles.WHEELS_APT, venv=env, venv_hook=hook,
+                             config=dockerfiles.wheels_root_config(distro, has_ca=ca is not None))
 
 
 def _base_parent(project: Project, client: docker.DockerClient | None, arch: str, *, dry_run: bool,
@@ -112,11 +124,23 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
         common.append(pkg.name)
     cmake = wheels_cmake_packages(project, [e.source for e in entries if e.dest.startswith("common/") and e.source])
     dockerfile = dockerfiles.base_dockerfile(robot, root_image=root_ref, has_ca=ca is not None, common=common,
-                                             cmake=cmake)
+                                             cmake=cmake, venv_in_root=_venv_in_root(project, client, arch, root_ref))
     plan = ImagePlan(role="base", name=naming.base_image(robot, project.name), tag=arches.base_tag(arch, native),
                      arch=arch, dockerfile=dockerfile, parent=root_ref, context=tuple(entries),
                      labels=dockerfiles.base_labels(robot))
     return planned(project, plan, root_id, known=known)
+
+
+def _venv_in_root(project: Project, client: docker.DockerClient | None, arch: str, root_ref: str) -> bool:
+    """Whether the root image ``root_ref`` holds the wheels base's venv: it is the root robocore bootstrapped from
+    this project's :func:`root_strap` (a pulled root, or none yet in a dry run, has no venv: the base installs it)."""
+    strap = root_strap(project, arch)
+    if client is None or strap is None or not strap.venv:
+        return False
+    from robocore.adapters import rootfs
+    from robocore.adapters.image_builder import image_state
+
+    return rootfs.made_from(image_state(client, root_ref), strap)
 
 
 def prepare_base(options: Options, *, force: bool) -> None:

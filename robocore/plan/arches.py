@@ -47,9 +47,10 @@ def base_tag(arch: str, native: str) -> str:
     return "latest" if arch == native else f"latest-{arch}"
 
 
-def root_image(kind: BaseKind, arch: str) -> str:
-    """The Debian root image of a wheels or debian base for ``arch``: ``robocore/<arch>/debian:bookworm-<kind>``."""
-    return f"{LOCAL_PREFIX}/{arch}/debian:{SUITE}-{kind.value}"
+def root_image(kind: BaseKind, arch: str, distro: str = "") -> str:
+    """The Debian root image of a wheels or debian base for ``arch``: ``robocore/<arch>/debian:bookworm-<kind>``;
+    with ``distro`` (the wheels base: its root holds that distro's venv) ``...:bookworm-<kind>-<distro>``."""
+    return f"{LOCAL_PREFIX}/{arch}/debian:{SUITE}-{kind.value}" + (f"-{distro}" if distro else "")
 
 
 def split_reference(ref: str) -> tuple[str, str]:
@@ -81,6 +82,8 @@ def base_root(robot: Robot, arch: str) -> str:
         return pinned_image(upstream_root(robot), arch)
     if robot.base.image:
         return pinned_image(robot.base.image, arch)
+    if robot.base.kind is BaseKind.wheels:  # the root robocore bootstraps holds the distro's venv
+        return root_image(robot.base.kind, arch, robot.ros_distro.value)
     return root_image(robot.base.kind, arch)
 
 
@@ -115,6 +118,33 @@ COMPILE_LATER_HOOKS = (
 )
 
 
+#: Docker's PATH for a container whose image sets none (what a Dockerfile's ``$PATH`` is on a root that sets none).
+DEFAULT_PATH = "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"
+
+
+@dataclass(frozen=True)
+class RootConfig:
+    """Settings a bootstrapped root's image config carries, as ENV, ENTRYPOINT, CMD and SHELL steps would set them:
+    the wheels base's own, given to its root so that its Dockerfile needs none of those steps (on fuse-overlayfs
+    each step of a build costs a walk of the whole image, seconds on a root that holds the venv)."""
+
+    env: tuple[tuple[str, str], ...] = ()
+    entrypoint: tuple[str, ...] = ()
+    cmd: tuple[str, ...] = ("bash",)
+    shell: tuple[str, ...] = ()
+
+    def image_config(self) -> dict[str, list[str]]:
+        """The image config's ``Env``, ``Entrypoint``, ``Cmd`` and ``Shell`` (those set)."""
+        config = {"Env": [f"{name}={value}" for name, value in self.env], "Entrypoint": list(self.entrypoint),
+                  "Cmd": list(self.cmd), "Shell": list(self.shell)}
+        return {key: value for key, value in config.items() if value}
+
+    def key(self) -> list[str]:
+        """The lines of a root's content hash that name these settings."""
+        return [f"{name}={value}" for name, value in self.env] + ["--", *self.entrypoint, "--", *self.cmd, "--",
+                                                                  *self.shell]
+
+
 @dataclass(frozen=True)
 class RootStrap:
     """How a registry-free root is bootstrapped for one arch (the mmdebstrap inputs of its content hash)."""
@@ -124,6 +154,10 @@ class RootStrap:
     variant: str = "apt"
     excludes: tuple[str, ...] = ("/usr/share/doc/*", "/usr/share/man/*", "/usr/share/locale/*")
     hooks: tuple[str, ...] = COMPILE_LATER_HOOKS
+    #: the venv the last of ``hooks`` installs into the root ("": none), see :mod:`robocore.plan.wheels_venv`
+    venv: str = ""
+    #: the image config's settings (None: ``Cmd`` bash alone)
+    config: RootConfig | None = None
 
     def argv(self, tarball: str, mirror: str) -> list[str]:
         """The mmdebstrap command line writing the root to ``tarball`` from ``mirror`` (the caller checks that
@@ -134,15 +168,25 @@ class RootStrap:
         return [*argv, *self.hooks, SUITE, tarball, mirror]
 
     def key(self) -> str:
-        """The text its content hash is made from (arch, variant, packages, excludes, hooks)."""
-        return "\n".join([SUITE, self.arch, self.variant, *self.packages, "--", *self.excludes, "--", *self.hooks])
+        """The text its content hash is made from (arch, variant, packages, excludes, hooks, venv)."""
+        extra = ["--", self.venv] if self.venv else []  # a root without them keeps the hash it had
+        extra += ["--", *self.config.key()] if self.config is not None else []
+        return "\n".join([SUITE, self.arch, self.variant, *self.packages, "--", *self.excludes, "--", *self.hooks,
+                          *extra])
 
 
-def root_strap(kind: BaseKind, arch: str, packages: Sequence[str]) -> RootStrap:
+def root_strap(kind: BaseKind, arch: str, packages: Sequence[str], *, venv: str = "",
+               venv_hook: str = "", config: RootConfig | None = None) -> RootStrap:
     """The bootstrap of ``kind``'s root for ``arch``: the base's own apt packages are unpacked by mmdebstrap
-    (natively, with only maintainer scripts emulated), so the base's apt step has nothing left to do."""
+    (natively, with only maintainer scripts emulated), so the base's apt step has nothing left to do. With
+    ``venv`` and its ``venv_hook`` (the wheels base, :func:`robocore.plan.wheels_venv.root_hook`), the hook runs
+    last, once the root's Python modules are compiled, and the root holds the base's venv too; ``config``: the
+    settings of its image config."""
     del kind  # the packages are the kind's; the name carries the kind
-    return RootStrap(arch=arch, packages=tuple(sorted(set(packages))))
+    if bool(venv) != bool(venv_hook):
+        raise ValueError("a root's venv and the hook that installs it come together")
+    hooks = COMPILE_LATER_HOOKS + ((venv_hook,) if venv_hook else ())
+    return RootStrap(arch=arch, packages=tuple(sorted(set(packages))), hooks=hooks, venv=venv, config=config)
 
 
 def elf_arch(header: bytes) -> str | None:

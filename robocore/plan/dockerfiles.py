@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING
 from robocore.config.loader import ROBOT_FILE, located
 from robocore.config.model import Arch, BaseKind, Component, Repository, Robot
 from robocore.errors import ConfigError, Problem
-from robocore.plan import arches, cmake_packages, colcon, naming
+from robocore.plan import arches, cmake_packages, colcon, naming, wheels_venv
 from robocore.ui import without_sgr
 
 if TYPE_CHECKING:
@@ -53,7 +53,7 @@ OFFICIAL_APT: tuple[str, ...] = ("procps", "python3-pip", "python3-pytest")
 #: image, in one build step).
 BASE_TREE = "tree"
 #: The installer of the wheels base's venv (pinned: its resolver and bytecode are part of the recipe).
-WHEELS_INSTALLER = "uv==0.13.9"
+WHEELS_INSTALLER = wheels_venv.WHEELS_INSTALLER
 #: Debian packages the wheels base needs from its root image (installed only if missing).
 WHEELS_APT: tuple[str, ...] = ("python3", "python3-venv", "procps", "ca-certificates")
 #: Debian 12's own ROS 1 (1.15, the noetic generation) for the debian base: the core with roscpp, rospy,
@@ -79,6 +79,8 @@ DEBIAN_TOOLS: tuple[str, ...] = (
 OFFICIAL_ROS1_APT: tuple[str, ...] = (*OFFICIAL_APT, "python3-colcon-common-extensions")
 
 CA_IN_IMAGE = "/etc/robocore/host-ca.pem"
+#: The shell of every base's RUN steps (and of the images built from it).
+SHELL = ("/bin/bash", "-o", "pipefail", "-c")
 CA_ENV = ("PIP_CERT", "REQUESTS_CA_BUNDLE", "SSL_CERT_FILE", "GIT_SSL_CAINFO", "CURL_CA_BUNDLE")
 COMMON_PREFIX = "/opt/robocore/common"
 DEPS_PREFIX = "/opt/robocore/deps"
@@ -260,24 +262,6 @@ def _debian_lines(distro: str, has_ca: bool) -> list[str]:
     ]
 
 
-def _wheels_venv(env: str, pins: str) -> str:
-    """The wheels base's venv made by :data:`WHEELS_INSTALLER`: uv itself is installed into a scratch folder by
-    the pip wheel Debian's python3-venv ships (no pip install into the image first); uv makes the venv with the
-    pip and setuptools wheels ``python3 -m venv`` would have put in it (components' ``pip`` entries use them)
-    and the pinned wheels, downloaded side by side, bytecode compiled as pip does; then the scratch folder
-    (uv, its cache and temporary files) goes. The same packages as ``venv`` + ``pip install``."""
-    scratch = "/tmp/robocore-uv"
-    wheels = "/usr/share/python-wheels"
-    return " \\\n && ".join([
-        f"pip_wheel=$(ls {wheels}/pip-*.whl | head -n 1) && tools_wheel=$(ls {wheels}/setuptools-*.whl | head -n 1)",
-        f'python3 "$pip_wheel/pip" install -q --no-compile --target {scratch} {WHEELS_INSTALLER}',
-        f"python3 -m venv --without-pip {env}",
-        f"TMPDIR={scratch} UV_CACHE_DIR={scratch}/cache {scratch}/bin/uv pip install --no-progress --compile-bytecode "
-        f'--python {env}/bin/python "$pip_wheel" "$tools_wheel" {pins}',
-        f"rm -rf {scratch}",
-    ])
-
-
 def base_labels(robot: Robot) -> dict[str, str]:
     """Labels of the base image that its Dockerfile does not write: they join the one LABEL step the build appends
     (each step of its own costs seconds on fuse-overlayfs). The debian base has the C++ tool chain, so ``build``
@@ -288,17 +272,20 @@ def base_labels(robot: Robot) -> dict[str, str]:
 
 
 def base_dockerfile(robot: Robot, *, root_image: str, has_ca: bool, common: Sequence[str],
-                    cmake: Sequence[str] = ()) -> str:
+                    cmake: Sequence[str] = (), venv_in_root: bool = False) -> str:
     """The base image's Dockerfile. ``common``: names of common packages in the context's ``common/``;
-    ``cmake``: those of them colcon builds with CMake (the wheels base then gets the CMake tool chain)."""
+    ``cmake``: those of them colcon builds with CMake (the wheels base then gets the CMake tool chain);
+    ``venv_in_root``: the wheels base's root already has its venv (a root robocore bootstrapped with
+    :func:`wheels_pins`, :mod:`robocore.plan.wheels_venv`), so the base has no venv step."""
     distro = robot.ros_distro.value
     wheels = robot.base.kind is BaseKind.wheels
     lines = [f"# robocore base image, {robot.generation} {distro} ({robot.base.kind.value}): {GENERATED}"]
     lines.append(f"FROM {root_image}")
-    lines.append('SHELL ["/bin/bash", "-o", "pipefail", "-c"]')
+    if not (wheels and venv_in_root):  # that root's image config has the shell
+        lines.append(f"SHELL {json.dumps(list(SHELL))}")
     debian = robot.base.kind is BaseKind.debian
     if wheels:
-        lines += _wheels_lines(distro, has_ca)
+        lines += _wheels_lines(distro, has_ca, venv_in_root=venv_in_root)
     elif debian:
         lines += _debian_lines(distro, has_ca)
     else:
@@ -328,16 +315,17 @@ def _entrypoint_lines() -> list[str]:
 TREE_KINDS = frozenset({BaseKind.wheels, BaseKind.debian})
 
 
-def _tree_lines(files: str, has_ca: bool, settings: list[tuple[str, str]]) -> list[str]:
+def _tree_lines(files: str, has_ca: bool, settings: list[tuple[str, str]] | None) -> list[str]:
     """The head of a base of :data:`TREE_KINDS`: robocore's ``files`` (and with ``has_ca`` the dev machine's trust
-    store) in one COPY of the tree, then every setting (the trust store's first) in one ENV."""
+    store) in one COPY of the tree, then every setting (the trust store's first) in one ENV (None: the root's
+    image config has them)."""
     trust = [(name, CA_IN_IMAGE) for name in CA_ENV] if has_ca else []
-    return [
+    lines = [
         f"# robocore's files at their paths: {files}"
         + (", the dev machine's trust store (public CAs plus any proxy CA, for pip/git in builds)" if has_ca else ""),
         f"COPY {BASE_TREE}/ /",
-        _env_lines([*trust, *settings]),
     ]
+    return lines if settings is None else [*lines, _env_lines([*trust, *settings])]
 
 
 def base_tree_dest(name: str, distro: str) -> str:
@@ -351,21 +339,41 @@ def base_tree_dest(name: str, distro: str) -> str:
     return BASE_TREE + paths[name]
 
 
-def _wheels_lines(distro: str, has_ca: bool) -> list[str]:
+def wheels_pins(distro: str) -> str:
+    """The requirements of the wheels base's venv for ``distro`` (space-separated): its ROS 2 wheels and tools."""
+    return " ".join(WHEELS[distro] + WHEELS_TOOLS) if distro in WHEELS else "WHEELS-UNAVAILABLE"
+
+
+def _wheels_settings(distro: str) -> list[tuple[str, str]]:
+    env = venv(distro)
+    return [("ROS_DISTRO", distro), ("LANG", "C.UTF-8"), ("PIP_DISABLE_PIP_VERSION_CHECK", "1"),
+            ("PIP_NO_CACHE_DIR", "1"), ("VIRTUAL_ENV", env), ("PATH", f"{env}/bin:$PATH")]
+
+
+def wheels_root_config(distro: str, has_ca: bool) -> arches.RootConfig:
+    """The settings of a wheels base whose root holds its venv, carried by that root's image config: the same
+    environment (``$PATH`` read as Docker's default), entrypoint, command and shell its Dockerfile would set."""
+    trust = [(name, CA_IN_IMAGE) for name in CA_ENV] if has_ca else []
+    env = [(name, value.replace("$PATH", arches.DEFAULT_PATH)) for name, value in [*trust, *_wheels_settings(distro)]]
+    return arches.RootConfig(env=tuple(env), entrypoint=(naming.ENTRYPOINT,), cmd=("bash",), shell=SHELL)
+
+
+def _wheels_lines(distro: str, has_ca: bool, *, venv_in_root: bool) -> list[str]:
     """The wheels base up to its venv. Each build step commits a layer, and a commit costs in proportion to the
     image's size on some storage drivers (fuse-overlayfs diffs the whole tree: ~6 s per step on the 400 MB base
     here, loaded), so every file comes in one COPY and every setting in one ENV before the venv's RUN, on the
-    small root; after it only the label robocore adds (and the common packages or CMake tool chain when asked)."""
+    small root; after it only the label robocore adds (and the common packages or CMake tool chain when asked).
+    With ``venv_in_root`` the root has the venv and the settings already (:func:`wheels_root_config`): robocore's
+    files are the one step."""
     env = venv(distro)
-    pins = " ".join(WHEELS[distro] + WHEELS_TOOLS) if distro in WHEELS else "WHEELS-UNAVAILABLE"
+    if venv_in_root:
+        return _tree_lines("the entrypoint, setup.bash, the ros2 command", has_ca, None)
     probe = "command -v ps >/dev/null && python3 -c 'import ensurepip, venv' 2>/dev/null"
-    settings = [("ROS_DISTRO", distro), ("LANG", "C.UTF-8"), ("PIP_DISABLE_PIP_VERSION_CHECK", "1"),
-                ("PIP_NO_CACHE_DIR", "1"), ("VIRTUAL_ENV", env), ("PATH", f"{env}/bin:$PATH")]
-    return [
-        *_tree_lines("the entrypoint, setup.bash, the ros2 command", has_ca, settings),
-        *_entrypoint_lines(),
-        f"RUN ({probe} || ({_apt_install(WHEELS_APT)})) \\\n && {_wheels_venv(env, pins)}",
-    ]
+    lines = [*_tree_lines("the entrypoint, setup.bash, the ros2 command", has_ca, _wheels_settings(distro)),
+             *_entrypoint_lines()]
+    script = wheels_venv.install_script(env, wheels_pins(distro))
+    lines.append(f"RUN ({probe} || ({_apt_install(WHEELS_APT)})) \\\n && {script}")
+    return lines
 
 
 def repo_folder(repo: Repository) -> str:
