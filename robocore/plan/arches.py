@@ -4,8 +4,9 @@ An arch is a value carried with every image, tree and cache key, decided here on
 
 - the **root image** a base is built FROM is always a per-arch local name, ``robocore/<arch>/...``, so two
   arches never share a name even when they come from one multi-arch reference: the wheels and debian
-  bases' Debian root is ``robocore/<arch>/debian:bookworm-<kind>`` (bootstrapped with ``mmdebstrap
-  --arch``, or ``debian:bookworm`` pulled with its platform and tagged so), an official base's
+  bases' Debian root is ``robocore/<arch>/debian:bookworm-<kind>``, the wheels base's
+  ``...:bookworm-wheels-<distro>`` (bootstrapped with ``mmdebstrap --arch``, the wheels one with the base's venv
+  and settings, or ``debian:bookworm`` pulled with its platform and tagged so), an official base's
   ``ros:<distro>-ros-base`` (or ``base.image``) is pulled with its platform and tagged
   ``robocore/<arch>/<reference>``;
 - the **base image** is ``<prefix>base:latest`` on the dev machine's arch and ``<prefix>base:latest-<arch>``
