@@ -215,3 +215,26 @@ def test_without_a_trust_store_the_hook_sets_none(tmp_path: Path) -> None:
     record = tmp_path / "argv"
     _run_hook(hook, root, {"PATH": f"{bin_dir}:{os.environ['PATH']}", "RECORD": str(record)})
     assert "python3 -m venv --without-pip /opt/ros/kilted/venv" in record.read_text()
+
+
+def test_a_failed_venv_hook_fails_the_bootstrap_naming_pypi_too(tmp_path: Path, monkeypatch: Any) -> None:
+    """A bootstrap whose install fails (here a stand-in mmdebstrap that fails as a hook would) says which mirror and,
+    for a root with a venv only, PyPI."""
+    from robocore.errors import BuildError
+
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    (bin_dir / "mmdebstrap").write_text("#!/bin/sh\necho 'E: hook failed: uv: connection refused' >&2\nexit 1\n")
+    (bin_dir / "mmdebstrap").chmod(0o755)
+    monkeypatch.setenv("PATH", f"{bin_dir}:{os.environ['PATH']}")
+    monkeypatch.setenv(rootfs.SCRATCH_ENV, "")
+    with_venv = prepare_base.root_strap(_project(tmp_path / "p"), "amd64")
+    plain = arches.root_strap(BaseKind.wheels, "amd64", dockerfiles.WHEELS_APT)
+    hints = []
+    for strap in (with_venv, plain):
+        assert strap is not None
+        with pytest.raises(BuildError) as info:
+            rootfs.bootstrap(object(), strap, target="t:x", work_dir=tmp_path / "w")  # type: ignore[arg-type]
+        assert "connection refused" in info.value.message
+        hints.append(info.value.hint or "")
+    assert "PyPI" in hints[0] and "PyPI" not in hints[1]

@@ -141,6 +141,7 @@ def bootstrap(client: docker.DockerClient, strap: RootStrap, *, target: str, wor
             tail = "\n".join((done.stderr or done.stdout).strip().splitlines()[-15:])
             raise BuildError(f"mmdebstrap --arch={strap.arch} failed (exit {done.returncode}):\n{tail}",
                              hint=f"check that {mirror} is reachable (set {MIRROR_ENV} for another mirror)"
+                             + (", and PyPI (the root's venv)" if strap.venv else "")
                              + ("" if strap.arch == _native() else "; an arch other than this machine's needs "
                                 "qemu-user-static registered with binfmt_misc"))
         return image_from_tarball(client, tarball, strap, target=target)
