@@ -80,19 +80,25 @@ class Figure:
     detail: str = ""
 
 
-def record(name: str, figures: Iterable[Figure], *, goals: Sequence[str] = (), notes: Sequence[str] = ()) -> Path:
+def record(name: str, figures: Iterable[Figure], *, goals: Sequence[str] = (), notes: Sequence[str] = (),
+           variant: str = "") -> Path:
     """Write ``bench/results/<name>.json``: the figures of this run with its command, date, commit and machine.
 
-    ``name`` is the bench script's name (``bench/<name>.py``). Returns the file written.
+    ``name`` is the bench script's name (``bench/<name>.py``). ``variant`` names a run that measures something
+    else with the same script (another ROS distro): it gets a file of its own, ``<name>-<variant>.json``, so that
+    both stay on the performance page. Returns the file written.
     """
     if not (BENCH / f"{name}.py").is_file():
         raise ValueError(f"{name}: no bench/{name}.py")
+    if variant and not variant.replace("_", "").isalnum():
+        raise ValueError(f"{variant!r}: a variant is letters, digits and underscores")
     if os.environ.get("PYTHONDONTWRITEBYTECODE"):
         notes = [*notes, "PYTHONDONTWRITEBYTECODE was set: modules without bytecode were compiled on every start"]
     main = sys.modules.get("__main__")
     doc = (getattr(main, "__doc__", None) or "").strip()
     result = {
         "bench": name,
+        **({"variant": variant} if variant else {}),
         "title": doc.splitlines()[0] if doc else "",
         "command": command_line(sys.argv),
         "date": datetime.fromtimestamp(STARTED, tz=timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
@@ -105,7 +111,7 @@ def record(name: str, figures: Iterable[Figure], *, goals: Sequence[str] = (), n
     }
     folder = Path(os.environ.get("ROBOCORE_BENCH_RESULTS") or RESULTS)
     folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{name}.json"
+    path = folder / (f"{name}-{variant}.json" if variant else f"{name}.json")
     partial = path.with_name(f".{path.name}.partial")
     partial.write_text(json.dumps(result, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
     partial.replace(path)

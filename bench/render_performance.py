@@ -43,24 +43,35 @@ def bench_names(bench: Path = BENCH) -> list[str]:
     return sorted(p.stem for p in bench.glob("*.py") if p.stem not in NOT_BENCHES)
 
 
+def result_names(results: Path, names: list[str]) -> list[str]:
+    """Each bench's result files in ``results``, by stem: ``<name>`` (listed even without a file), then its
+    variants' ``<name>-<variant>`` (another distro measured by the same script), in order."""
+    out = []
+    for name in names:
+        out.append(name)
+        out += sorted(path.stem for path in results.glob(f"{name}-*.json"))
+    return out
+
+
 def render(results: Path, names: list[str]) -> str:
     """The page for the result files in ``results`` and the bench scripts ``names``."""
-    runs = {name: json.loads(path.read_text(encoding="utf-8"))
-            for name in names if (path := results / f"{name}.json").is_file()}
+    stems = result_names(results, names)
+    runs = {stem: json.loads(path.read_text(encoding="utf-8"))
+            for stem in stems if (path := results / f"{stem}.json").is_file()}
     lines = [HEAD, "| bench | what | last run | goals met | command |", "|---|---|---|---|---|"]
-    for name in names:
-        run = runs.get(name)
+    for stem in stems:
+        run = runs.get(stem)
         if run is None:
-            lines.append(f"| [{name}](#{name}) | | not yet run | | `python bench/{name}.py` |")
+            lines.append(f"| [{stem}](#{stem}) | | not yet run | | `python bench/{stem}.py` |")
             continue
         judged = [f["met"] for f in run["figures"] if "met" in f]
         met = f"{sum(judged)} of {len(judged)}" if judged else "-"
-        lines.append(f"| [{name}](#{name}) | {cell(run['title'])} | {run['date'][:10]} | {met} | "
+        lines.append(f"| [{stem}](#{stem}) | {cell(run['title'])} | {run['date'][:10]} | {met} | "
                      f"`{run['command']}` |")
-    for name in names:
-        lines += ["", f"## {name}", ""]
-        run = runs.get(name)
-        lines += section(run) if run is not None else [f"Not yet run: `python bench/{name}.py`."]
+    for stem in stems:
+        lines += ["", f"## {stem}", ""]
+        run = runs.get(stem)
+        lines += section(run) if run is not None else [f"Not yet run: `python bench/{stem}.py`."]
     return "\n".join(lines) + "\n"
 
 

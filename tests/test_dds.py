@@ -232,20 +232,50 @@ def test_udp_super_client_drops_builtin_transports() -> None:
     assert root.findtext(".//userTransports/transport_id") == root.findtext(".//transport_descriptor/transport_id")
 
 
+def _seconds(element: ET.Element | None) -> float:
+    """A Fast DDS duration element (``<sec>``, ``<nanosec>``) in seconds."""
+    assert element is not None
+    return int(element.findtext("sec") or 0) + int(element.findtext("nanosec") or 0) / 1e9
+
+
 @pytest.mark.parametrize("distro", ["humble", "jazzy", "kilted"])
-def test_server_profile_sets_a_short_lease(distro: str) -> None:
+def test_server_profile_sets_its_lines_short_lease(distro: str) -> None:
     r = robot(distro)
+    live = dds.server_liveliness(r)
     root = parse(dds.server_profile_xml(r))
     assert "\n" not in dds.server_profile_xml(r)  # one line: it travels in an environment variable
     assert root.findtext(".//discoveryProtocol") == "SERVER"
-    assert int(root.findtext(".//leaseDuration/sec") or 0) == dds.SERVER_LEASE_SECONDS
-    assert int(root.findtext(".//leaseAnnouncement/sec") or 0) < dds.SERVER_LEASE_SECONDS
+    assert _seconds(root.find(".//leaseDuration")) == live.lease_ms / 1000 < 20  # Fast DDS's own: 20 s
+    # several announcements per lease: one lost packet does not drop the server
+    assert _seconds(root.find(".//leaseAnnouncement")) * 3 <= live.lease_ms / 1000
 
 
-def test_restart_hold_outlasts_the_lease_on_2x_only() -> None:
-    assert dds.restart_hold_seconds(robot("jazzy")) > dds.SERVER_LEASE_SECONDS
-    assert dds.restart_hold_seconds(robot("humble")) > dds.SERVER_LEASE_SECONDS
-    assert dds.restart_hold_seconds(robot("kilted")) == 0  # 3.x servers get a new GUID on each start
+def test_2x_keeps_its_8_s_lease_and_its_hold_outlasts_it() -> None:
+    """2.x's settings are the measured ones (a shorter lease let matched nodes go unheard): 8 s announced every
+    2 s, and a restarted server silent for longer than a lease."""
+    for distro in ("humble", "jazzy"):
+        live = dds.server_liveliness(robot(distro))
+        assert (live.lease_ms, live.announcement_ms) == (8000, 2000)
+        assert dds.restart_hold_seconds(robot(distro)) == live.hold_seconds > live.lease_ms / 1000
+    root = parse(dds.server_profile_xml(robot("jazzy")))
+    assert root.findtext(".//leaseDuration/sec") == "8" and root.findtext(".//leaseDuration/nanosec") == "0"
+
+
+def test_3x_serves_at_once_after_a_restart_and_its_lease_bounds_the_recovery() -> None:
+    """A 3.x server has a new GUID at each start: no hold. Its clients match the new one only once they dropped the
+    killed one, so a node started after a restart is heard about a lease after the kill: under 5 s."""
+    for distro in ("kilted", "rolling"):
+        live = dds.server_liveliness(robot(distro))
+        assert dds.restart_hold_seconds(robot(distro)) == live.hold_seconds == 0
+        assert live.lease_ms <= 3000 and live.announcement_ms <= live.lease_ms // 3
+
+
+def test_a_given_liveliness_replaces_the_lines_own() -> None:
+    """The bench's contrast: 3.x's server with 2.x's lease."""
+    lease_8s = dds.ServerLiveliness(lease_ms=8000, announcement_ms=2000, hold_seconds=0)
+    root = parse(dds.server_profile_xml(robot("kilted"), lease_8s))
+    assert _seconds(root.find(".//leaseDuration")) == 8 and _seconds(root.find(".//leaseAnnouncement")) == 2
+    assert 'xmlns="http://www.eprosima.com"' in dds.server_profile_xml(robot("kilted"), lease_8s)
 
 
 # ------------------------------------------------------------------ replacements

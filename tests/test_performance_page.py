@@ -82,3 +82,19 @@ def test_record_refuses_a_name_that_is_no_bench_script(tmp_path: Path) -> None:
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=60)
     assert done.returncode != 0 and "no bench/no_such_bench.py" in done.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_a_variants_result_gets_its_own_section_beside_the_benchs(tmp_path: Path) -> None:
+    """A run of another distro (``<name>-<variant>.json``) is shown after the bench's own run, not instead of it."""
+    results = tmp_path / "results"
+    shutil.copytree(RESULTS, results)
+    run = json.loads((results / "noop.json").read_text())
+    run["figures"][0]["value"] = 654321.0
+    (results / "noop-kilted.json").write_text(json.dumps({**run, "variant": "kilted"}))
+    page = tmp_path / "performance.md"
+    done = render("--results", str(results), "--page", str(page))
+    assert done.returncode == 0, done.stderr
+    text = page.read_text()
+    assert text.index("## noop\n") < text.index("## noop-kilted\n") < text.index("## noop_young\n")
+    assert "654,321" in text.split("## noop-kilted\n")[1].split("\n## ")[0]
+    assert "[noop-kilted](#noop-kilted)" in text and "not yet run | | `python bench/noop-kilted.py`" not in text

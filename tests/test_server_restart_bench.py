@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import pytest
 from bench_scripts import load
@@ -13,12 +16,29 @@ def bench() -> ModuleType:
     return load("server_restart")
 
 
-def test_kilted_restarts_robocores_server_without_a_hold_and_contrasts_a_fixed_guid(bench: ModuleType) -> None:
+def test_kilted_restarts_robocores_server_without_a_hold_and_contrasts_the_2x_lease_and_a_fixed_guid(
+        bench: ModuleType) -> None:
     robot = bench.robot_of("kilted")
     assert robot.fastdds_line == 3 and "-i" not in bench.fastdds.server_process(robot, 0).command
     rows = bench.rows_of(robot, 0)
     assert all(row["hold"] == 0 and not row["backup"] for row in rows.values())
-    assert [row.get("fixed_id", False) for row in rows.values()] == [False, False, True]
+    assert [row.get("fixed_id", False) for row in rows.values()] == [False, False, False, True]
+    # robocore's own lease (row 1, 2) against 2.x's 8 s (row 3), the server's profile changed for it
+    lease = bench.fastdds.server_liveliness(robot).lease_ms // 1000
+    assert [label.split(", ")[1] for label in rows] == [f"lease {lease} s (robocore)"] * 2 + ["lease 8 s (2.x's)",
+                                                                                              "no hold"]
+    assert [row.get("liveliness") for row in rows.values()] == [None, None, bench.LEASE_8S, None]
+    assert bench.LEASE_8S.lease_ms == 8000 and bench.LEASE_8S.hold_seconds == 0
+
+
+def test_a_kilted_run_gets_a_result_file_of_its_own(bench: ModuleType, tmp_path: Path, monkeypatch: Any) -> None:
+    """Kilted's figures go beside Jazzy's (``server_restart-kilted.json``), not over them."""
+    monkeypatch.setenv("ROBOCORE_BENCH_RESULTS", str(tmp_path))
+    assert bench.record("server_restart", [], variant="kilted").name == "server_restart-kilted.json"
+    assert json.loads((tmp_path / "server_restart-kilted.json").read_text())["variant"] == "kilted"
+    assert bench.record("server_restart", []).name == "server_restart.json"
+    with pytest.raises(ValueError):
+        bench.record("server_restart", [], variant="../x")
 
 
 def test_jazzy_keeps_its_rows_with_robocores_hold(bench: ModuleType) -> None:

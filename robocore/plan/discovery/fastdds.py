@@ -8,7 +8,8 @@ matter (see the robot's ``fastdds_line``); their differences stay in this module
   the profile file is read from ``FASTRTPS_DEFAULT_PROFILES_FILE``; a restarted server holds
   back before serving (:func:`restart_hold_seconds`).
 * **3.x** (Kilted, Rolling): servers are matched by locator only; XML lists bare
-  ``<locator>`` elements; the profile file is read from ``FASTDDS_DEFAULT_PROFILES_FILE``.
+  ``<locator>`` elements; the profile file is read from ``FASTDDS_DEFAULT_PROFILES_FILE``; a server's
+  lease is shorter and a restarted server serves at once (:func:`server_liveliness`).
 
 Profiles are named by ``FASTDDS_DEFAULT_PROFILES_FILE`` on both lines, plus
 ``FASTRTPS_DEFAULT_PROFILES_FILE`` on 2.x (3.x warns about that old name).
@@ -198,36 +199,66 @@ def _timing(indent: str, period_ms: int, *, initial: bool) -> str:
     return "".join(lines)
 
 
-#: Liveliness of discovery servers as their clients see it. Shorter than Fast DDS's 20 s default so that
-#: a restarted server is usable sooner (see :func:`restart_hold_seconds`).
-SERVER_LEASE_SECONDS = 8
-SERVER_ANNOUNCEMENT_SECONDS = 2
+@dataclass(frozen=True)
+class ServerLiveliness:
+    """How long a discovery server's clients keep it alive without news (``lease_ms``), how often it announces
+    itself to them (``announcement_ms``), and how long a *restarted* server stays silent first (``hold_seconds``).
+
+    One value per Fast DDS line (:data:`SERVER_LIVELINESS`): the lease decides how soon the clients of a killed
+    server find its successor, differently on each line (see :func:`server_liveliness`).
+    """
+
+    lease_ms: int
+    announcement_ms: int
+    hold_seconds: int
+
+
+#: The servers' liveliness per Fast DDS line (both shorter than Fast DDS's 20 s lease announced every 3 s).
+#:
+#: * 2.x: a restarted server has its old GUID (``-i``), and its clients discard what it sends until they dropped
+#:   the old instance (its lease ran out): it holds back for the lease plus 4 s. The lease stays 8 s: shorter
+#:   leases (2-3 s) with shorter holds let already matched nodes go unheard for seconds.
+#: * 3.x: a restarted server has a new GUID and serves at once, but a client matches the successor's discovery
+#:   endpoints (EDP) only once it dropped the killed instance (Fast DDS 3.2 runs that matching in its ping routine,
+#:   which a client restarts when a server leaves): a node started after the restart is heard about a lease
+#:   after the kill. Measured with Kilted (Fast DDS 3.2): 8 s heard after 5.5-6.3 s, 3 s heard well within 5 s,
+#:   and matched nodes kept talking (docs/design-notes.md, "A restarted Fast DDS 3.x server").
+SERVER_LIVELINESS = {
+    2: ServerLiveliness(lease_ms=8000, announcement_ms=2000, hold_seconds=12),
+    3: ServerLiveliness(lease_ms=3000, announcement_ms=1000, hold_seconds=0),
+}
+
+
+def server_liveliness(robot: Robot) -> ServerLiveliness:
+    """The robot's Fast DDS line's server lease, announcement period and restart hold (:data:`SERVER_LIVELINESS`)."""
+    return SERVER_LIVELINESS[3 if robot.fastdds_line >= 3 else 2]
 
 
 def restart_hold_seconds(robot: Robot) -> int:
     """Seconds a *restarted* discovery server waits before serving.
 
-    A 2.x server restarts with the same GUID (its ``-i`` id). Its clients keep the proxy of the
-    previous instance, whose liveliness the new instance keeps refreshing, and they discard what
-    the new instance sends (its sequence numbers start again): a participant started after the
-    restart never matches one started before it (measured with Jazzy's Fast DDS 2.14: no
-    recovery in 90 s). Staying silent for longer than the server's lease makes every client drop
-    the old proxy and register again from scratch, which takes a few seconds. Fast DDS 3.x
-    servers get a new GUID on every start (no ``-i``) and need no hold. A BACKUP server (``-b``), Fast
-    DDS's own remedy, aborts when it reloads its files on restart in 2.14 (``bench/server_restart.py``).
+    A 2.x server restarts with the same GUID (its ``-i`` id). Its clients keep the proxy of the previous
+    instance, whose liveliness the new instance keeps refreshing, and they discard what the new instance
+    sends (its sequence numbers start again): a participant started after the restart never matches one
+    started before it (Jazzy's Fast DDS 2.14: no recovery in 90 s). Staying silent for longer than the
+    server's lease makes every client drop the old proxy and register again from scratch. Fast DDS 3.x
+    servers get a new GUID on every start (no ``-i``) and need no hold. A BACKUP server (``-b``), Fast DDS's
+    own remedy, aborts when it reloads its files on restart in 2.14 (``bench/server_restart.py``).
     """
-    return SERVER_LEASE_SECONDS + 4 if robot.fastdds_line < 3 else 0
+    return server_liveliness(robot).hold_seconds
 
 
-def server_profile_xml(robot: Robot) -> str:
-    """The server's own profile (``fastdds discovery -x``): SERVER with robocore's lease settings, one line."""
+def server_profile_xml(robot: Robot, liveliness: ServerLiveliness | None = None) -> str:
+    """The server's own profile (``fastdds discovery -x``): SERVER with its line's lease settings (or
+    ``liveliness``'s: the bench's contrasts), one line."""
     ns = _NS[3 if robot.fastdds_line >= 3 else 2]
+    live = server_liveliness(robot) if liveliness is None else liveliness
     return (
         f'<?xml version="1.0" encoding="UTF-8"?><dds><profiles xmlns="{ns}">'
         '<participant profile_name="robocore_server" is_default_profile="true"><rtps><builtin><discovery_config>'
         "<discoveryProtocol>SERVER</discoveryProtocol>"
-        f"<leaseDuration><sec>{SERVER_LEASE_SECONDS}</sec></leaseDuration>"
-        f"<leaseAnnouncement><sec>{SERVER_ANNOUNCEMENT_SECONDS}</sec></leaseAnnouncement>"
+        f"<leaseDuration>{_duration(live.lease_ms)}</leaseDuration>"
+        f"<leaseAnnouncement>{_duration(live.announcement_ms)}</leaseAnnouncement>"
         + _timing("", SERVER_ANNOUNCEMENT_MS, initial=False).strip()
         + "</discovery_config></builtin></rtps></participant></profiles></dds>"
     )
