@@ -147,14 +147,23 @@ def client_node(client: Any, net: Any, image: str, name: str, ip: str, argv: lis
     return start(client, net, image, name, ip, argv, env, volumes={dds: {"bind": DDS_DIR, "mode": "ro"}})
 
 
-def listen(client: Any, net: Any, image: str, wait: float, dds: str, robot: Robot) -> str:
-    """A new listener's verdict: ``HEARD <s>`` (seconds from its start) or ``NOTHING``."""
+def listen(client: Any, net: Any, image: str, wait: float, dds: str, robot: Robot) -> tuple[str, float]:
+    """A new listener's verdict, ``HEARD <s>`` (seconds from its Python's start) or ``NOTHING``, and when this
+    process saw it (``time.monotonic()``, its logs read every 0.1 s): a listener slow to start under load shows
+    in the second, not in the first."""
     argv = ["python3", "-c", LISTENER, str(wait)]
     container = client_node(client, net, image, "listener", LISTENER_IP, argv, dds, robot)
     try:
-        container.wait(timeout=wait + 60)
-        lines = container.logs(stdout=True, stderr=False).decode(errors="replace").split()
-        return " ".join(lines[-2:]) if "HEARD" in lines else "NOTHING"
+        deadline = time.monotonic() + wait + 60
+        while time.monotonic() < deadline:
+            words = container.logs(stdout=True, stderr=False).decode(errors="replace").split()
+            if "HEARD" in words:
+                seen = time.monotonic()
+                return " ".join(words[words.index("HEARD"):][:2]), seen
+            if "NOTHING" in words:
+                break
+            time.sleep(0.1)
+        return "NOTHING", time.monotonic()
     finally:
         container.remove(force=True)
 
@@ -184,12 +193,12 @@ def scenario(client: Any, image: str, wait: float, dds: str, robot: Robot, *, ba
         client_node(client, net, image, "talker", TALKER_IP, ["python3", "-c", TALKER], dds, robot)
         watcher = client_node(client, net, image, "watcher", WATCHER_IP, ["python3", "-c", WATCHER], dds, robot)
         time.sleep(4)
-        before = listen(client, net, image, wait, dds, robot)
+        before, _ = listen(client, net, image, wait, dds, robot)
         stopping = time.monotonic()
         server.stop(timeout=stop_timeout)
         stopped = time.monotonic()
         server.start()
-        after = listen(client, net, image, wait + hold, dds, robot)
+        after, seen = listen(client, net, image, wait + hold, dds, robot)
         time.sleep(1.5)  # the watcher's next report
         watch = watched(watcher)
         server.reload()
@@ -197,7 +206,7 @@ def scenario(client: Any, image: str, wait: float, dds: str, robot: Robot, *, ba
         crashed = next((line.strip() for line in logs.splitlines() if "malloc" in line or "corrupt" in line), "")
         status = f"{server.status}" + (f", {crashed}" if crashed else "")
         if after.startswith("HEARD"):
-            after = f"HEARD {float(after.split()[1]):.1f} s after its start"
+            after = f"HEARD {float(after.split()[1]):.1f} s after its start, {seen - stopped:.1f} s after the stop"
         after += f" (stop took {stopped - stopping:.1f} s)"
         return {"before": before, "after": after, "server": status, "watcher": watch}
 
@@ -224,27 +233,33 @@ def rows_of(robot: Robot, hold: int) -> dict[str, dict[str, Any]]:
     }
 
 
-def seconds_of(after: str) -> float:
-    """The seconds of a ``HEARD <s> s after its start`` verdict; infinity for ``NOTHING``."""
-    return float(after.split()[1]) if after.startswith("HEARD") else math.inf
+def seconds_of(after: str) -> tuple[float, float]:
+    """The seconds of a ``HEARD <a> s after its start, <b> s after the stop`` verdict; infinity for ``NOTHING``."""
+    if not after.startswith("HEARD"):
+        return math.inf, math.inf
+    words = after.split()
+    return float(words[1]), float(words[6])
 
 
-#: The goal of a node started after a 3.x server's restart, from its start (issue 36).
+#: The goal of a node started after a 3.x server's restart: heard within 5 s. Judged from the server's
+#: stop, which also counts the node's own start (a container and Python).
 GOAL_3X = 5.0
 
 
-def median_figure(label: str, heard: list[float], robot: Robot) -> Figure:
-    """A row's median over its runs (a run that never heard counts as the longest), judged against
-    :data:`GOAL_3X` for robocore's own 3.x rows."""
-    middle = statistics.median(heard)
-    value = round(middle, 2) if math.isfinite(middle) else "NOTHING"
-    never = sum(not math.isfinite(h) for h in heard)
-    detail = f"{len(heard)} runs, " + ", ".join(f"{h:.1f}" if math.isfinite(h) else "never" for h in heard) + \
-        (f" ({never} never heard)" if never else "")
+def median_figure(label: str, heard: list[tuple[float, float]], robot: Robot) -> Figure:
+    """A row's median over its runs, from the server's stop (a run that never heard counts as the longest),
+    judged against :data:`GOAL_3X` for robocore's own 3.x rows; the medians from the listener's start in detail."""
+    stop = statistics.median(h[1] for h in heard)
+    start = statistics.median(h[0] for h in heard)
+    never = sum(not math.isfinite(h[1]) for h in heard)
+    detail = (f"{len(heard)} runs, from the stop: " + ", ".join(f"{h[1]:.1f}" if math.isfinite(h[1]) else "never"
+                                                               for h in heard)
+              + (f" ({never} never heard)" if never else "")
+              + (f"; median from the listener's start {start:.1f} s" if math.isfinite(start) else ""))
     judged = robot.fastdds_line >= 3 and "(robocore)" in label
-    return Figure(f"median: {label}", value, "s" if math.isfinite(middle) else "",
-                  goal=f"< {GOAL_3X:g} s" if judged else None,
-                  met=bool(middle < GOAL_3X) if judged else None, detail=detail)
+    return Figure(f"median from the stop: {label}", round(stop, 2) if math.isfinite(stop) else "NOTHING",
+                  "s" if math.isfinite(stop) else "", goal=f"< {GOAL_3X:g} s" if judged else None,
+                  met=bool(stop < GOAL_3X) if judged else None, detail=detail)
 
 
 def main() -> int:

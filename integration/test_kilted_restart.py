@@ -7,7 +7,7 @@ container specs of a Kilted project (its wheels base, talker and listener built 
 and ``build``), real rclpy nodes:
 
 - the server is SIGKILLed and started again; a new listener started right after it hears the talker within
-  :data:`BOUND` seconds of the kill (the issue's goal: < 5 s), and the listener matched before the kill misses
+  :data:`BOUND` seconds of the kill (the goal: < 5 s), and the listener matched before the kill misses
   none of the talker's messages across it (the short lease drops only the server, never a matched peer);
 - negative control: the same with the server's lease set back to 8 s announced every 2 s (2.x's, robocore's
   3.x setting before): the talker cannot drop the killed server before 6 s, and the new listener is not heard

@@ -257,8 +257,14 @@ def test_2x_keeps_its_8_s_lease_and_its_hold_outlasts_it() -> None:
         live = dds.server_liveliness(robot(distro))
         assert (live.lease_ms, live.announcement_ms) == (8000, 2000)
         assert dds.restart_hold_seconds(robot(distro)) == live.hold_seconds > live.lease_ms / 1000
-    root = parse(dds.server_profile_xml(robot("jazzy")))
-    assert root.findtext(".//leaseDuration/sec") == "8" and root.findtext(".//leaseDuration/nanosec") == "0"
+    assert "<leaseDuration><sec>8</sec></leaseDuration><leaseAnnouncement><sec>2</sec></leaseAnnouncement>" in \
+        dds.server_profile_xml(robot("jazzy"))  # the text 2.x servers were measured with
+
+
+def test_a_lease_of_a_fraction_of_a_second_keeps_its_fraction() -> None:
+    half = dds.ServerLiveliness(lease_ms=2000, announcement_ms=500, hold_seconds=0)
+    root = parse(dds.server_profile_xml(robot("kilted"), half))
+    assert _seconds(root.find(".//leaseDuration")) == 2 and _seconds(root.find(".//leaseAnnouncement")) == 0.5
 
 
 def test_3x_serves_at_once_after_a_restart_and_its_lease_bounds_the_recovery() -> None:

@@ -202,11 +202,9 @@ def _timing(indent: str, period_ms: int, *, initial: bool) -> str:
 @dataclass(frozen=True)
 class ServerLiveliness:
     """How long a discovery server's clients keep it alive without news (``lease_ms``), how often it announces
-    itself to them (``announcement_ms``), and how long a *restarted* server stays silent first (``hold_seconds``).
-
-    One value per Fast DDS line (:data:`SERVER_LIVELINESS`): the lease decides how soon the clients of a killed
-    server find its successor, differently on each line (see :func:`server_liveliness`).
-    """
+    itself to them (``announcement_ms``), and how long a *restarted* server stays silent first (``hold_seconds``):
+    one per Fast DDS line (:data:`SERVER_LIVELINESS`), as the lease decides how soon a killed server's clients
+    find its successor."""
 
     lease_ms: int
     announcement_ms: int
@@ -214,19 +212,22 @@ class ServerLiveliness:
 
 
 #: The servers' liveliness per Fast DDS line (both shorter than Fast DDS's 20 s lease announced every 3 s).
-#:
-#: * 2.x: a restarted server has its old GUID (``-i``), and its clients discard what it sends until they dropped
-#:   the old instance (its lease ran out): it holds back for the lease plus 4 s. The lease stays 8 s: shorter
-#:   leases (2-3 s) with shorter holds let already matched nodes go unheard for seconds.
+#: * 2.x: a restarted server has its old GUID (``-i``), and its clients discard what it sends until its lease ran
+#:   out: it holds back for the lease plus 4 s. Shorter leases with shorter holds let matched nodes go unheard.
 #: * 3.x: a restarted server has a new GUID and serves at once, but a client matches the successor's discovery
-#:   endpoints (EDP) only once it dropped the killed instance (Fast DDS 3.2 runs that matching in its ping routine,
-#:   which a client restarts when a server leaves): a node started after the restart is heard about a lease
-#:   after the kill. Kilted (Fast DDS 3.2), from the node's start: 8 s heard after 6.5-7.0 s, 3 s after 1.6-2.0 s,
-#:   matched nodes missing nothing (docs/design-notes.md, "A restarted Fast DDS 3.x server serves at once").
+#:   endpoints only once it dropped the killed instance (Fast DDS 3.2 does it in its ping routine, which restarts
+#:   when a server leaves): a node started after a restart is heard about a lease after the kill. Kilted, from the
+#:   node's start: 8 s heard after 6.5-7.0 s, 3 s after 1.6-2.0 s, matched nodes missing nothing
+#:   (docs/design-notes.md, "A restarted Fast DDS 3.x server serves at once").
 SERVER_LIVELINESS = {
     2: ServerLiveliness(lease_ms=8000, announcement_ms=2000, hold_seconds=12),
     3: ServerLiveliness(lease_ms=3000, announcement_ms=1000, hold_seconds=0),
 }
+
+
+def _lease_duration(ms: int) -> str:
+    """Whole seconds as ``<sec>`` alone (the 2.x profile's text, unchanged), anything else with ``<nanosec>``."""
+    return f"<sec>{ms // 1000}</sec>" if ms % 1000 == 0 else _duration(ms)
 
 
 def server_liveliness(robot: Robot) -> ServerLiveliness:
@@ -257,8 +258,8 @@ def server_profile_xml(robot: Robot, liveliness: ServerLiveliness | None = None)
         f'<?xml version="1.0" encoding="UTF-8"?><dds><profiles xmlns="{ns}">'
         '<participant profile_name="robocore_server" is_default_profile="true"><rtps><builtin><discovery_config>'
         "<discoveryProtocol>SERVER</discoveryProtocol>"
-        f"<leaseDuration>{_duration(live.lease_ms)}</leaseDuration>"
-        f"<leaseAnnouncement>{_duration(live.announcement_ms)}</leaseAnnouncement>"
+        f"<leaseDuration>{_lease_duration(live.lease_ms)}</leaseDuration>"
+        f"<leaseAnnouncement>{_lease_duration(live.announcement_ms)}</leaseAnnouncement>"
         + _timing("", SERVER_ANNOUNCEMENT_MS, initial=False).strip()
         + "</discovery_config></builtin></rtps></participant></profiles></dds>"
     )
