@@ -50,14 +50,18 @@ def root_hook(env: str, pins: str, *, ca: str | None, passed: Sequence[str]) -> 
     """The ``--customize-hook`` that installs the venv (:func:`install_script`) into the root mmdebstrap is making
     (``$1``), after the roots' own hooks. The script runs in the chroot with a clean environment: a fixed PATH,
     ``HOME`` and ``LANG``; the dev machine's trust store ``ca`` (a host path, copied in and removed after) named by
-    :data:`CA_VARIABLES`, as the base's build step has it; and those of the variables ``passed`` (the proxy
-    variables) that are set, by name, so their values are no part of the root's content hash. Nothing else of the
-    dev machine's environment (a ``PYTHONPATH``, a ``VIRTUAL_ENV``) reaches the install."""
+    :data:`CA_VARIABLES`, as the base's build step has it; ``SOURCE_DATE_EPOCH`` (hash-based bytecode); and those
+    of the variables ``passed`` (the proxy variables) that are set, by name, so their values are no part of the
+    root's content hash. Nothing else of the dev machine's environment (a ``PYTHONPATH``, a ``VIRTUAL_ENV``)
+    reaches the install."""
     names = " ".join(shlex.quote(name) for name in passed)
     lines = ['set -e; root="$1"; set --',
              f'for name in {names}; do eval "value=\\${{$name:-}}"; '
              '[ -z "$value" ] || set -- "$@" "$name=$value"; done']
-    settings = [f"PATH={ROOT_PATH}", "HOME=/root", "LANG=C.UTF-8"]
+    # hash-based bytecode (py_compile's default once SOURCE_DATE_EPOCH is set): the root's tarball clamps every
+    # file's mtime to the bootstrap's start, so timestamp-based .pyc files would all be stale in the image, and
+    # each Python start would compile the venv's imports again
+    settings = [f"PATH={ROOT_PATH}", "HOME=/root", "LANG=C.UTF-8", "SOURCE_DATE_EPOCH=0"]
     if ca is not None:
         lines.append(f'cp -- {shlex.quote(ca)} "$root{CA_IN_ROOT}"')
         settings += [f"{name}={CA_IN_ROOT}" for name in CA_VARIABLES]
