@@ -60,9 +60,10 @@ def root_strap(project: Project, arch: str) -> arches.RootStrap | None:
 
 
 def _base_parent(project: Project, client: docker.DockerClient | None, arch: str, *, dry_run: bool,
-                 say: Callable[[str], None]) -> tuple[str, str]:
+                 say: Callable[[str], None], strap: arches.RootStrap | None) -> tuple[str, str]:
     """(FROM reference, its image ID) of the base for ``arch``: always the per-arch local name of its root
-    (:func:`robocore.plan.arches.base_root`); without a client (a dry run) the ID is :data:`DRY_RUN_UNKNOWN`."""
+    (:func:`robocore.plan.arches.base_root`), bootstrapped from ``strap`` (its :func:`root_strap`) when it is to
+    be made; without a client (a dry run) the ID is :data:`DRY_RUN_UNKNOWN`."""
     from robocore.adapters import rootfs
     from robocore.adapters.image_builder import image_state
 
@@ -74,11 +75,9 @@ def _base_parent(project: Project, client: docker.DockerClient | None, arch: str
         state = image_state(client, target)
         if state is not None and state.arch == arch:
             return target, state.id
-        strap = root_strap(project, arch)
         return target, "(to be bootstrapped)" if strap is not None else "(to be pulled)"
     return rootfs.ensure_root_image(client, target=target, upstream=arches.upstream_root(robot), arch=arch,
-                                    strap=root_strap(project, arch), work_dir=project.cache_dir / "rootfs",
-                                    status=say)
+                                    strap=strap, work_dir=project.cache_dir / "rootfs", status=say)
 
 
 def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *, dry_run: bool = False,
@@ -88,7 +87,8 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
     robot = project.robot
     dockerfiles.refuse_robot_shape(project)
     native = native_arch()
-    root_ref, root_id = _base_parent(project, client, arch, dry_run=dry_run, say=say)
+    strap = root_strap(project, arch)
+    root_ref, root_id = _base_parent(project, client, arch, dry_run=dry_run, say=say, strap=strap)
     ca = find_ca_bundle()
     wheels = robot.base.kind is BaseKind.wheels
     tree = robot.base.kind in dockerfiles.TREE_KINDS
@@ -124,17 +124,17 @@ def plan_base(project: Project, client: docker.DockerClient | None, arch: str, *
         common.append(pkg.name)
     cmake = wheels_cmake_packages(project, [e.source for e in entries if e.dest.startswith("common/") and e.source])
     dockerfile = dockerfiles.base_dockerfile(robot, root_image=root_ref, has_ca=ca is not None, common=common,
-                                             cmake=cmake, venv_in_root=_venv_in_root(project, client, arch, root_ref))
+                                             cmake=cmake, venv_in_root=_venv_in_root(client, strap, root_ref))
     plan = ImagePlan(role="base", name=naming.base_image(robot, project.name), tag=arches.base_tag(arch, native),
                      arch=arch, dockerfile=dockerfile, parent=root_ref, context=tuple(entries),
                      labels=dockerfiles.base_labels(robot))
     return planned(project, plan, root_id, known=known)
 
 
-def _venv_in_root(project: Project, client: docker.DockerClient | None, arch: str, root_ref: str) -> bool:
+def _venv_in_root(client: docker.DockerClient | None, strap: arches.RootStrap | None, root_ref: str) -> bool:
     """Whether the root image ``root_ref`` holds the wheels base's venv: it is the root robocore bootstrapped from
-    this project's :func:`root_strap` (a pulled root, or none yet in a dry run, has no venv: the base installs it)."""
-    strap = root_strap(project, arch)
+    ``strap``, the project's :func:`root_strap` (a pulled root, or none yet in a dry run, has no venv: the base
+    installs it)."""
     if client is None or strap is None or not strap.venv:
         return False
     from robocore.adapters import rootfs
@@ -197,7 +197,7 @@ def _make_root(project: Project, arch: str, say: Callable[[str], None]) -> None:
     """Have ``arch``'s root image (kept, pulled or bootstrapped), with a Docker client of this thread's own."""
     client = local_docker()
     try:
-        _base_parent(project, client, arch, dry_run=False, say=say)
+        _base_parent(project, client, arch, dry_run=False, say=say, strap=root_strap(project, arch))
     finally:
         client.close()
 

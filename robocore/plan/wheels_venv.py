@@ -16,6 +16,8 @@ from __future__ import annotations
 import shlex
 from collections.abc import Sequence
 
+from robocore.plan import arches
+
 #: The installer of the wheels base's venv (pinned: its resolver and bytecode are part of the recipe).
 WHEELS_INSTALLER = "uv==0.13.9"
 #: Where the hook puts the dev machine's trust store inside the root while the venv is installed (then removed:
@@ -23,8 +25,6 @@ WHEELS_INSTALLER = "uv==0.13.9"
 CA_IN_ROOT = "/tmp/robocore-ca.pem"
 #: The variables the hook sets for the install: the same trust store for pip (fetching uv) and uv.
 CA_VARIABLES = ("SSL_CERT_FILE", "PIP_CERT", "REQUESTS_CA_BUNDLE")
-#: PATH inside the root while the hook runs (the dev machine's PATH means nothing there).
-ROOT_PATH = "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"
 
 
 def install_script(env: str, pins: str) -> str:
@@ -61,7 +61,7 @@ def root_hook(env: str, pins: str, *, ca: str | None, passed: Sequence[str]) -> 
     # hash-based bytecode (py_compile's default once SOURCE_DATE_EPOCH is set): the root's tarball clamps every
     # file's mtime to the bootstrap's start, so timestamp-based .pyc files would all be stale in the image, and
     # each Python start would compile the venv's imports again
-    settings = [f"PATH={ROOT_PATH}", "HOME=/root", "LANG=C.UTF-8", "SOURCE_DATE_EPOCH=0"]
+    settings = [f"PATH={arches.DEFAULT_PATH}", "HOME=/root", "LANG=C.UTF-8", "SOURCE_DATE_EPOCH=0"]
     if ca is not None:
         lines.append(f'cp -- {shlex.quote(ca)} "$root{CA_IN_ROOT}"')
         settings += [f"{name}={CA_IN_ROOT}" for name in CA_VARIABLES]
