@@ -56,7 +56,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from harness import Figure, record
+from harness import Figure, copy_built_project, record
 
 #: The script of a ROS 2 component: waits for the go file (it holds the mode first), then makes its nodes, each in a
 #: context of its own (a DDS participant of its own); every 5 s, how many nodes the least informed of them sees.
@@ -428,7 +428,7 @@ def bench_project(line: str, given: Path | None) -> Iterator[Path]:
             subprocess.run([sys.executable, "-m", "robocore", "init", str(root), "--defaults", *init],
                            check=True, capture_output=True)
         else:
-            subprocess.run(["rsync", "-a", "--exclude", ".robocore/test-runs", f"{given}/", f"{root}/"], check=True)
+            copy_built_project(given, root)  # into a new folder: nothing of it to delete
         (root / "robot.template.yaml").write_text((root / "robot.yaml").read_text())
         (root / SCRIPTS).mkdir()
         os.chmod(root / SCRIPTS, 0o755)

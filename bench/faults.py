@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from harness import Figure, record
+from harness import Figure, copy_built_project, record
 
 PUBLISH = """
 import sys, time
@@ -58,8 +58,7 @@ def make_project(scratch: Path, source: Path | None, servers: list[str]) -> Path
         if not source.exists():
             subprocess.run([sys.executable, "-m", "robocore", "init", str(source), "--defaults", "--base", "wheels"],
                            check=True, capture_output=True)
-    subprocess.run(["rsync", "-a", "--delete", "--exclude", ".robocore/test-runs", f"{source}/", f"{root}/"],
-                   check=True)
+    copy_built_project(source, root)
     data = yaml.safe_load((root / "robot.yaml").read_text())
     first = data["hosts"][0]
     first.update(name="main", ip="192.0.2.9", user="root")

@@ -55,6 +55,13 @@ def robocore(project: Path | None, *args: str, check: bool = True, timeout: floa
     return done
 
 
+def copy_built_project(source: Path, root: Path) -> None:
+    """Make ``root`` a copy of the built project ``source`` (its install trees and state; not its test runs), so a
+    bench edits its robot.yaml without touching the original."""
+    subprocess.run(["rsync", "-a", "--delete", "--exclude", ".robocore/test-runs", f"{source}/", f"{root}/"],
+                   check=True)
+
+
 def robocore_command() -> list[str]:
     """The installed console script next to this Python (what a user types), else ``python -m robocore``."""
     script = Path(sys.executable).with_name("robocore")

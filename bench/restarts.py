@@ -29,14 +29,13 @@ import os
 import shutil
 import signal
 import statistics
-import subprocess
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
 import yaml
-from harness import Figure, record, robocore
+from harness import Figure, copy_built_project, record, robocore
 
 HEARD = "I heard: hello from talker #"
 WAYS = ("replace (run)", "SIGKILL + start", "crash, restart policy", "docker restart")
@@ -48,8 +47,7 @@ def one_host_copy(source: Path, scratch: Path, name: str, *, domain: int, port: 
     """A copy of the built project ``source`` named ``name``: one host, transport shm, one discovery server on
     ``port``, ROS domain ``domain``."""
     root = scratch / name
-    subprocess.run(["rsync", "-a", "--delete", "--exclude", ".robocore/test-runs", f"{source}/", f"{root}/"],
-                   check=True)
+    copy_built_project(source, root)
     data = yaml.safe_load((root / "robot.yaml").read_text())
     host = data["hosts"][0]["name"]
     data["hosts"] = data["hosts"][:1]
