@@ -8,8 +8,9 @@ from nothing they take about ten minutes, most of it the arm64 root's bootstrap 
 (:mod:`official_standins`), and its project's base and talker image (minutes more under qemu, off the suites'
 critical path).
 
-Run as a script (``python integration/arm64_project.py``), this module makes those images in a throw-away copy of
-the project (``prepare-base`` and ``stage``, which contact no robot host), holding :data:`LOCK` while it works.
+Run as a script (``python integration/arm64_project.py``), this module makes those images in throw-away copies of
+the projects (``prepare-base`` and ``stage``, which contact no robot host; for the fleet's copy, kept at
+:data:`FLEET_BUILT`, ``build`` too), holding :data:`LOCK` while it works.
 ``scripts/test`` starts it in the background before the lint and unit sessions, and the integration suites'
 conftest starts it when nobody has (a plain ``pytest integration``): the other suites run meanwhile, on the other
 core. The arm64 suites run last and wait for :data:`LOCK` (:func:`wait_for_images`) before their own
@@ -57,6 +58,13 @@ def init_project(root: Path, hosts: Sequence[Mapping[str, object]], *, talker_ho
     for comp in data["components"]:
         comp["runs_on"] = talker_host if comp["name"] == "talker" else server_host
     (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+
+
+def init_fleet_project(root: Path, ip: str) -> None:
+    """The fleet model of the Swarm suite's arm64 robot at ``root``: :func:`init_project` with one arm64 host,
+    ``robot`` at ``ip``, running the master, the talker and the listener."""
+    init_project(root, [{"name": "robot", "ip": ip, "user": "root", "arch": "arm64"}], talker_host="robot",
+                 server_host="robot")
 
 
 def _holding(path: Path) -> int:
@@ -122,8 +130,7 @@ def make_images() -> None:
         shutil.rmtree(FLEET_BUILT, ignore_errors=True)
         FLEET_BUILT.mkdir(mode=0o700)
         fleet = FLEET_BUILT / NAME
-        init_project(fleet, [{"name": "robot", "ip": NO_HOSTS[1], "user": "root", "arch": "arm64"}],
-                     talker_host="robot", server_host="robot")
+        init_fleet_project(fleet, NO_HOSTS[1])
         for step in ("prepare-base", "stage", "build"):
             _step(fleet, step)
         (FLEET_BUILT / "built").write_text("")
@@ -131,7 +138,12 @@ def make_images() -> None:
 
 def built_fleet_project() -> Path | None:
     """The all-arm64 copy of the project this script built, when its last run got that far, else None."""
-    return FLEET_BUILT / NAME if (FLEET_BUILT / "built").is_file() and wait_for_images(0) is None else None
+    try:
+        ours = FLEET_BUILT.lstat().st_uid == os.getuid() and not FLEET_BUILT.is_symlink()
+    except FileNotFoundError:
+        return None
+    done = ours and (FLEET_BUILT / "built").is_file() and wait_for_images(0) is None
+    return FLEET_BUILT / NAME if done else None
 
 
 def _step(root: Path, step: str, *extra: str) -> None:

@@ -303,7 +303,7 @@ def test_v2_reaches_every_robot_and_an_offline_one_converges_alone(fleets: Swarm
         code, out = container.exec_run(["sh", "-c", "docker ps -q --filter label=com.docker.swarm.service.name="
                                         f"{SOLO}-{OFFLINE}-talker | xargs docker inspect --format "
                                         "'{{.Config.Image}} {{.State.Status}}'"])
-        v1 = json.loads((fleets.roots[SOLO] / ".robocore/releases/v1.json").read_text())["components"]["talker"]
+        v1 = record(fleets.roots[SOLO], "v1")["components"]["talker"]
         assert (code, out.decode().split()) == (0, [v1["amd64"], "running"]), out
     finally:
         cut(fleets.hosts, offline, False)
