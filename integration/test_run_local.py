@@ -2,7 +2,8 @@
 
 Controls: idempotency is checked by container IDs (a recreated container has a new ID), the changed
 component is the only one with a new ID; an unreachable host is reported by name while the
-reachable one is deployed; a missing install tree is refused before anything starts.
+reachable one is deployed; a missing install tree is refused before anything starts; a discovery server's
+graceful stop is set against the same server without Docker's init.
 """
 
 from __future__ import annotations
@@ -19,7 +20,15 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 import yaml
-from deploy_helpers import HEARD, compose_command, copy_project, log_lines, remove_project_containers, wait_for
+from deploy_helpers import (
+    HEARD,
+    compose_command,
+    copy_project,
+    free_udp_port,
+    log_lines,
+    remove_project_containers,
+    wait_for,
+)
 
 if TYPE_CHECKING:
     from conftest import RobocoreCli
@@ -275,6 +284,52 @@ def test_connect_opens_an_interactive_shell_in_a_tty(running: Path, run_robocore
     assert "tty=/dev/pts/" in text and "super=TRUE" in text, text
     # Sourcing the component's install tree puts it on AMENT_PREFIX_PATH (the echoed command itself has no match).
     assert re.search(r"prefix=\S*/robocore/install", text), f"the install tree is not sourced:\n{text}"
+
+
+def _stop(container: Any, timeout: int) -> tuple[float, int]:
+    """``docker stop -t timeout``: (seconds it took, the container's exit code)."""
+    started = time.monotonic()
+    container.stop(timeout=timeout)
+    seconds = time.monotonic() - started
+    container.reload()
+    return seconds, int(container.attrs["State"]["ExitCode"])
+
+
+def test_discovery_server_stops_gracefully_at_once(running: Path, docker_client: Any) -> None:
+    """`docker stop` of the discovery server ends in well under Docker's 10 s: the container's init passes SIGTERM on
+    and the server stops by itself (exit 0, not SIGKILL's 137). Started again, it serves the robot: after its restart
+    hold, a listener restarted after it hears the talker again. Control: the same server without the init ignores
+    SIGTERM (PID 1 without a handler) and is killed when the stop's timeout ends."""
+    from robocore.plan.containers import discovery_spec
+    from robocore.project import Project
+
+    server = docker_client.containers.get(f"{running.name}-discovery-0")
+    listener = docker_client.containers.get(f"{running.name}-listener")
+    assert server.attrs["HostConfig"]["Init"] is True
+    seconds, code = _stop(server, 10)
+    print(f"\nBENCH docker stop of a discovery server: {seconds:.2f} s, exit code {code}")
+    assert seconds < 3 and code == 0, f"stopped in {seconds:.1f} s with exit code {code} (137: SIGKILL)"
+    assert "Server shut down" in server.logs(tail=5).decode(errors="replace")
+    server.start()
+    listener.restart(timeout=2)  # a new participant: it can only find the talker through the restarted server
+    before = len(log_lines(listener, HEARD))
+    assert wait_for(lambda: len(log_lines(listener, HEARD)) > before, HEAR_WITHIN, interval=0.5), \
+        "a listener restarted after the server's restart heard nothing"
+
+    kwargs = discovery_spec(Project.load(running), 0).docker_kwargs()
+    port = str(yaml.safe_load((running / "robot.yaml").read_text())["discovery"]["servers"][0]["port"])
+    free = str(free_udp_port())
+    kwargs.update(name=f"{running.name}-discovery-noinit", init=False, mounts=[],
+                  command=[free if arg == port else arg for arg in kwargs["command"]])
+    assert free in kwargs["command"]
+    control = docker_client.containers.create(**kwargs)
+    try:
+        control.start()
+        assert wait_for(lambda: b"Server is running" in control.logs(), 30), control.logs().decode(errors="replace")
+        seconds, code = _stop(control, 3)
+    finally:
+        control.remove(force=True)
+    assert seconds >= 2.5 and code == 137, f"without the init: stopped in {seconds:.1f} s with exit code {code}"
 
 
 def test_compose_up_runs_the_robot_and_run_keeps_it(project_copy: Any, docker_client: Any, run_robocore: RobocoreCli,

@@ -195,6 +195,21 @@ def test_discovery_spec() -> None:
     assert spec.env["ROS_DISCOVERY_SERVER"] == ";192.168.1.10:11811"  # linked to server 1, own slot empty
 
 
+def test_every_robot_container_runs_under_docker_init() -> None:
+    """A process as PID 1 without a SIGTERM handler of its own ignores `docker stop` and is killed after the timeout:
+    components and discovery servers alike get Docker's init (run and compose). The Fast DDS server's asks it to
+    signal the whole process group, so that SIGTERM reaches the server behind the ``fastdds`` tool's wrappers,
+    which the script then lets ignore it; a component's init signals its child alone."""
+    p = project(discovery={"servers": [{"host": "pi", "port": 12000}, {"host": "dev"}]})
+    specs = host_specs(p, "dev") + host_specs(p, "pi")
+    assert {s.role for s in specs} == {naming.ROLE_COMPONENT, naming.ROLE_DISCOVERY}
+    for spec in specs:
+        assert spec.docker_kwargs()["init"] is True and spec.compose_service()["init"] is True, spec.name
+        assert (naming.INIT_SIGNALS_GROUP in spec.env) == (spec.role == naming.ROLE_DISCOVERY), spec.name
+    assert dds.DISCOVERY_SCRIPT.endswith(f'if [ -n "${{{naming.INIT_SIGNALS_GROUP}:-}}" ]; then trap "" TERM; fi; '
+                                         'exec "$@"')  # after the restart hold: its sleep still ends on SIGTERM
+
+
 def test_tag_uses_the_registry() -> None:
     p = project(registry="registry.local:5000")
     assert component_spec(p, p.robot.component("talker"), tag="v1.2").image == "registry.local:5000/myrobot-talker:v1.2"

@@ -100,6 +100,14 @@ def test_the_server_process_is_roscore_on_the_masters_port() -> None:
     assert process.state_dir is None  # the master keeps nothing across restarts
 
 
+def test_the_master_runs_under_docker_init() -> None:
+    """roscore (roslaunch) handles SIGTERM itself and stops its children: the init passes `docker stop` on to it
+    alone, as for a component (no process-group signalling)."""
+    spec = containers.discovery_spec(Project(root=Path("/srv/r1"), robot=robot()), 0)
+    assert spec.docker_kwargs()["init"] is True and spec.compose_service()["init"] is True
+    assert naming.INIT_SIGNALS_GROUP not in spec.env
+
+
 def test_a_moved_master_runs_on_its_own_port_and_advertises_its_own_host() -> None:
     process = master(discovery={"servers": [{"host": "nuc", "port": 12000}]}).server_process(0)
     assert process.command == ("roscore", "-p", "12000")

@@ -117,7 +117,7 @@ class ContainerSpec:
             "network_mode": self.network_mode,
             "restart_policy": {"Name": "" if self.restart == "no" else self.restart},
             "privileged": self.privileged,
-            "init": self.role == naming.ROLE_COMPONENT,
+            "init": self.role in naming.MANAGED_ROLES,  # SIGTERM reaches a process without a handler of its own
         }
         if self.entrypoint is not None:
             kwargs["entrypoint"] = list(self.entrypoint)
@@ -159,7 +159,7 @@ class ContainerSpec:
         service["network_mode"] = self.network_mode
         if self.ipc_mode:
             service["ipc"] = self.ipc_mode
-        if self.role == naming.ROLE_COMPONENT:
+        if self.role in naming.MANAGED_ROLES:
             service["init"] = True
         if self.depends_on:
             service["depends_on"] = list(self.depends_on)

@@ -30,6 +30,9 @@ CONTAINER_DDS = "/robocore/dds"  # generated DDS profiles
 ENTRYPOINT = "/robocore/entrypoint.sh"  # sources ROS and the install tree, then execs
 #: The interpreter the entrypoint gives colcon's setup scripts for their helper (isolated, without site).
 SETUP_PYTHON = "/robocore/setup-python"
+#: Set in a container's environment, Docker's init (tini, ``init: true``) sends the signals it passes on (``docker
+#: stop``'s SIGTERM) to its child's whole process group rather than to the child alone; a pod has no such init.
+INIT_SIGNALS_GROUP = "TINI_KILL_PROCESS_GROUP"
 
 
 #: A Docker image tag: a letter, digit or '_', then up to 127 letters, digits, '_', '.' or '-'.

@@ -44,7 +44,7 @@ from robocore.plan.discovery.base import (
 )
 from robocore.plan.discovery.fastdds_transports import TransportSettings, transport_settings
 from robocore.plan.discovery.replacements import rotate_profile
-from robocore.plan.naming import ENTRYPOINT
+from robocore.plan.naming import ENTRYPOINT, INIT_SIGNALS_GROUP
 
 RMW = "rmw_fastrtps_cpp"
 
@@ -362,9 +362,10 @@ def client_xml(robot: Robot, *, transport: Transport | None = None, user_port_of
 #: In a discovery server container: the state volume (a marker that the server ran before) and its profile.
 DISCOVERY_STATE = "/robocore/discovery"
 DISCOVERY_PROFILE = "/tmp/robocore-discovery.xml"
-#: The discovery container's command (argv: this script, then ``fastdds discovery ...``). A restart (the
-#: marker exists in the state volume) waits ROBOCORE_DS_HOLD seconds first: see :func:`restart_hold_seconds`.
-#: Fixed text: the values come from the environment, nothing is interpolated.
+#: The discovery container's command (argv: this script, then ``fastdds discovery ...``). A restart (the marker
+#: exists in the state volume) waits ROBOCORE_DS_HOLD s first (:func:`restart_hold_seconds`). The tool's wrappers
+#: (sh, Python) then ignore the SIGTERM Docker's init sends the whole group, and wait for the server's own clean
+#: stop (docs/design-notes.md, "A graceful stop: Docker's init"). Fixed text: values come from the environment.
 DISCOVERY_SCRIPT = (
     f'marker="{DISCOVERY_STATE}/started"; '
     'if [ -e "$marker" ] && [ "${ROBOCORE_DS_HOLD:-0}" -gt 0 ]; then '
@@ -372,7 +373,7 @@ DISCOVERY_SCRIPT = (
     'the previous instance"; sleep "$ROBOCORE_DS_HOLD"; fi; '
     'touch "$marker"; '
     f'printf "%s\\n" "$ROBOCORE_DS_XML" > {DISCOVERY_PROFILE}; '
-    'exec "$@"'
+    f'if [ -n "${{{INIT_SIGNALS_GROUP}:-}}" ]; then trap "" TERM; fi; exec "$@"'
 )
 
 #: What a discovery server container logs once it serves (Fast DDS 2.x, 3.x) or while it holds after a restart.
@@ -387,6 +388,7 @@ def server_process(robot: Robot, index: int, *, transport: Transport | None = No
     env = server_environment(robot, index, transport=transport)
     env["ROBOCORE_DS_XML"] = server_profile_xml(robot)
     env["ROBOCORE_DS_HOLD"] = str(restart_hold_seconds(robot))
+    env[INIT_SIGNALS_GROUP] = "1"  # a graceful stop reaches the server itself (see DISCOVERY_SCRIPT)
     command = ("sh", "-c", DISCOVERY_SCRIPT, "robocore-discovery", *server_command(robot, index),
                "-x", DISCOVERY_PROFILE)
     return ServerProcess(command=command, environment=env, state_dir=DISCOVERY_STATE)

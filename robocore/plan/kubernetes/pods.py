@@ -14,7 +14,9 @@ The container itself (image, command, environment, IPC, devices, GPUs, privilege
 * **Shared memory** as robot.yaml says: ``hostIPC`` when ``transport: shm`` (what ``ipc: host`` is
   under Docker), none with ``transport: udp`` (the DDS profiles then keep data off shared memory).
 * **The process tree.** ``shareProcessNamespace`` makes the pod's pause process PID 1, which reaps
-  orphans and lets the node handle SIGTERM, as Docker's ``--init`` does for robocore's components.
+  orphans and lets the node (or discovery server) handle SIGTERM, as Docker's ``--init`` does for robocore's
+  containers. The pause process signals no process group: the variable that asks Docker's init to do so
+  (``naming.INIT_SIGNALS_GROUP``) is left out, and a stopped discovery server's tool ends at once, server with it.
 * **ROS 1**: ``ROS_IP`` is the node's address (``status.hostIP``), for the TCPROS callbacks.
 * **Volumes**: the install tree and the read-only project volumes are in the fleet release's image, so the pod
   mounts neither; a writable project volume is a folder under the host's mount root (made when missing), an
@@ -79,6 +81,7 @@ def escape(text: str) -> str:
 
 def _environment(spec: ContainerSpec, context: PodContext) -> list[dict[str, Any]]:
     env = dict(spec.environment)
+    env.pop(naming.INIT_SIGNALS_GROUP, None)  # no such init in a pod (module docstring)
     ros1_address = env.get("ROS_HOSTNAME") in context.advertised_names
     if ros1_address:
         for key in ADVERTISED:
@@ -154,7 +157,7 @@ def daemon_set(name: str, spec: ContainerSpec, context: PodContext) -> dict[str,
     }
     if spec.ipc_mode == "host":
         pod["hostIPC"] = True
-    if spec.role == naming.ROLE_COMPONENT:
+    if spec.role in naming.MANAGED_ROLES:
         pod["shareProcessNamespace"] = True
     if spec.gpus:
         pod["runtimeClassName"] = "nvidia"
