@@ -12,6 +12,12 @@ death, for the restart policy) until the listener logs a greeting of the new tal
   starts the container again (its first restart is at once; the rounds are 11 s apart, so it is always the first);
 - ``docker restart``: a graceful stop and start.
 
+Every way is timed from the same moment: the new talker process's start, as Docker records it (the container's
+``State.StartedAt``), to the wall-clock time the listener's log shows the greeting. Timing from the command
+instead would count ``docker start``'s own API round trip (0.1-0.3 s) for one way and not for a ``run`` that
+returns after its start. For the crash the figure from the kill is shown too: it adds Docker's own reaction
+(noticing the exit, applying the policy).
+
 The ways alternate round after round, so they see the same load; the ratio is each way's median over the
 replace's. The machine is shared: read the ratios.
 
@@ -24,6 +30,7 @@ replace's. The machine is shared: read the ratios.
 from __future__ import annotations
 
 import argparse
+import datetime
 import math
 import os
 import shutil
@@ -82,20 +89,31 @@ class Deployed:
         robocore(self.root, "down", "--quiet", check=False)
 
 
-def heard_after(robot: Deployed, mark: int, since: float, timeout: float = 30.0) -> float:
-    """Seconds from ``since`` (monotonic) until the listener logged, after its first ``mark`` greetings, one of a
-    new talker (its count started again: not above the last before) (nan: never). A greeting the old talker sent
-    just before its end, logged late, is not one: its number is above the last."""
+def started_at(container: Any) -> float:
+    """The wall-clock time (epoch seconds) Docker recorded for the container's last start."""
+    container.reload()
+    stamp = container.attrs["State"]["StartedAt"]  # RFC 3339 with nanoseconds: 2026-11-28T15:44:07.123456789Z
+    whole, _, fraction = stamp.rstrip("Z").partition(".")
+    moment = datetime.datetime.fromisoformat(whole).replace(tzinfo=datetime.timezone.utc)
+    return moment.timestamp() + float(f"0.{fraction or 0}")
+
+
+def heard_at(robot: Deployed, mark: int, timeout: float = 30.0) -> float:
+    """The wall-clock time at which the listener had logged, after its first ``mark`` greetings, one of a new
+    talker (its count started again: not above the last before) (nan: never). A greeting the old talker sent just
+    before its end, logged late, is not one: its number is above the last."""
     last = robot.greetings()[mark - 1] if mark else None
-    while time.monotonic() < since + timeout:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
         if any(last is None or n <= last for n in robot.greetings()[mark:]):
-            return time.monotonic() - since
+            return time.time()
         time.sleep(0.02)
     return float("nan")
 
 
-def come_back(robot: Deployed, way: str) -> float:
-    """The talker brought back ``way``; seconds until heard again."""
+def come_back(robot: Deployed, way: str) -> tuple[float, float]:
+    """The talker brought back ``way``: seconds from its new process's start until heard again, and from the
+    request (the command, or for the crash the kill) until heard again."""
     container = robot.container("talker")
     if way == "replace (run)":
         robot_file = robot.root / "robot.yaml"
@@ -104,26 +122,27 @@ def come_back(robot: Deployed, way: str) -> float:
         talker["environment"] = {"BENCH_ROUND": str(time.monotonic())}  # a changed spec: run replaces it
         robot_file.write_text(yaml.safe_dump(data, sort_keys=False))
         mark, listener = len(robot.greetings()), robot.container("listener").id
+        asked = time.time()
         done = robocore(robot.root, "run")
-        started = time.monotonic()  # run returns once the new container started
         if robot.container("listener").id != listener:  # run replaced it too: a new log
             raise SystemExit(f"run replaced the listener as well:\n{done.stdout[-2000:]}")
     elif way == "SIGKILL + start":
         container.kill()
         time.sleep(0.3)
         mark = len(robot.greetings())
-        started = time.monotonic()
+        asked = time.time()
         container.start()
     elif way == "crash, restart policy":
         container.reload()
         mark = len(robot.greetings())
-        started = time.monotonic()
+        asked = time.time()
         os.kill(container.attrs["State"]["Pid"], signal.SIGKILL)  # not through Docker: the policy applies
     else:
         mark = len(robot.greetings())
         container.restart(timeout=5)
-        started = time.monotonic()
-    return heard_after(robot, mark, started)
+        asked = time.time()  # the stop's seconds are not the way back's
+    heard = heard_at(robot, mark)
+    return heard - started_at(robot.container("talker")), heard - asked
 
 
 def main() -> int:
@@ -137,16 +156,19 @@ def main() -> int:
     scratch = Path(tempfile.mkdtemp(prefix="robocore-bench-restarts-"))
     robot: Deployed | None = None
     times: dict[str, list[float]] = {}
+    asked: dict[str, list[float]] = {}
     try:
         robot = Deployed(one_host_copy(args.project.resolve(), scratch, "bench-restarts", domain=131, port=11931),
                          client)
-        if math.isnan(heard_after(robot, 0, time.monotonic(), 60)):
+        if math.isnan(heard_at(robot, 0, 60)):
             raise SystemExit("the listener never heard the talker")
         for n in range(args.rounds):
             for way in WAYS:
-                took = come_back(robot, way)
+                took, since_asked = come_back(robot, way)
                 times.setdefault(way, []).append(took)
-                print(f"round {n + 1} {way:24} {took:.2f} s", flush=True)
+                asked.setdefault(way, []).append(since_asked)
+                print(f"round {n + 1} {way:24} {took:.2f} s from its start, {since_asked:.2f} s from the request",
+                      flush=True)
                 time.sleep(SPACING)
     finally:
         if robot is not None:
@@ -154,14 +176,17 @@ def main() -> int:
         shutil.rmtree(scratch, ignore_errors=True)
     reference = statistics.median(times[WAYS[0]])
     figures = []
-    print(f"\n{'way':24} {'median s':>9} {'max s':>6} {'x replace':>9}")
+    print(f"\n{'way':24} {'median s':>9} {'max s':>6} {'x replace':>9} {'from request':>12}")
     for way in WAYS:
         median, worst = statistics.median(times[way]), max(times[way])
-        print(f"{way:24} {median:9.2f} {worst:6.2f} {median / reference:9.2f}")
-        figures.append(Figure(f"{way}: heard again (median)", round(median, 2), "s", goal="< 1 s",
+        requested = statistics.median(asked[way])
+        print(f"{way:24} {median:9.2f} {worst:6.2f} {median / reference:9.2f} {requested:12.2f}")
+        figures.append(Figure(f"{way}: heard again after its start (median)", round(median, 2), "s", goal="< 1 s",
                               ratio=round(median / reference, 2), ratio_of="x replace",
                               met=median < 1.0 and worst <= 2.0,
-                              detail=f"max {worst:.2f} s; rounds {' '.join(f'{t:.2f}' for t in times[way])}"))
+                              detail=f"max {worst:.2f} s; rounds {' '.join(f'{t:.2f}' for t in times[way])}; "
+                                     f"from the {'kill' if 'crash' in way else 'command'}: median {requested:.2f} s, "
+                                     f"rounds {' '.join(f'{t:.2f}' for t in asked[way])}"))
     record("restarts", figures, goals=["each way < 1 s median, none over 2 s"],
            notes=[f"{args.rounds} rounds per way, the ways alternating, {SPACING:.0f} s apart"])
     return 0
