@@ -3,6 +3,7 @@ why in one line; the loop goes on watching."""
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from pathlib import Path
@@ -51,6 +52,15 @@ def start(tmp_path: Path, rounds: int, settle: float) -> threading.Thread:
     return thread
 
 
+def save(path: Path, text: str) -> None:
+    """Save ``path`` as editors do, atomically: the new text goes to a file beside the watched folder, then is renamed
+    over ``path``. A write in place (truncate, then write) could be seen half-done: a writer descheduled between the
+    two for longer than the settle time leaves the loop an empty file that has stopped changing, so it deploys that."""
+    staged = path.parent.parent / f".{path.name}.saving"
+    staged.write_text(text)
+    os.replace(staged, path)
+
+
 def wait_for(condition: Any, what: str, timeout: float = 30.0) -> None:
     deadline = time.monotonic() + timeout
     while not condition():
@@ -86,10 +96,10 @@ def test_a_failed_build_deploys_nothing_says_why_and_the_loop_goes_on(
     robot.install(monkeypatch, [tmp_path / "ws"])
     thread = start(tmp_path, rounds=2, settle=0.05)
     wait_for(lambda: len(robot.steps) == 3, "the first deploy")
-    source.write_text("broken")
+    save(source, "broken")
     wait_for(lambda: len(robot.built) == 2, "the failing build")
     wait_for(lambda: any(line.startswith("dev: build failed") for line in thread.said), "the failure line")  # type: ignore[attr-defined]
-    source.write_text("fixed")
+    save(source, "fixed")
     thread.join(timeout=60)
     assert not thread.is_alive()
     assert robot.steps == ["build", "sync", "run", "build", "build", "sync", "run"]  # nothing after the failed build
