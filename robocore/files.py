@@ -44,7 +44,8 @@ SHARED_DIR = 0o755
 WRITTEN_RECORD = ".robocore-written"
 
 
-def _read_umask() -> int:
+def read_umask() -> int:
+    """This process's umask, read without changing it (``/proc/self/status``; elsewhere set and restored once)."""
     try:
         with open("/proc/self/status", encoding="ascii", errors="replace") as status:
             for line in status:
@@ -58,7 +59,7 @@ def _read_umask() -> int:
 
 
 #: The process's umask when robocore started.
-UMASK = _read_umask()
+UMASK = read_umask()
 #: Mode of every file robocore writes under :data:`STATE_DIR` unless it is :data:`SHARED` (whatever the umask).
 PRIVATE = 0o600
 #: Mode of the files robocore writes under :data:`STATE_DIR` that a process of another user reads: the DDS

@@ -148,6 +148,30 @@ def private_imports(package: Path) -> list[str]:
     return wrong
 
 
+def private_uses(paths: list[Path], package: Path = PACKAGE) -> list[str]:
+    """Uses of a robocore module's ``_private`` name from another file: ``from robocore.m import _name``, and
+    ``m._name`` where ``m`` is a robocore module imported by name (``from robocore.commands import run``)."""
+    known = {module_name(p, package) for p in package.rglob("*.py")}
+    wrong = []
+    for path in paths:
+        tree = ast.parse(path.read_text())
+        where = path.relative_to(package.parent)
+        modules = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                modules.update(a.asname for a in node.names if a.name.startswith("robocore") and a.asname)
+            elif isinstance(node, ast.ImportFrom) and not node.level and (node.module or "").startswith("robocore"):
+                for alias in node.names:
+                    if f"{node.module}.{alias.name}" in known:
+                        modules.add(alias.asname or alias.name)
+                    elif alias.name.startswith("_") and not alias.name.startswith("__"):
+                        wrong.append(f"{where}:{node.lineno}: imports {node.module}.{alias.name}")
+        wrong += [f"{where}:{node.lineno}: uses {node.value.id}.{node.attr}" for node in ast.walk(tree)
+                  if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+                  and node.value.id in modules and node.attr.startswith("_") and not node.attr.startswith("__")]
+    return wrong
+
+
 def test_there_is_no_import_cycle() -> None:
     cycles = cycles_in(PACKAGE)
     assert cycles == [], "import cycles:\n" + "\n".join(" -> ".join(c) for c in cycles)
@@ -160,6 +184,13 @@ def test_imports_go_down_the_layers() -> None:
 
 def test_no_module_imports_another_modules_private_name() -> None:
     wrong = private_imports(PACKAGE)
+    assert wrong == [], "\n".join(wrong)
+
+
+def test_no_test_suite_or_benchmark_reaches_into_a_private_name() -> None:
+    folders = [PACKAGE.parent / name for name in ("robocore", "tests", "integration", "bench")]
+    files = [path for folder in folders for path in sorted(folder.rglob("*.py"))]
+    wrong = private_uses(files)
     assert wrong == [], "\n".join(wrong)
 
 
@@ -183,6 +214,9 @@ def test_the_checks_see_a_planted_cycle_an_upward_import_and_a_private_name(tmp_
     assert cycles_in(fake) == [["robocore.commands.b", "robocore.plan.a", "robocore.commands.b"]]
     assert upward_imports(fake) == ["robocore/plan/a.py:2: robocore.plan.a imports robocore.commands.b (a layer above)"]
     assert private_imports(fake) == ["robocore/commands/b.py:1: imports robocore.plan.a._hidden"]
+    (fake / "commands" / "d.py").write_text("from robocore.plan import a\na._hidden()\na.public()\n")
+    assert private_uses([fake / "commands" / "b.py", fake / "commands" / "d.py"], fake) == [
+        "robocore/commands/b.py:1: imports robocore.plan.a._hidden", "robocore/commands/d.py:2: uses a._hidden"]
 
 
 def test_a_support_module_that_imports_a_task_module_is_caught(tmp_path: Path) -> None:

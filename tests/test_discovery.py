@@ -334,7 +334,7 @@ def test_a_replaced_node_gets_the_next_profile_after_its_predecessors_and_the_sa
     old_env = {**spec.env, **{n: f"/robocore/dds/{old_profile}" for n in fastdds.PROFILE_VARIABLES}}
     old = FakeContainer(attrs={"Config": {"Env": [f"{k}={v}" for k, v in old_env.items()]}})
     client = FakeDocker()
-    run._apply(client, Action("replace", spec.name, "new image"), spec, old,  # type: ignore[arg-type]
+    run.apply_action(client, Action("replace", spec.name, "new image"), spec, old,  # type: ignore[arg-type]
                project.robot.hosts[0], report=Reporter(quiet=True), kind=kind, ready_timeout=run.SERVER_READY_TIMEOUT)
     [made] = client.containers.created
     assert old.removed and made["environment"]["FASTDDS_DEFAULT_PROFILES_FILE"] == f"/robocore/dds/{new_profile}"

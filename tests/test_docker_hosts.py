@@ -116,15 +116,15 @@ def test_layer_filter_drops_only_layers_the_host_has_and_keeps_the_rest_byte_for
     import io
     import tarfile
 
-    from robocore.adapters.image_delivery import _without_layers
+    from robocore.adapters.image_delivery import without_layers
 
     base, top = b"B" * 3_000_000, b"T" * 1000
     long_name = "x" * 150 + "/layer.tar"  # needs a pax header
     raw = _tar({"a/layer.tar": base, long_name: top, "manifest.json": b"[]", "a/VERSION": b"1.0"})
     chunks = [raw[i:i + 7777] for i in range(0, len(raw), 7777)]
-    assert b"".join(_without_layers(iter(chunks), {"sha256:" + "0" * 64})) == raw
+    assert b"".join(without_layers(iter(chunks), {"sha256:" + "0" * 64})) == raw
     have = {"sha256:" + hashlib.sha256(base).hexdigest()}
-    out = b"".join(_without_layers(iter(chunks), have))
+    out = b"".join(without_layers(iter(chunks), have))
     with tarfile.open(fileobj=io.BytesIO(out)) as tar:
         names = tar.getnames()
         assert tar.extractfile(long_name).read() == top  # type: ignore[union-attr]
@@ -201,5 +201,5 @@ def test_a_delivered_image_id_is_not_asked_for_again() -> None:
     assert len(known) >= 2  # the component's image and the discovery server's
     remote.asked.clear()
     local.asked.clear()
-    ids = run._image_ids(remote, local, specs, project, host, dry_run=False, known=known)  # type: ignore[arg-type]
+    ids = run.host_image_ids(remote, local, specs, project, host, dry_run=False, known=known)  # type: ignore[arg-type]
     assert ids == known and remote.asked == [] and local.asked == []

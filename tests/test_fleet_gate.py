@@ -13,7 +13,7 @@ import pytest
 
 from robocore.adapters import swarm
 from robocore.commands import fleet_rollout
-from robocore.commands.fleet_rollout import FAILED, HEALTHY, Gate, _Change
+from robocore.commands.fleet_rollout import FAILED, HEALTHY, Change, Gate
 from robocore.commands.fleet_swarm import FleetProject
 from robocore.commands.support.context import Options
 from robocore.config.fleet import parse_fleet_text
@@ -86,11 +86,11 @@ def gate(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[Gate, FleetPr
     return the_gate, fleet_project, clock, states
 
 
-def changes(fleet_project: FleetProject, clock: Clock) -> list[_Change]:
+def changes(fleet_project: FleetProject, clock: Clock) -> list[Change]:
     out = []
     for robot in ("r1", "r2"):
         specs = plan.robot_services(fleet_project.project, robot, fleet_project.instances[robot], RELEASE)
-        out.append(_Change(robot=robot, wave="half", release="v2", specs=specs, before={s.name: set() for s in specs},
+        out.append(Change(robot=robot, wave="half", release="v2", specs=specs, before={s.name: set() for s in specs},
                            started=clock.now, deadline=clock.now + fleet_project.fleet.rollout.timeouts.robot))
     return out
 
@@ -123,7 +123,7 @@ def test_without_a_wave_deadline_only_the_robots_own_timeout_applies(gate: Any) 
     assert all(c.reason.startswith("not running after 1000 s") for c in wave), [c.reason for c in wave]
 
 
-def _ended_probe(gate: Any, monkeypatch: pytest.MonkeyPatch, state: str, code: int, logs: list[str]) -> _Change:
+def _ended_probe(gate: Any, monkeypatch: pytest.MonkeyPatch, state: str, code: int, logs: list[str]) -> Change:
     """r1's change with a probe that has ended in ``state`` with exit ``code``; each read of its output through the
     manager gives the next of ``logs`` (the last one from then on)."""
     _, fleet_project, clock, _ = gate
@@ -141,11 +141,11 @@ def test_a_probe_whose_output_comes_late_is_read_again(gate: Any, monkeypatch: p
     the_gate, _, clock, _ = gate
     missing = '{"ok": false, "missing": ["/listener"], "silent": []}'
     change = _ended_probe(gate, monkeypatch, "failed", 1, ["", missing])
-    the_gate._probe(change, clock.now)  # exited 1: no grace, and its output says why when there is one
+    the_gate.probe(change, clock.now)  # exited 1: no grace, and its output says why when there is one
     assert (change.verdict, change.reason) == (FAILED, "the health probe printed no verdict (failed)")
     change = _ended_probe(gate, monkeypatch, "complete", 0, ["", "", '{"ok": true}'])
     for _ in range(3):
-        the_gate._probe(change, clock.now)
+        the_gate.probe(change, clock.now)
         clock.sleep(1)
     assert change.verdict == HEALTHY
 
@@ -157,7 +157,7 @@ def test_a_probe_that_exited_0_with_no_output_passes_after_the_wait(gate: Any, m
     change = _ended_probe(gate, monkeypatch, "complete", 0, [""])
     started = clock.now
     while change.verdict is None:
-        the_gate._probe(change, clock.now)
+        the_gate.probe(change, clock.now)
         clock.sleep(0.5)
     assert change.verdict == HEALTHY
     assert clock.now - started >= fleet_rollout.PROBE_LOG_WAIT

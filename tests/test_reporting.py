@@ -77,7 +77,7 @@ def test_fail_prints_the_results_so_far_and_the_problems(capsys: pytest.CaptureF
 
 def test_logs_follow_json_is_json_lines_then_the_envelope(capsys: pytest.CaptureFixture[str]) -> None:
     report = Reporter("logs", json=True)
-    logs._follow(report, [("main", "talker", FakeContainer([b"hello\n", b"again\n"]))], 6, 10)
+    logs.follow_logs(report, [("main", "talker", FakeContainer([b"hello\n", b"again\n"]))], 6, 10)
     report.finish()
     lines = capsys.readouterr().out.splitlines()
     docs = [json.loads(line) for line in lines]  # every line is one object
@@ -89,6 +89,6 @@ def test_logs_follow_json_is_json_lines_then_the_envelope(capsys: pytest.Capture
 def test_logs_follow_without_json_prints_prefixed_lines(capsys: pytest.CaptureFixture[str]) -> None:
     """Negative control: the same stream for people is text, not JSON."""
     report = Reporter("logs")
-    logs._follow(report, [("main", "talker", FakeContainer([b"hello\n"]))], 6, 10)
+    logs.follow_logs(report, [("main", "talker", FakeContainer([b"hello\n"]))], 6, 10)
     report.finish()
     assert capsys.readouterr().out == "talker | hello\n"

@@ -179,7 +179,7 @@ def _stream(local: docker.DockerClient, remote: docker.DockerClient, image: Any,
     total = int(image.attrs.get("Size", 0))
     counter = _Counter()
     raw = image.save(chunk_size=1 << 20, named=name)
-    body = counter.wrap(_without_layers(raw, skip) if skip else raw)
+    body = counter.wrap(without_layers(raw, skip) if skip else raw)
     if not progress:
         _load(remote, body, name)
         return Delivery(name, "loaded", counter.sent)
@@ -282,7 +282,7 @@ def _member(reader: _Reader, count: int) -> Iterator[bytes]:
         yield block
 
 
-def _without_layers(chunks: Iterable[bytes], skip: set[str]) -> Iterator[bytes]:
+def without_layers(chunks: Iterable[bytes], skip: set[str]) -> Iterator[bytes]:
     """Re-stream a ``docker save`` tar, leaving out the layer tars whose diff ID is in ``skip``.
 
     A layer's diff ID is the sha256 of its uncompressed tar, so every regular member is hashed

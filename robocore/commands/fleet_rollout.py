@@ -60,7 +60,7 @@ class RobotOutcome:
 
 
 @dataclass
-class _Change:
+class Change:
     """A robot being changed and gated (the gate's state)."""
 
     robot: str
@@ -145,7 +145,7 @@ class Gate:
             self.scripts[name] = resources.read(name).decode()
         return self.scripts[name]
 
-    def run(self, changes: list[_Change], deadline: float | None = None) -> None:
+    def run(self, changes: list[Change], deadline: float | None = None) -> None:
         """Decide every change (healthy, failed or pending); a change still undecided at ``deadline`` (a
         ``time.monotonic()`` value: the wave's ``timeouts.wave``) fails as a failed gate does."""
         while any(c.verdict is None for c in changes):
@@ -161,13 +161,13 @@ class Gate:
             if any(c.verdict is None for c in changes):
                 time.sleep(POLL)
 
-    def _decide(self, change: _Change, verdict: str, reason: str = "") -> None:
+    def _decide(self, change: Change, verdict: str, reason: str = "") -> None:
         change.verdict, change.reason, change.ended = verdict, reason, time.monotonic()
         if change.probe is not None:
             swarm.remove_service(self.client, change.probe)
             change.probe = None
 
-    def _step(self, change: _Change, by_robot: dict[str, list[Any]]) -> None:
+    def _step(self, change: Change, by_robot: dict[str, list[Any]]) -> None:
         down = offline(change.robot, by_robot, self.fleet)
         if down:
             self._decide(change, PENDING, f"offline ({', '.join(down)}): Swarm starts it when it is back")
@@ -206,9 +206,11 @@ class Gate:
         if not self.health.nodes and not self.health.heard:
             self._decide(change, HEALTHY)
             return
-        self._probe(change, clock)
+        self.probe(change, clock)
 
-    def _probe(self, change: _Change, clock: float) -> None:
+    def probe(self, change: Change, clock: float) -> None:
+        """The first time, start the gate check's probe service on ``change``'s robot; after, once it has ended, decide
+        ``change`` healthy or failed by its verdict (its exit code when no verdict came)."""
         if change.probe is None:
             release = self.releases[change.release]
             left = max(change.deadline - clock - 5, 5)
@@ -254,17 +256,17 @@ def _list(value: object) -> list[object]:
 
 
 def _change(client: docker.DockerClient, fleet: FleetProject, robot: str, wave: str, release: plan.Release,
-            live: dict[str, swarm.ServiceInfo], health: str) -> _Change:
+            live: dict[str, swarm.ServiceInfo], health: str) -> Change:
     """Update ``robot``'s services to ``release`` (stop-first) and return the gate's state for it."""
     specs = plan.robot_services(fleet.project, robot, fleet.instances[robot], release)
     specs = [_labelled(s, release.version, live.get(s.name), health) for s in specs]
     before = _apply(client, specs)
     start = time.monotonic()
-    return _Change(robot=robot, wave=wave, release=release.version, specs=specs, before=before, started=start,
+    return Change(robot=robot, wave=wave, release=release.version, specs=specs, before=before, started=start,
                    deadline=start + fleet.fleet.rollout.timeouts.robot)
 
 
-def _outcome(change: _Change) -> RobotOutcome:
+def _outcome(change: Change) -> RobotOutcome:
     return RobotOutcome(robot=change.robot, wave=change.wave, release=change.release, verdict=change.verdict or "",
                         reason=change.reason, seconds=round((change.ended or time.monotonic()) - change.started, 1))
 
@@ -300,10 +302,10 @@ def _recorded_release(fleet: FleetProject, robot: str, live: dict[str, swarm.Ser
     return plan.Release(version=versions.pop(), components=components, base=base)
 
 
-def _roll_back(client: docker.DockerClient, fleet: FleetProject, changes: list[_Change], gate: Gate,
-               live: dict[str, swarm.ServiceInfo]) -> list[_Change]:
+def _roll_back(client: docker.DockerClient, fleet: FleetProject, changes: list[Change], gate: Gate,
+               live: dict[str, swarm.ServiceInfo]) -> list[Change]:
     """Return the robots of ``changes`` to the release they ran before (from ``live``, read before the change)."""
-    back: list[_Change] = []
+    back: list[Change] = []
     for change in changes:
         previous = _recorded_release(fleet, change.robot, live, previous=False)
         if previous is None:

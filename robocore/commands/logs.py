@@ -65,9 +65,9 @@ def logs(options: Options, *, component: str | None, follow: bool, tail: int) ->
     if not follow:
         for host, name, container in containers:
             for line in _lines(container.logs(tail=tail, stream=False)):
-                _emit(report, LogLine(name, host, line), width, stream=False)
+                emit_line(report, LogLine(name, host, line), width, stream=False)
     else:
-        _follow(report, containers, width, tail)
+        follow_logs(report, containers, width, tail)
     if failures:
         raise GroupError(failures, list(results))
 
@@ -84,7 +84,7 @@ def _lines(data: bytes | Iterator[bytes]) -> Iterator[str]:
         yield pending.decode(errors="replace")
 
 
-def _emit(report: Reporter, log: LogLine, width: int, *, stream: bool) -> None:
+def emit_line(report: Reporter, log: LogLine, width: int, *, stream: bool) -> None:
     """One log line behind its component's name, or (JSON) a result, streamed at once when following.
 
     The line is the container's own output: its colours (SGR sequences, which ROS logging uses) are
@@ -100,7 +100,9 @@ def _emit(report: Reporter, log: LogLine, width: int, *, stream: bool) -> None:
     sys.stdout.flush()
 
 
-def _follow(report: Reporter, containers: list[tuple[str, str, Any]], width: int, tail: int) -> None:
+def follow_logs(report: Reporter, containers: list[tuple[str, str, Any]], width: int, tail: int) -> None:
+    """Merge the live log streams of ``containers`` (host, name, container), each from its last ``tail`` lines,
+    printing each line as it comes (:func:`emit_line`) until every stream ends or the user interrupts."""
     report.streamed = True  # with JSON: JSON Lines, the envelope last
     lines: queue.Queue[LogLine | None] = queue.Queue()
 
@@ -121,4 +123,4 @@ def _follow(report: Reporter, containers: list[tuple[str, str, Any]], width: int
         if item is None:
             open_streams -= 1
         else:
-            _emit(report, item, width, stream=True)
+            emit_line(report, item, width, stream=True)

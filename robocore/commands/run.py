@@ -107,7 +107,7 @@ def _image_id(client: docker.DockerClient, ref: str) -> str | None:
         return None
 
 
-def _image_ids(
+def host_image_ids(
     client: docker.DockerClient, local: docker.DockerClient | None, specs: Sequence[ContainerSpec], project: Project,
     host: Host, *, dry_run: bool, known: dict[str, str] | None = None,
 ) -> dict[str, str]:
@@ -165,7 +165,7 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
             local = local_client(timeout=600)  # also streams images (docker save) to the host
             if not dry_run:
                 known = _deliver(client, local, specs, project, host, outcome, report=report)
-        image_ids = _image_ids(client, local, specs, project, host, dry_run=dry_run, known=known)
+        image_ids = host_image_ids(client, local, specs, project, host, dry_run=dry_run, known=known)
         containers = {c.name: c for c in managed_containers(client, project.name)}
         _check_name_conflicts(client, specs, containers, host)
         kind = discovery.for_robot(project.robot)
@@ -178,8 +178,8 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
         by_name = {s.name: s for s in specs}
         timeout = allowing_emulation(SERVER_READY_TIMEOUT, emulated=emulated)
         for stage in in_stages(actions, {s.name for s in specs if s.role == ROLE_DISCOVERY}):
-            each_or_first_error(stage, lambda a: _apply(client, a, by_name.get(a.name), containers.get(a.name), host,
-                                                        report=report, kind=kind, ready_timeout=timeout),
+            each_or_first_error(stage, lambda a: apply_action(client, a, by_name.get(a.name), containers.get(a.name),
+                                                              host, report=report, kind=kind, ready_timeout=timeout),
                                 limit=SIDE_BY_SIDE, name="robocore-start")
     finally:
         client.close()
@@ -221,8 +221,12 @@ def _check_name_conflicts(client: docker.DockerClient, specs: Sequence[Container
         other.remove(force=True)  # ours, but with another role (e.g. a leftover): recreate it
 
 
-def _apply(client: docker.DockerClient, action: Action, spec: ContainerSpec | None, container: Any, host: Host, *,
+def apply_action(client: docker.DockerClient, action: Action, spec: ContainerSpec | None, container: Any, host: Host, *,
            report: Reporter, kind: discovery.Discovery, ready_timeout: float) -> None:
+    """Carry out one planned ``action`` on ``host``: remove, keep, start, or (re)create the container of ``spec``.
+    A replaced node's container gets ``kind``'s successor environment (the next client profile after its
+    predecessor's) and keeps the spec's labels, so a later run keeps it; a created discovery server is waited for
+    (``ready_timeout``). Docker's refusals become one :class:`DockerError` line, with a hint where one helps."""
     from docker.errors import APIError
     from rich.markup import escape
 

@@ -64,7 +64,7 @@ def world(tmp_path: Path) -> Iterator[dict[str, object]]:
     history.parent.mkdir(parents=True)
     runs = [{"tag": "v0", "releases": {}}, {"tag": "v1", "releases": {}}]
     history.write_text(json.dumps({"host": "main", "runs": runs}))
-    warmup._record(root, [warmup.Endpoint("main", "robot", "10.99.0.1", 22)])  # the next command would warm it
+    warmup.record_warmed(root, [warmup.Endpoint("main", "robot", "10.99.0.1", 22)])  # the next command would warm it
     fake_bin = tmp_path / "bin"
     fake_bin.mkdir()
     for tool in ("ssh", "rsync", "git", "docker", "mmdebstrap"):

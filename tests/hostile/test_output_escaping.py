@@ -36,7 +36,7 @@ def test_log_lines_keep_their_colours_and_nothing_else() -> None:
 
 
 def test_logs_print_the_containers_colours_but_escape_the_rest(capsys: pytest.CaptureFixture[str]) -> None:
-    logs._emit(Reporter(), logs.LogLine(f"talk{TITLE}er", "rpi", f"{RED}hello\x1b[0m{CLEAR}"), 8, stream=True)
+    logs.emit_line(Reporter(), logs.LogLine(f"talk{TITLE}er", "rpi", f"{RED}hello\x1b[0m{CLEAR}"), 8, stream=True)
     out = capsys.readouterr().out
     assert out == f"talk\\x1b]0;pwned\\x07er | {RED}hello\x1b[0m\\x1b[2J\\x1b[H\x1b[0m\n"
 

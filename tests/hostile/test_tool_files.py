@@ -54,7 +54,7 @@ def mode(path: Path) -> int:
 def test_the_umask_is_read_without_changing_it() -> None:
     old = os.umask(0o027)
     try:
-        assert files._read_umask() == 0o027
+        assert files.read_umask() == 0o027
         assert os.umask(0o027) == 0o027  # still what it was
     finally:
         os.umask(old)

@@ -79,7 +79,7 @@ def warm_loaded(root: Path, endpoints: Sequence[Endpoint], argv: Sequence[str]) 
     if not wants_remote(argv):
         return
     warm(endpoints)
-    _record(root, endpoints)
+    record_warmed(root, endpoints)
 
 
 def warm_recorded(argv: Sequence[str], cwd: Path | None = None) -> None:
@@ -120,7 +120,8 @@ def _fingerprint(root: Path) -> list[int]:
     return [st.st_size, st.st_mtime_ns]
 
 
-def _record(root: Path, endpoints: Sequence[Endpoint]) -> None:
+def record_warmed(root: Path, endpoints: Sequence[Endpoint]) -> None:
+    """Record ``endpoints`` as the hosts warmed for the project at ``root``, so that the next command warms them."""
     from robocore.files import write_atomic
 
     try:
