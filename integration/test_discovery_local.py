@@ -9,8 +9,10 @@ were not the one carrying the messages:
 - with the generated shared-memory settings (host network + ipc host) data flows between
   containers of one host; the same pair with private IPC namespaces discovers the topic and
   receives nothing; the generated UDP-only settings work with private IPC;
-- the discovery server container is restarted and a restarted listener finds the talker again
-  (the seconds it takes are printed); without robocore's restart hold it never does (Fast DDS 2.x);
+- the discovery server container is SIGKILLed and started again (a crash, a power cut: it says no
+  goodbye) and a restarted listener finds the talker again (the seconds it take are printed); without
+  robocore's restart hold it never does (Fast DDS 2.x); a graceful restart (SIGTERM, under Docker's
+  init the server unregisters itself before it ends) needs no hold;
 - with two redundant servers, losing one still lets a restarted listener find the talker; with a
   single server lost, it finds nothing.
 """
@@ -139,13 +141,21 @@ def test_udp_transport_works_with_private_ipc(deployment: Any) -> None:
     assert wait_for(dep.heard, HEAR_WITHIN), "UDP-only listener heard nothing"
 
 
-def _restart_server_and_listener(dep: Deployment, timeout: float) -> float | None:
+def _restart_server_and_listener(dep: Deployment, timeout: float, *, graceful: bool = False) -> float | None:
     """Restart the server, then the listener (a new participant that can only find the talker through the
-    restarted server); return the seconds until it hears the talker, None if it does not within ``timeout``."""
+    restarted server); return the seconds until it hears the talker, None if it does not within ``timeout``.
+
+    The server is SIGKILLed and started again (it ends without a goodbye: what its restart hold is for), or with
+    ``graceful`` restarted by Docker (SIGTERM: it unregisters itself from its clients before it ends)."""
     assert wait_for(dep.heard, HEAR_WITHIN), "no messages before the restart"
     server, listener = dep.containers["discovery-0"], dep.containers["listener"]
     started = time.monotonic()
-    server.restart(timeout=2)
+    if graceful:
+        server.restart(timeout=10)
+        assert "shut down" in server.logs().decode(errors="replace"), "the server did not end cleanly on SIGTERM"
+    else:
+        server.kill()
+        server.start()
     listener.restart(timeout=2)
     # The old listener process is gone: every "I heard" line from now on is the new one's.
     before = len(dep.heard())
@@ -177,6 +187,20 @@ def test_restart_without_the_hold_never_recovers(deployment: Any) -> None:
     dep.start(specs["listener"])
     assert _restart_server_and_listener(dep, 40) is None, \
         "recovered without the hold: the hold may no longer be needed (check dds.restart_hold_seconds)"
+
+
+def test_a_graceful_restart_needs_no_hold(deployment: Any) -> None:
+    """The control's counterpart: the same server without its hold, restarted gracefully, says goodbye (it runs
+    under Docker's init, which passes SIGTERM on), so its clients drop it and take its next start at once."""
+    dep = deployment()
+    specs = dep.specs()
+    env = {**specs["discovery-0"].env, "ROBOCORE_DS_HOLD": "0"}
+    dep.start(replace(specs["discovery-0"], environment=tuple(sorted(env.items()))))
+    dep.start(specs["talker"])
+    dep.start(specs["listener"])
+    seconds = _restart_server_and_listener(dep, 40, graceful=True)
+    assert seconds is not None, "a graceful restart without the hold did not recover within 40 s"
+    print(f"\nBENCH graceful discovery-server restart, no hold -> restarted listener hears the talker: {seconds:.1f} s")
 
 
 def lose_server_0_and_restart_listener(dep: Any) -> int:
