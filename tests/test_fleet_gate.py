@@ -141,8 +141,18 @@ def test_a_probe_whose_output_comes_late_is_read_again(gate: Any, monkeypatch: p
     the_gate, _, clock, _ = gate
     missing = '{"ok": false, "missing": ["/listener"], "silent": []}'
     change = _ended_probe(gate, monkeypatch, "failed", 1, ["", missing])
-    the_gate.probe(change, clock.now)  # exited 1: no grace, and its output says why when there is one
+    the_gate.probe(change, clock.now)  # exited 1, its output not there yet: read again, its verdict says why
+    assert change.verdict is None
+    clock.sleep(1)
+    the_gate.probe(change, clock.now)
+    assert (change.verdict, change.reason) == (FAILED, "nodes missing: /listener")
+    change = _ended_probe(gate, monkeypatch, "failed", 1, [""])
+    started = clock.now
+    while change.verdict is None:  # no output ever: after the wait, the exit code decides
+        the_gate.probe(change, clock.now)
+        clock.sleep(0.5)
     assert (change.verdict, change.reason) == (FAILED, "the health probe printed no verdict (failed)")
+    assert clock.now - started >= fleet_rollout.PROBE_LOG_WAIT
     change = _ended_probe(gate, monkeypatch, "complete", 0, ["", "", '{"ok": true}'])
     for _ in range(3):
         the_gate.probe(change, clock.now)

@@ -38,7 +38,8 @@ if TYPE_CHECKING:
 
 #: Seconds between two looks at the tasks while gating.
 POLL = 0.5
-#: Seconds the output of a probe that exited 0 is read again, when it has not reached the manager yet.
+#: Seconds the output of an ended probe is read again, when it has not reached the manager yet (a robot that has
+#: just reconnected sends it late): its verdict says why a robot failed, its exit code alone does not.
 PROBE_LOG_WAIT = 5.0
 #: Health verdicts kept in the services' labels.
 HEALTHY, FAILED, PENDING, ROLLED_BACK = "healthy", "failed", "pending", "rolled-back"
@@ -229,13 +230,14 @@ class Gate:
             return
         verdict = plan.probe_verdict(swarm.service_logs(self.client, change.probe))
         task = ended[0]
-        if verdict is None and task.state == "complete" and task.exit_code in (0, None):
-            # it exited 0, which it does only when every node was seen and every topic heard; its output reaches
-            # the manager later than its end (a robot that has just reconnected): read again for a while, then
-            # take the exit code as the verdict
+        if verdict is None:
+            # its output can reach the manager later than its end (a robot that has just reconnected): read again
+            # for a while, then take the exit code as the verdict (it exits 0 only when every node was seen and
+            # every topic heard)
             change.probe_ended = change.probe_ended or clock
             if clock - change.probe_ended < PROBE_LOG_WAIT:
                 return
+        if verdict is None and task.state == "complete" and task.exit_code in (0, None):
             self._decide(change, HEALTHY)
         elif verdict is None:
             self._decide(change, FAILED, f"the health probe printed no verdict ({task.state}"
