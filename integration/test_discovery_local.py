@@ -10,7 +10,7 @@ were not the one carrying the messages:
   containers of one host; the same pair with private IPC namespaces discovers the topic and
   receives nothing; the generated UDP-only settings work with private IPC;
 - the discovery server container is SIGKILLed and started again (a crash, a power cut: it says no
-  goodbye) and a restarted listener finds the talker again (the seconds it take are printed); without
+  goodbye) and a restarted listener finds the talker again (the seconds it takes are printed); without
   robocore's restart hold it never does (Fast DDS 2.x); a graceful restart (SIGTERM, under Docker's
   init the server unregisters itself before it ends) needs no hold;
 - with two redundant servers, losing one still lets a restarted listener find the talker; with a
