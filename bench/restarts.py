@@ -30,7 +30,6 @@ replace's. The machine is shared: read the ratios.
 from __future__ import annotations
 
 import argparse
-import datetime
 import math
 import os
 import shutil
@@ -43,6 +42,8 @@ from typing import Any
 
 import yaml
 from harness import Figure, copy_built_project, record, robocore
+
+from robocore.plan import starts
 
 HEARD = "I heard: hello from talker #"
 WAYS = ("replace (run)", "SIGKILL + start", "crash, restart policy", "docker restart")
@@ -92,10 +93,10 @@ class Deployed:
 def started_at(container: Any) -> float:
     """The wall-clock time (epoch seconds) Docker recorded for the container's last start."""
     container.reload()
-    stamp = container.attrs["State"]["StartedAt"]  # RFC 3339 with nanoseconds: 2026-11-28T15:44:07.123456789Z
-    whole, _, fraction = stamp.rstrip("Z").partition(".")
-    moment = datetime.datetime.fromisoformat(whole).replace(tzinfo=datetime.timezone.utc)
-    return moment.timestamp() + float(f"0.{fraction or 0}")
+    moment = starts.docker_time(container.attrs["State"]["StartedAt"])
+    if moment is None:
+        raise SystemExit(f"Docker gave no start time for {container.name}")
+    return moment.timestamp()
 
 
 def heard_at(robot: Deployed, mark: int, timeout: float = 30.0) -> float:

@@ -20,7 +20,6 @@ One bring-up for the module: the tests share the robot.
 
 from __future__ import annotations
 
-import datetime
 import os
 import signal
 import statistics
@@ -31,6 +30,8 @@ from typing import Any
 
 import pytest
 from deploy_helpers import copy_project, remove_project_containers, remove_test_runs
+
+from robocore.plan import starts
 
 pytestmark = pytest.mark.docker
 
@@ -135,10 +136,10 @@ def test_a_talker_sigkilled_20_times_is_heard_again_after_every_restart(robot: A
 
 
 def docker_time(stamp: str) -> float:
-    """Epoch seconds of a Docker timestamp (RFC 3339, nanoseconds: ``2026-11-28T15:44:07.123456789Z``)."""
-    whole, _, fraction = stamp.rstrip("Z").partition(".")
-    moment = datetime.datetime.fromisoformat(whole).replace(tzinfo=datetime.timezone.utc)
-    return moment.timestamp() + float(f"0.{fraction or 0}")
+    """Epoch seconds of a Docker timestamp (RFC 3339: ``State.StartedAt``, a log line's stamp)."""
+    moment = starts.docker_time(stamp)
+    assert moment is not None, f"not a Docker timestamp: {stamp!r}"
+    return moment.timestamp()
 
 
 class Pair:
@@ -174,9 +175,9 @@ class Pair:
         """``ROUNDS`` times: the talker brought back ``way``, then seconds from its start to heard."""
         seconds = []
         for _ in range(ROUNDS):
-            ran = time.time() - docker_time(self.talker().attrs["State"]["StartedAt"])
-            time.sleep(max(0.0, spacing - ran))
-            mark, previous = len(self.greetings()), self.talker().attrs["State"]["StartedAt"]
+            previous = self.talker().attrs["State"]["StartedAt"]
+            time.sleep(max(0.0, spacing - (time.time() - docker_time(previous))))
+            mark = len(self.greetings())
             way()
             seconds.append(self.start_to_heard(mark, previous))
         print(f"FIGURE {name}: start to heard s: median {statistics.median(seconds):.2f}, "

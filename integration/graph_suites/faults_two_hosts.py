@@ -13,7 +13,6 @@ server holds back (Fast DDS 2.x: 12 s silent after a restart) and the other serv
 
 from __future__ import annotations
 
-import datetime
 import itertools
 import threading
 import time
@@ -23,6 +22,7 @@ import pytest
 from rclpy.qos import qos_profile_sensor_data
 from std_msgs.msg import String
 
+from robocore.plan import starts
 from robocore.testing.faults import FaultError
 
 GREETING = "hello from talker #"
@@ -62,10 +62,10 @@ def figure(name: str, value: float) -> None:
 
 
 def docker_time(stamp: str) -> float:
-    """Epoch seconds of a Docker timestamp (RFC 3339, nanoseconds)."""
-    whole, _, fraction = stamp.rstrip("Z").partition(".")
-    moment = datetime.datetime.fromisoformat(whole).replace(tzinfo=datetime.timezone.utc)
-    return moment.timestamp() + float(f"0.{fraction or 0}")
+    """Epoch seconds of a Docker timestamp (RFC 3339: ``State.StartedAt``, a log line's stamp)."""
+    moment = starts.docker_time(stamp)
+    assert moment is not None, f"not a Docker timestamp: {stamp!r}"
+    return moment.timestamp()
 
 
 def started_at(robot: Any, service: str) -> float:

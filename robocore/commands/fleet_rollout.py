@@ -237,11 +237,11 @@ class Gate:
             change.probe_ended = change.probe_ended or clock
             if clock - change.probe_ended < PROBE_LOG_WAIT:
                 return
-        if verdict is None and task.state == "complete" and task.exit_code in (0, None):
-            self._decide(change, HEALTHY)
-        elif verdict is None:
-            self._decide(change, FAILED, f"the health probe printed no verdict ({task.state}"
-                         + (f": {task.error}" if task.error else "") + ")")
+            if task.state == "complete" and task.exit_code in (0, None):
+                self._decide(change, HEALTHY)
+            else:
+                self._decide(change, FAILED, f"the health probe printed no verdict ({task.state}"
+                             + (f": {task.error}" if task.error else "") + ")")
         elif verdict.get("ok") is True:
             self._decide(change, HEALTHY)
         else:
