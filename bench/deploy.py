@@ -34,7 +34,6 @@ import sys
 import tempfile
 import time
 import uuid
-from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +42,7 @@ from harness import Figure, record
 from robot_host.hosts import RobotFleet
 
 from robocore.adapters.ssh import MULTIPLEX_SECONDS
+from robocore.plan.starts import docker_time
 
 PROJECT = "robocore-it-demo"  # shares the cached images of the integration suites
 
@@ -123,10 +123,11 @@ def wait_heard(client: Any, container: str, needle: str, timeout: float = 120, *
 
 
 def log_time(stamp: str) -> float:
-    """Seconds since the epoch of a Docker log timestamp (RFC 3339, nanoseconds, UTC)."""
-    whole, _, frac = stamp.rstrip("Z").partition(".")
-    seconds = datetime.strptime(whole, "%Y-%m-%dT%H:%M:%S").replace(tzinfo=timezone.utc).timestamp()
-    return seconds + float(f"0.{frac or 0}")
+    """Seconds since the epoch of a Docker timestamp (RFC 3339, nanoseconds, UTC), to the microsecond."""
+    moment = docker_time(stamp)
+    if moment is None:
+        raise ValueError(f"not a Docker timestamp: {stamp!r}")
+    return moment.timestamp()
 
 
 def robocore_path(project: Path, client: Any, text: str, *, separate: bool) -> tuple[float, int, dict[str, float]]:

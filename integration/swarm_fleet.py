@@ -28,6 +28,8 @@ import yaml
 from deploy_helpers import copy_project
 from robot_host.hosts import RobotFleet
 
+from robocore.plan.starts import docker_time
+
 #: Where the talker's code is in its install tree (what a release of a changed talker changes).
 TALKER_PY = "demo_talker/lib/python3.11/site-packages/demo_talker/talker.py"
 #: The release variants: the demo as built, a talker that says "v2", a talker that exits 3 at start.
@@ -207,11 +209,11 @@ def container_lives(hosts: RobotFleet, index: int, since: float, until: float) -
 
 
 def _epoch(stamp: str) -> float:
-    """Docker's RFC 3339 time (nanoseconds, Z) as seconds since the epoch."""
-    from datetime import datetime
-
-    head, _, fraction = stamp.rstrip("Z").partition(".")
-    return datetime.fromisoformat(head + "+00:00").timestamp() + float(f"0.{fraction or '0'}")
+    """Docker's RFC 3339 time (nanoseconds, Z) as seconds since the epoch, to the microsecond."""
+    moment = docker_time(stamp)
+    if moment is None:
+        raise ValueError(f"not a Docker timestamp: {stamp!r}")
+    return moment.timestamp()
 
 
 def overlaps(lives: Sequence[tuple[str, float, float | None]], since: float,

@@ -206,8 +206,9 @@ def test_every_robot_container_runs_under_docker_init() -> None:
     for spec in specs:
         assert spec.docker_kwargs()["init"] is True and spec.compose_service()["init"] is True, spec.name
         assert (naming.INIT_SIGNALS_GROUP in spec.env) == (spec.role == naming.ROLE_DISCOVERY), spec.name
-    assert dds.DISCOVERY_SCRIPT.endswith(f'if [ -n "${{{naming.INIT_SIGNALS_GROUP}:-}}" ]; then trap "" TERM; fi; '
-                                         'exec "$@"')  # after the restart hold: its sleep still ends on SIGTERM
+    lines = dds.DISCOVERY_SCRIPT.splitlines()  # the script ignores SIGTERM only after the restart hold's sleep
+    assert lines.index('trap "" TERM') > max(i for i, line in enumerate(lines) if "sleep" in line and "$left" in line)
+    assert f'if [ -z "${{{naming.INIT_SIGNALS_GROUP}:-}}" ]; then rm -f "$state/alive"; exec "$@"; fi' in lines
 
 
 def test_tag_uses_the_registry() -> None:

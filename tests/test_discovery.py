@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import time
 from pathlib import Path
 from typing import Any
 
@@ -339,3 +342,79 @@ def test_a_replaced_node_gets_the_next_profile_after_its_predecessors_and_the_sa
     [made] = client.containers.created
     assert old.removed and made["environment"]["FASTDDS_DEFAULT_PROFILES_FILE"] == f"/robocore/dds/{new_profile}"
     assert made["labels"] == spec.labels  # a later run compares the spec's hash: it keeps this container
+
+
+# ------------------------------------------------------------------ the server script's restart hold
+
+def run_server_script(state: Path, server: str, *, hold: int = 12, init: bool = True,
+                      alive_age: float | None = None, started: bool = False) -> tuple[int, str, list[str]]:
+    """Run :data:`fastdds.DISCOVERY_SCRIPT` on this machine's sh, its state volume a folder of ``state``, a
+    ``sh -c server`` standing in for the server and a ``sleep`` that only writes down how long it was asked to
+    wait (the heartbeat's sleeps included). Returns the exit code, the output and the hold's sleeps."""
+    bin_dir, volume = state / "bin", state / "volume"
+    bin_dir.mkdir(exist_ok=True)
+    volume.mkdir(exist_ok=True)
+    (bin_dir / "sleep").write_text(f'#!/bin/sh\necho "$1" >> {state}/slept\n')
+    (bin_dir / "sleep").chmod(0o755)
+    if started:
+        (volume / "started").touch()
+    if alive_age is not None:
+        (volume / "alive").touch()
+        stamp = time.time() - alive_age
+        os.utime(volume / "alive", (stamp, stamp))
+    script = (fastdds.DISCOVERY_SCRIPT.replace(fastdds.DISCOVERY_STATE, str(volume))
+              .replace(fastdds.DISCOVERY_PROFILE, str(state / "profile.xml")))
+    env = {"PATH": f"{bin_dir}:{os.environ['PATH']}", "ROBOCORE_DS_HOLD": str(hold), "ROBOCORE_DS_XML": "<dds/>"}
+    if init:
+        env[naming.INIT_SIGNALS_GROUP] = "1"
+    done = subprocess.run(["sh", "-c", script, "robocore-discovery", "sh", "-c", server], env=env,
+                          capture_output=True, text=True, timeout=30, check=False)
+    slept = (state / "slept").read_text().split() if (state / "slept").exists() else []
+    return done.returncode, done.stdout, [s for s in slept if s != str(fastdds.HEARTBEAT_SECONDS)]
+
+
+def markers(state: Path) -> list[str]:
+    return sorted(p.name for p in (state / "volume").iterdir())
+
+
+def test_a_first_start_serves_at_once_and_a_clean_stop_leaves_no_hold_behind(tmp_path: Path) -> None:
+    code, out, slept = run_server_script(tmp_path, "exit 0")
+    assert (code, slept, "restarted" in out) == (0, [], False)
+    assert markers(tmp_path) == []
+    assert (tmp_path / "profile.xml").read_text() == "<dds/>\n"
+
+
+def test_a_server_that_ended_badly_leaves_its_markers_and_its_exit_code(tmp_path: Path) -> None:
+    code, _, slept = run_server_script(tmp_path, "sleep 1; exit 3")
+    assert (code, slept) == (3, [])
+    assert markers(tmp_path) == ["alive", "started"]
+
+
+@pytest.mark.parametrize(("alive_age", "silent"), [(5, {7, 8}), (0.2, {12}), (-3600, {12}), (14, {0}), (3600, {0})])
+def test_a_restarted_server_holds_only_what_is_left_since_its_last_heartbeat(
+        tmp_path: Path, alive_age: float, silent: set[int]) -> None:
+    """Hold + one heartbeat period after the last heartbeat, at most the whole hold (a clock behind the
+    heartbeat holds in full). The script counts whole seconds: the age is one of two."""
+    code, out, slept = run_server_script(tmp_path, "exit 0", alive_age=alive_age, started=True)
+    assert code == 0
+    held = [int(s) for s in slept] or [0]
+    assert len(held) == 1 and held[0] in silent, out
+    assert ("silent for" in out) == (held[0] > 0)
+
+
+def test_a_server_without_heartbeats_holds_in_full_and_none_is_held_without_a_hold(tmp_path: Path) -> None:
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    assert run_server_script(tmp_path / "a", "exit 0", started=True)[2] == ["12"]  # ran before heartbeats
+    assert run_server_script(tmp_path / "b", "exit 0", started=True, hold=0, alive_age=1)[2] == []
+
+
+def test_without_docker_init_the_server_is_execd_and_its_next_start_holds_in_full(tmp_path: Path) -> None:
+    """No init passes SIGTERM on (a Kubernetes pod): the server replaces the script, so nothing is left to see
+    its clean stop or keep heartbeats; the next start holds the whole time."""
+    parent = 'echo "parent $PPID"; exit 0'
+    code, out, _ = run_server_script(tmp_path, parent, init=False, alive_age=600)
+    assert code == 0 and f"parent {os.getpid()}" in out  # this test's process: the script was replaced
+    assert markers(tmp_path) == ["started"]
+    code, out, slept = run_server_script(tmp_path, parent)
+    assert slept == ["12"] and f"parent {os.getpid()}" not in out  # with init, the script stays the parent
