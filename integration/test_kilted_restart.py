@@ -11,13 +11,18 @@ and ``build``), real rclpy nodes:
   none of the talker's messages across it (the short lease drops only the server, never a matched peer);
 - negative control: the same with the server's lease set back to 8 s announced every 2 s (2.x's, robocore's
   3.x setting before): the talker cannot drop the killed server before 6 s, and the new listener is not heard
-  within the bound (it is heard later).
+  within the bound (it is heard later);
+- the talker back in place (SIGKILLed and started again; crashed and restarted by its restart policy) is heard
+  within 2 s of its start, median of 3 each (:mod:`ways_back`).
 """
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
+import signal
+import statistics
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
@@ -26,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 from deploy_helpers import HEARD, copy_project, log_lines, remove_project_containers, wait_for
+from ways_back import POLICY_SPACING, Pair
 
 from robocore.commands.support.composefiles import write_compose_files
 from robocore.plan.containers import ContainerSpec, host_specs
@@ -139,3 +145,34 @@ def test_control_with_the_8_s_lease_the_node_is_heard_only_after_the_bound(kilte
     assert done.heard_after is not None, "not heard even after the 8 s lease ran out: the control proves nothing"
     assert done.heard_after >= BOUND, \
         f"heard {done.heard_after:.2f} s after the kill with the 8 s lease: the test cannot tell the leases apart"
+
+
+#: Rounds of each way back in place, and the bound on their median (seconds from the talker's start to heard).
+ROUNDS = 3
+BACK_WITHIN = 2.0
+
+
+def test_a_kilted_talker_back_in_place_is_heard_within_2_s(kilted_copy: Project, docker_client: Any) -> None:
+    """Fast DDS 3.x, robocore's specs with their restart policy: the talker SIGKILLed and started again in place,
+    then crashed (its process killed from outside Docker) and started again by its policy."""
+    project = kilted_copy
+    write_compose_files(project)
+    specs = {s.service: s for s in host_specs(project, project.robot.hosts[0].name)}
+    assert specs["talker"].restart == "unless-stopped"
+    for service in ("discovery-0", "talker", "listener"):
+        client_container = docker_client.containers.create(**specs[service].docker_kwargs())
+        client_container.start()
+    pair = Pair(docker_client, specs["talker"].name, specs["listener"].name)
+    pair.wait_heard(HEAR_WITHIN)
+
+    def kill_and_start() -> None:
+        talker = pair.talker()
+        talker.kill()
+        time.sleep(0.3)
+        talker.start()
+
+    killed = pair.timed_rounds(kill_and_start, "kilted SIGKILL + start", ROUNDS)
+    crashed = pair.timed_rounds(lambda: os.kill(pair.talker().attrs["State"]["Pid"], signal.SIGKILL),
+                                "kilted crash, restart policy", ROUNDS, spacing=POLICY_SPACING)
+    assert statistics.median(killed) < BACK_WITHIN, killed
+    assert statistics.median(crashed) < BACK_WITHIN, crashed

@@ -8,6 +8,8 @@
   ``run`` starts the master and restarts the nodes (they register only at start), and the graph is
   whole again; the master restarted behind robocore's back (``docker restart``): ``status`` names the
   nodes it does not know, and a new node hears nothing until ``run`` restarts them;
+- the talker back in place (SIGKILLed and started again; crashed and restarted by its policy) is heard within
+  2 s of its start;
 - a one-line edit of the C++ talker goes through ``build`` and ``run`` and is heard;
 - the project's own ``nox -s validate build unit graph``: gtest and pytest package tests, then the ROS 1 graph tests
   through robocore's pytest plugin;
@@ -22,7 +24,10 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import signal
+import statistics
 import tempfile
 import time
 from collections.abc import Callable, Iterator
@@ -40,6 +45,7 @@ from deploy_helpers import (
     run_nox,
     wait_for,
 )
+from ways_back import POLICY_SPACING, Pair
 
 if TYPE_CHECKING:
     from conftest import RobocoreCli
@@ -49,6 +55,9 @@ pytestmark = pytest.mark.docker
 
 NAME = "robocore-it-noetic"
 TALKER_TEXT = "hello from talker #"
+#: Rounds of each way back in place, and the bound on their median (seconds from the talker's start to heard).
+WAY_ROUNDS = 3
+BACK_WITHIN = 2.0
 
 
 def _init(parent: Path, run_robocore: RobocoreCli, *, port: int) -> Path:
@@ -172,6 +181,29 @@ def test_stopped_master_keeps_connections_and_run_brings_the_graph_back(noetic: 
     _run_restarts_nodes(run_robocore, noetic, "keep", "before the discovery server's last start")
     assert TALKER_TEXT in _probe(docker_client, tracked_containers, _master_uri(noetic))
     assert _graph(_status(run_robocore, noetic))["not_registered"] == []
+
+
+def test_a_ros1_talker_back_in_place_is_heard_within_2_s(noetic: Path, run_robocore: RobocoreCli,
+                                                         docker_client: Any) -> None:
+    """The roscpp talker deployed by ``run`` (restart policy ``unless-stopped``) SIGKILLed and started again in
+    place, then crashed (its process killed from outside Docker) and started again by its policy: each time it
+    registers with the master again and the rospy listener hears it within 2 s of its start (median of 3,
+    :mod:`ways_back`)."""
+    run_robocore(noetic, "run", "--quiet")
+    pair = Pair(docker_client, f"{NAME}-talker", f"{NAME}-listener")
+    pair.wait_heard(60)
+
+    def kill_and_start() -> None:
+        talker = pair.talker()
+        talker.kill()
+        time.sleep(0.3)
+        talker.start()
+
+    killed = pair.timed_rounds(kill_and_start, "ROS 1 SIGKILL + start", WAY_ROUNDS)
+    crashed = pair.timed_rounds(lambda: os.kill(pair.talker().attrs["State"]["Pid"], signal.SIGKILL),
+                                "ROS 1 crash, restart policy", WAY_ROUNDS, spacing=POLICY_SPACING)
+    assert statistics.median(killed) < BACK_WITHIN, killed
+    assert statistics.median(crashed) < BACK_WITHIN, crashed
 
 
 def test_one_line_cpp_edit_is_built_and_heard(noetic: Path, run_robocore: RobocoreCli, docker_client: Any) -> None:

@@ -24,25 +24,20 @@ import os
 import signal
 import statistics
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
 from deploy_helpers import copy_project, remove_project_containers, remove_test_runs
-
-from robocore.plan import starts
+from ways_back import HEARD, POLICY_SPACING, Pair
 
 pytestmark = pytest.mark.docker
 
 CYCLES = 20
-HEARD = "I heard: hello from talker #"
 #: Rounds of each way of coming back in place, and the bound on their median (seconds from start to heard).
 ROUNDS = 5
 BOUND = 2.0
-#: Seconds a talker runs before it is crashed again: Docker doubles a restart policy's delay for a container
-#: that ran less than 10 s, which would time Docker's back-off, not the way back.
-POLICY_SPACING = 10.5
 
 
 @pytest.fixture(scope="module")
@@ -135,56 +130,6 @@ def test_a_talker_sigkilled_20_times_is_heard_again_after_every_restart(robot: A
 # --------------------------------------------------------------------------- each way back in place, timed
 
 
-def docker_time(stamp: str) -> float:
-    """Epoch seconds of a Docker timestamp (RFC 3339: ``State.StartedAt``, a log line's stamp)."""
-    moment = starts.docker_time(stamp)
-    assert moment is not None, f"not a Docker timestamp: {stamp!r}"
-    return moment.timestamp()
-
-
-class Pair:
-    """The talker and listener containers of one deployment, by name."""
-
-    def __init__(self, client: Any, talker: str, listener: str) -> None:
-        self.client, self.talker_name, self.listener_name = client, talker, listener
-
-    def talker(self) -> Any:
-        return self.client.containers.get(self.talker_name)
-
-    def greetings(self) -> list[tuple[str, int]]:
-        """(Docker's timestamp, talker number) of each greeting in the listener's log, oldest first."""
-        text = self.client.containers.get(self.listener_name).logs(timestamps=True).decode(errors="replace")
-        return [(line.split(" ", 1)[0], int(line.rpartition("#")[2])) for line in text.splitlines()
-                if HEARD in line and line.rpartition("#")[2].isdigit()]
-
-    def start_to_heard(self, mark: int, previous_start: str, timeout: float = 30.0) -> float:
-        """Seconds from the talker's new start (its ``StartedAt`` no longer ``previous_start``) to the listener's
-        first greeting of it (after the log's first ``mark`` greetings, its count started again: not above the
-        last before), both as Docker recorded them."""
-        last = self.greetings()[mark - 1][1]
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            started = self.talker().attrs["State"]["StartedAt"]
-            new = [stamp for stamp, number in self.greetings()[mark:] if number <= last]
-            if new and started != previous_start:
-                return docker_time(new[0]) - docker_time(started)
-            time.sleep(0.1)
-        raise AssertionError(f"the talker was not heard again within {timeout} s: {self.greetings()[-5:]}")
-
-    def timed_rounds(self, way: Callable[[], None], name: str, spacing: float = 0.0) -> list[float]:
-        """``ROUNDS`` times: the talker brought back ``way``, then seconds from its start to heard."""
-        seconds = []
-        for _ in range(ROUNDS):
-            previous = self.talker().attrs["State"]["StartedAt"]
-            time.sleep(max(0.0, spacing - (time.time() - docker_time(previous))))
-            mark = len(self.greetings())
-            way()
-            seconds.append(self.start_to_heard(mark, previous))
-        print(f"FIGURE {name}: start to heard s: median {statistics.median(seconds):.2f}, "
-              f"rounds {' '.join(f'{t:.2f}' for t in seconds)}")
-        return seconds
-
-
 @pytest.fixture(scope="module")
 def deployed(demo_project: Path, tmp_path_factory: pytest.TempPathFactory, docker_client: Any,
              run_robocore: Any) -> Iterator[Pair]:
@@ -195,10 +140,7 @@ def deployed(demo_project: Path, tmp_path_factory: pytest.TempPathFactory, docke
     try:
         run_robocore(root, "run", "--quiet")
         pair = Pair(docker_client, f"{name}-talker", f"{name}-listener")
-        deadline = time.monotonic() + 30
-        while not pair.greetings():
-            assert time.monotonic() < deadline, "the deployed listener never heard the talker"
-            time.sleep(0.2)
+        pair.wait_heard()
         yield pair
     finally:
         remove_project_containers(docker_client, name)
@@ -208,7 +150,7 @@ def test_a_crashed_talker_restarted_by_its_policy_is_heard_within_2_s(deployed: 
     """The talker's process killed from outside Docker (a crash): Docker's restart policy starts it again."""
     restarts = deployed.talker().attrs["RestartCount"]
     seconds = deployed.timed_rounds(lambda: os.kill(deployed.talker().attrs["State"]["Pid"], signal.SIGKILL),
-                                    "crash, restart policy", spacing=POLICY_SPACING)
+                                    "crash, restart policy", ROUNDS, spacing=POLICY_SPACING)
     assert deployed.talker().attrs["RestartCount"] == restarts + ROUNDS, "the restart policy did not restart it"
     assert statistics.median(seconds) < BOUND, seconds
 
@@ -222,12 +164,12 @@ def test_a_talker_started_again_after_a_sigkill_is_heard_within_2_s(robot: Any) 
         time.sleep(0.3)
         robot.start("talker")
 
-    seconds = pair.timed_rounds(kill_and_start, "SIGKILL + start")
+    seconds = pair.timed_rounds(kill_and_start, "SIGKILL + start", ROUNDS)
     assert statistics.median(seconds) < BOUND, seconds
 
 
 def test_a_talker_restarted_gracefully_is_heard_within_2_s(robot: Any) -> None:
     """The ``robot`` fixture's ``restart``: SIGTERM, the node's clean shutdown, a start in place."""
     pair = Pair(robot.client, robot.specs["talker"].name, robot.specs["listener"].name)
-    seconds = pair.timed_rounds(lambda: robot.restart("talker"), "restart")
+    seconds = pair.timed_rounds(lambda: robot.restart("talker"), "restart", ROUNDS)
     assert statistics.median(seconds) < BOUND, seconds

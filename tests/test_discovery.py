@@ -390,6 +390,14 @@ def test_a_server_that_ended_badly_leaves_its_markers_and_its_exit_code(tmp_path
     assert markers(tmp_path) == ["alive", "started"]
 
 
+def test_the_heartbeat_keeps_alive_fresh_while_the_server_runs(tmp_path: Path) -> None:
+    """The server makes ``alive`` an hour old; while it runs on (0.5 s), the beat writes it again."""
+    alive = tmp_path / "volume" / "alive"
+    server = f'touch -d "1 hour ago" {alive}; python3 -c "import time; time.sleep(0.5)"; exit 3'
+    code, _, _ = run_server_script(tmp_path, server)
+    assert code == 3 and time.time() - alive.stat().st_mtime < 30
+
+
 @pytest.mark.parametrize(("alive_age", "silent"), [(5, {7, 8}), (0.2, {12}), (-3600, {12}), (14, {0}), (3600, {0})])
 def test_a_restarted_server_holds_only_what_is_left_since_its_last_heartbeat(
         tmp_path: Path, alive_age: float, silent: set[int]) -> None:

@@ -370,9 +370,10 @@ HEARTBEAT_SECONDS = 1
 #: * **The restart hold** (:func:`restart_hold_seconds`) is for a server that ended without a goodbye (a crash, a
 #:   SIGKILL, a power cut) less than a lease ago: its clients still hold its previous instance. ``started`` in the
 #:   state volume says the server ran and did not end cleanly; ``alive`` is touched every
-#:   :data:`HEARTBEAT_SECONDS` while it runs, so the hold is only what is left of ROBOCORE_DS_HOLD since a
-#:   heartbeat after its last sign of life (all of it when the clock is behind that). A server that ran before
-#:   this script kept heartbeats (``started`` alone) holds in full.
+#:   :data:`HEARTBEAT_SECONDS` while it serves (not during a hold: it says when its clients last heard from it), so
+#:   the hold is only what is left of ROBOCORE_DS_HOLD since a heartbeat after its last sign of life (all of it
+#:   when the clock is behind that). A server that ran before this script kept heartbeats (``started`` alone)
+#:   holds in full.
 #: * **A clean stop** (exit 0) removes both markers: the server unregistered itself from its clients, which drop
 #:   it at once, so its next start (``docker restart``, a host's shutdown and boot, ``run``'s replace) serves
 #:   without a hold.
@@ -402,8 +403,9 @@ DISCOVERY_SCRIPT = "\n".join((
     'touch "$state/alive"',
     '"$@" &',
     'server=$!',
-    # the beat writes with the shell's own redirection, no child that could outlive it and touch a removed marker
-    f'(while kill -0 "$server" 2>/dev/null; do : > "$state/alive"; sleep {HEARTBEAT_SECONDS}; done) &',
+    # the beat writes with the shell's own redirection (no child that could outlive it and touch a removed marker),
+    # on a regular builtin, whose failed redirection does not end the loop
+    f'(while kill -0 "$server" 2>/dev/null; do true 2>/dev/null > "$state/alive"; sleep {HEARTBEAT_SECONDS}; done) &',
     'beat=$!',
     'wait "$server"; code=$?',
     'kill -KILL "$beat" 2>/dev/null; wait "$beat" 2>/dev/null',

@@ -1,0 +1,84 @@
+"""Timing a component's way back in place: from the new process's start, as Docker records it
+(``State.StartedAt``), to the listener's first greeting of it, as Docker's log timestamps record it. Both clocks
+are the daemon's, so the test process's own scheduling on a busy machine adds nothing.
+
+Shared by the suites that time the ways back on a one-host robot (``test_shm_kills``: Jazzy with shared memory;
+``test_kilted_restart``: Fast DDS 3.x; ``test_ros1_robot``: the ROS 1 master and TCPROS).
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from collections.abc import Callable
+from typing import Any
+
+from robocore.plan import starts
+
+#: What the template's listeners log for each greeting (rclpy and rospy alike), before the talker's number.
+HEARD = "I heard: hello from talker #"
+#: Seconds a talker runs before it is crashed again: Docker doubles a restart policy's delay for a container
+#: that ran less than 10 s, which would time Docker's back-off, not the way back.
+POLICY_SPACING = 10.5
+
+
+def docker_time(stamp: str) -> float:
+    """Epoch seconds of a Docker timestamp (RFC 3339: ``State.StartedAt``, a log line's stamp)."""
+    moment = starts.docker_time(stamp)
+    assert moment is not None, f"not a Docker timestamp: {stamp!r}"
+    return moment.timestamp()
+
+
+class Pair:
+    """The talker and listener containers of one deployment, by name."""
+
+    def __init__(self, client: Any, talker: str, listener: str) -> None:
+        self.client, self.talker_name, self.listener_name = client, talker, listener
+
+    def talker(self) -> Any:
+        return self.client.containers.get(self.talker_name)
+
+    def greetings(self) -> list[tuple[str, int]]:
+        """(Docker's timestamp, talker number) of each greeting in the listener's log, oldest first."""
+        text = self.client.containers.get(self.listener_name).logs(timestamps=True).decode(errors="replace")
+        found = []
+        for line in text.splitlines():
+            number = line.rpartition("#")[2].strip()
+            if HEARD in line and number.isdigit():
+                found.append((line.split(" ", 1)[0], int(number)))
+        return found
+
+    def wait_heard(self, timeout: float = 30.0) -> None:
+        """Until the listener has heard the talker at least once."""
+        deadline = time.monotonic() + timeout
+        while not self.greetings():
+            assert time.monotonic() < deadline, "the listener never heard the talker"
+            time.sleep(0.2)
+
+    def start_to_heard(self, mark: int, previous_start: str, timeout: float = 30.0) -> float:
+        """Seconds from the talker's new start (its ``StartedAt`` no longer ``previous_start``) to the listener's
+        first greeting of it (after the log's first ``mark`` greetings, its count started again: not above the
+        last before), both as Docker recorded them."""
+        last = self.greetings()[mark - 1][1]
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            started = self.talker().attrs["State"]["StartedAt"]
+            new = [stamp for stamp, number in self.greetings()[mark:] if number <= last]
+            if new and started != previous_start:
+                return docker_time(new[0]) - docker_time(started)
+            time.sleep(0.1)
+        raise AssertionError(f"the talker was not heard again within {timeout} s: {self.greetings()[-5:]}")
+
+    def timed_rounds(self, way: Callable[[], None], name: str, rounds: int, spacing: float = 0.0) -> list[float]:
+        """``rounds`` times: the talker brought back ``way``, then seconds from its start to heard. ``spacing``:
+        seconds the talker runs from its start before the next round."""
+        seconds = []
+        for _ in range(rounds):
+            previous = self.talker().attrs["State"]["StartedAt"]
+            time.sleep(max(0.0, spacing - (time.time() - docker_time(previous))))
+            mark = len(self.greetings())
+            way()
+            seconds.append(self.start_to_heard(mark, previous))
+        print(f"FIGURE {name}: start to heard s: median {statistics.median(seconds):.2f}, "
+              f"rounds {' '.join(f'{t:.2f}' for t in seconds)}")
+        return seconds
