@@ -12,8 +12,8 @@ and ``build``), real rclpy nodes:
 - negative control: the same with the server's lease set back to 8 s announced every 2 s (2.x's, robocore's
   3.x setting before): the talker cannot drop the killed server before 6 s, and the new listener is not heard
   within the bound (it is heard later);
-- the talker back in place (SIGKILLed and started again; crashed and restarted by its restart policy) is heard
-  within 2 s of its start, median of 3 each (:mod:`ways_back`).
+- the talker back in place (SIGKILLed and started again; crashed and restarted by its restart policy), with
+  shared memory, is heard within 2 s of its start, median of 5 each (:mod:`ways_back`).
 """
 
 from __future__ import annotations
@@ -148,7 +148,9 @@ def test_control_with_the_8_s_lease_the_node_is_heard_only_after_the_bound(kilte
 
 
 #: Rounds of each way back in place, and the bound on their median (seconds from the talker's start to heard).
-ROUNDS = 3
+#: Five: with shared memory about one round in three is heard 1.4-1.9 s after the start on Fast DDS 3.x (0.6-1.0 s
+#: otherwise; over UDP none was), which three rounds would put in the median now and then.
+ROUNDS = 5
 BACK_WITHIN = 2.0
 
 

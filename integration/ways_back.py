@@ -57,15 +57,17 @@ class Pair:
 
     def start_to_heard(self, mark: int, previous_start: str, timeout: float = 30.0) -> float:
         """Seconds from the talker's new start (its ``StartedAt`` no longer ``previous_start``) to the listener's
-        first greeting of it (after the log's first ``mark`` greetings, its count started again: not above the
-        last before), both as Docker recorded them."""
-        last = self.greetings()[mark - 1][1]
+        first greeting logged at or after it (after the log's first ``mark`` greetings), both as Docker recorded
+        them. Every way back ends the old process before the new one starts, so what the listener logs after the
+        new start is the new process's (its count starts again, but the listener may miss its first greetings,
+        so the count cannot tell)."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             started = self.talker().attrs["State"]["StartedAt"]
-            new = [stamp for stamp, number in self.greetings()[mark:] if number <= last]
-            if new and started != previous_start:
-                return docker_time(new[0]) - docker_time(started)
+            if started != previous_start:
+                new = [stamp for stamp, _ in self.greetings()[mark:] if docker_time(stamp) >= docker_time(started)]
+                if new:
+                    return docker_time(new[0]) - docker_time(started)
             time.sleep(0.1)
         raise AssertionError(f"the talker was not heard again within {timeout} s: {self.greetings()[-5:]}")
 
