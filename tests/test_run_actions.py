@@ -125,17 +125,6 @@ def test_stages_take_removals_then_each_server_alone_then_everything_else() -> N
     assert in_stages([Action("keep", "p-talker")], set()) == []
 
 
-def test_without_servers_first_the_servers_start_beside_the_components_ahead_of_them() -> None:
-    """Nodes that look for their server until it answers (Fast DDS) wait for no server: one stage after the
-    removals, the servers first in it (the first taken by the side-by-side starts)."""
-    actions = [Action("create", "p-talker"), Action("remove", "p-old", "no longer planned"),
-               Action("replace", "p-discovery-0", "new image"), Action("keep", "p-discovery-1"),
-               Action("create", "p-listener")]
-    stages = in_stages(actions, {"p-discovery-0", "p-discovery-1"}, servers_first=False)
-    assert [[a.name for a in stage] for stage in stages] == [["p-old"], ["p-discovery-0", "p-talker", "p-listener"]]
-    assert len(in_stages(actions, {"p-discovery-0", "p-discovery-1"})) == 3  # control: servers first, alone
-
-
 def test_a_stage_overlaps_and_raises_the_first_failure_after_all_ran() -> None:
     barrier = threading.Barrier(SIDE_BY_SIDE, timeout=10)  # broken unless SIDE_BY_SIDE run at the same time
     done: list[str] = []

@@ -177,9 +177,7 @@ def deploy_host(project: Project, host: Host, specs: Sequence[ContainerSpec], *,
             return outcome
         by_name = {s.name: s for s in specs}
         timeout = allowing_emulation(SERVER_READY_TIMEOUT, emulated=emulated)
-        servers = {s.name for s in specs if s.role == ROLE_DISCOVERY}
-        # nodes that register once need their server first; the others look for it until it answers
-        for stage in in_stages(actions, servers, servers_first=kind.nodes_register_once):
+        for stage in in_stages(actions, {s.name for s in specs if s.role == ROLE_DISCOVERY}):
             each_or_first_error(stage, lambda a: apply_action(client, a, by_name.get(a.name), containers.get(a.name),
                                                               host, report=report, kind=kind, ready_timeout=timeout),
                                 limit=SIDE_BY_SIDE, name="robocore-start")
@@ -297,8 +295,7 @@ def wait_server_ready(container: Any, spec: ContainerSpec, host: Host, check: di
 
 
 def run(options: Options, *, host: str | None, tag: str | None) -> None:
-    """(Re)start containers on hosts, idempotent: discovery servers first where nodes register once (the ROS 1
-    master), side by side with the components where nodes look for a server until one answers (Fast DDS)."""
+    """(Re)start containers on hosts: discovery servers first, then components; idempotent."""
     project = options.load()
     hosts = select_hosts(project, host)
     if not options.dry_run:

@@ -63,21 +63,16 @@ def decide(specs: Sequence[ContainerSpec], existing: Sequence[Existing], image_i
     return actions
 
 
-def in_stages(actions: Sequence[Action], servers: Collection[str], *, servers_first: bool = True) -> list[list[Action]]:
+def in_stages(actions: Sequence[Action], servers: Collection[str]) -> list[list[Action]]:
     """``actions`` of one host grouped in the order ``run`` takes them: the removals, then each discovery server
     of ``servers`` alone (one is serving before anything after it starts), then every other container.
 
-    With ``servers_first`` False (nodes that keep looking for a server until one answers, as Fast DDS clients
-    do every 20 ms), the servers start in the last stage, ahead of the components in it: nothing waits for a
-    server to serve. The actions inside a stage do not depend on each other, so they can be taken side by side;
-    ``keep`` actions (nothing to do) and empty stages are left out.
+    The actions inside a stage do not depend on each other, so they can be taken side by side; ``keep`` actions
+    (nothing to do) and empty stages are left out.
     """
     removals = [a for a in actions if a.verb == "remove"]
     serving = [[a] for a in actions if a.name in servers and a.verb not in ("remove", "keep")]
     rest = [a for a in actions if a.name not in servers and a.verb not in ("remove", "keep")]
-    if not servers_first:
-        rest = [a for stage in serving for a in stage] + rest
-        serving = []
     return [stage for stage in (removals, *serving, rest) if stage]
 
 
