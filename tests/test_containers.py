@@ -13,6 +13,7 @@ from robocore.plan import containers, naming
 from robocore.plan.actions import Action, Existing, decide
 from robocore.plan.containers import ContainerSpec, component_spec, discovery_spec, docker_ports, host_specs
 from robocore.plan.discovery import fastdds as dds
+from robocore.plan.discovery import server_script
 
 ROOT = Path("/srv/myrobot")
 
@@ -206,9 +207,10 @@ def test_every_robot_container_runs_under_docker_init() -> None:
     for spec in specs:
         assert spec.docker_kwargs()["init"] is True and spec.compose_service()["init"] is True, spec.name
         assert (naming.INIT_SIGNALS_GROUP in spec.env) == (spec.role == naming.ROLE_DISCOVERY), spec.name
-    lines = dds.DISCOVERY_SCRIPT.splitlines()  # the script ignores SIGTERM only after the restart hold's sleep
-    assert lines.index('trap "" TERM') > max(i for i, line in enumerate(lines) if "sleep" in line and "$left" in line)
-    assert f'if [ -z "${{{naming.INIT_SIGNALS_GROUP}:-}}" ]; then rm -f "$state/alive"; exec "$@"; fi' in lines
+    lines = [line.strip() for line in server_script.DISCOVERY_SCRIPT_LINES]  # SIGTERM ignored only after the hold
+    assert lines.index('trap "" TERM;') > max(i for i, line in enumerate(lines) if "sleep" in line and "$left" in line)
+    assert f'if [ -z "${{{naming.INIT_SIGNALS_GROUP}:-}}" ]; then rm -f "$state/alive"; exec "$@"; fi;' in lines
+    assert "\n" not in dds.DISCOVERY_SCRIPT  # one line in compose files and pods
 
 
 def test_tag_uses_the_registry() -> None:

@@ -33,6 +33,7 @@ from robocore.plan.discovery import (
     ServerState,
     Transport,
     fastdds,
+    server_script,
 )
 from robocore.plan.discovery.base import READY, WAITING, last_error_line
 from robocore.project import Project
@@ -348,7 +349,7 @@ def test_a_replaced_node_gets_the_next_profile_after_its_predecessors_and_the_sa
 
 def run_server_script(state: Path, server: str, *, hold: int = 12, init: bool = True,
                       alive_age: float | None = None, started: bool = False) -> tuple[int, str, list[str]]:
-    """Run :data:`fastdds.DISCOVERY_SCRIPT` on this machine's sh, its state volume a folder of ``state``, a
+    """Run :data:`server_script.DISCOVERY_SCRIPT` on this machine's sh, its state volume a folder of ``state``, a
     ``sh -c server`` standing in for the server and a ``sleep`` that only writes down how long it was asked to
     wait (the heartbeat's sleeps included). Returns the exit code, the output and the hold's sleeps."""
     bin_dir, volume = state / "bin", state / "volume"
@@ -362,15 +363,15 @@ def run_server_script(state: Path, server: str, *, hold: int = 12, init: bool = 
         (volume / "alive").touch()
         stamp = time.time() - alive_age
         os.utime(volume / "alive", (stamp, stamp))
-    script = (fastdds.DISCOVERY_SCRIPT.replace(fastdds.DISCOVERY_STATE, str(volume))
-              .replace(fastdds.DISCOVERY_PROFILE, str(state / "profile.xml")))
+    script = (server_script.DISCOVERY_SCRIPT.replace(server_script.DISCOVERY_STATE, str(volume))
+              .replace(server_script.DISCOVERY_PROFILE, str(state / "profile.xml")))
     env = {"PATH": f"{bin_dir}:{os.environ['PATH']}", "ROBOCORE_DS_HOLD": str(hold), "ROBOCORE_DS_XML": "<dds/>"}
     if init:
         env[naming.INIT_SIGNALS_GROUP] = "1"
     done = subprocess.run(["sh", "-c", script, "robocore-discovery", "sh", "-c", server], env=env,
                           capture_output=True, text=True, timeout=30, check=False)
     slept = (state / "slept").read_text().split() if (state / "slept").exists() else []
-    return done.returncode, done.stdout, [s for s in slept if s != str(fastdds.HEARTBEAT_SECONDS)]
+    return done.returncode, done.stdout, [s for s in slept if s != str(server_script.HEARTBEAT_SECONDS)]
 
 
 def markers(state: Path) -> list[str]:
