@@ -18,10 +18,8 @@ and ``build``), real rclpy nodes:
 
 from __future__ import annotations
 
-import os
 import re
 import shutil
-import signal
 import statistics
 import time
 from collections.abc import Iterator
@@ -31,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 from deploy_helpers import HEARD, copy_project, log_lines, remove_project_containers, wait_for
-from ways_back import POLICY_SPACING, Pair
+from ways_back import Pair, in_place_ways
 
 from robocore.commands.support.composefiles import write_compose_files
 from robocore.plan.containers import ContainerSpec, host_specs
@@ -167,14 +165,6 @@ def test_a_kilted_talker_back_in_place_is_heard_within_2_s(kilted_copy: Project,
     pair = Pair(docker_client, specs["talker"].name, specs["listener"].name)
     pair.wait_heard(HEAR_WITHIN)
 
-    def kill_and_start() -> None:
-        talker = pair.talker()
-        talker.kill()
-        time.sleep(0.3)
-        talker.start()
-
-    killed = pair.timed_rounds(kill_and_start, "kilted SIGKILL + start", ROUNDS)
-    crashed = pair.timed_rounds(lambda: os.kill(pair.talker().attrs["State"]["Pid"], signal.SIGKILL),
-                                "kilted crash, restart policy", ROUNDS, spacing=POLICY_SPACING)
+    killed, crashed = in_place_ways(pair, "kilted", ROUNDS)
     assert statistics.median(killed) < BACK_WITHIN, killed
     assert statistics.median(crashed) < BACK_WITHIN, crashed

@@ -24,9 +24,7 @@
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import signal
 import statistics
 import tempfile
 import time
@@ -45,7 +43,7 @@ from deploy_helpers import (
     run_nox,
     wait_for,
 )
-from ways_back import POLICY_SPACING, Pair
+from ways_back import Pair, in_place_ways
 
 if TYPE_CHECKING:
     from conftest import RobocoreCli
@@ -193,15 +191,7 @@ def test_a_ros1_talker_back_in_place_is_heard_within_2_s(noetic: Path, run_roboc
     pair = Pair(docker_client, f"{NAME}-talker", f"{NAME}-listener")
     pair.wait_heard(60)
 
-    def kill_and_start() -> None:
-        talker = pair.talker()
-        talker.kill()
-        time.sleep(0.3)
-        talker.start()
-
-    killed = pair.timed_rounds(kill_and_start, "ROS 1 SIGKILL + start", WAY_ROUNDS)
-    crashed = pair.timed_rounds(lambda: os.kill(pair.talker().attrs["State"]["Pid"], signal.SIGKILL),
-                                "ROS 1 crash, restart policy", WAY_ROUNDS, spacing=POLICY_SPACING)
+    killed, crashed = in_place_ways(pair, "ROS 1", WAY_ROUNDS)
     assert statistics.median(killed) < BACK_WITHIN, killed
     assert statistics.median(crashed) < BACK_WITHIN, crashed
 

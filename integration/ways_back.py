@@ -8,6 +8,8 @@ Shared by the suites that time the ways back on a one-host robot (``test_shm_kil
 
 from __future__ import annotations
 
+import os
+import signal
 import statistics
 import time
 from collections.abc import Callable
@@ -37,6 +39,17 @@ class Pair:
 
     def talker(self) -> Any:
         return self.client.containers.get(self.talker_name)
+
+    def kill_and_start(self) -> None:
+        """SIGKILL the talker's container, then start it again in place 0.3 s later."""
+        talker = self.talker()
+        talker.kill()
+        time.sleep(0.3)
+        talker.start()
+
+    def crash(self) -> None:
+        """Kill the talker's process from outside Docker, as a crash ends it: its restart policy starts it again."""
+        os.kill(self.talker().attrs["State"]["Pid"], signal.SIGKILL)
 
     def greetings(self) -> list[tuple[str, int]]:
         """(Docker's timestamp, talker number) of each greeting in the listener's log, oldest first."""
@@ -84,3 +97,11 @@ class Pair:
         print(f"FIGURE {name}: start to heard s: median {statistics.median(seconds):.2f}, "
               f"rounds {' '.join(f'{t:.2f}' for t in seconds)}")
         return seconds
+
+
+def in_place_ways(pair: Pair, label: str, rounds: int) -> tuple[list[float], list[float]]:
+    """``rounds`` times each: the talker SIGKILLed and started again, then crashed and started again by its
+    restart policy; the seconds from its start to heard of each way."""
+    killed = pair.timed_rounds(pair.kill_and_start, f"{label} SIGKILL + start", rounds)
+    crashed = pair.timed_rounds(pair.crash, f"{label} crash, restart policy", rounds, spacing=POLICY_SPACING)
+    return killed, crashed
