@@ -297,9 +297,9 @@ def _stop(container: Any, timeout: int) -> tuple[float, int]:
 
 def test_discovery_server_stops_gracefully_at_once(running: Path, docker_client: Any) -> None:
     """`docker stop` of the discovery server ends in well under Docker's 10 s: the container's init passes SIGTERM on
-    and the server stops by itself (exit 0, not SIGKILL's 137). Started again, it serves the robot (a clean stop leaves
-    no restart hold): a listener restarted after it hears the talker again. Control: the same server without the init ignores
-    SIGTERM (PID 1 without a handler) and is killed when the stop's timeout ends."""
+    and the server stops by itself (exit 0, not SIGKILL's 137). Started again, it serves the robot (a clean stop
+    leaves no restart hold): a listener restarted after it hears the talker again. Control: the same server without
+    the init ignores SIGTERM (PID 1 without a handler) and is killed when the stop's timeout ends."""
     from robocore.plan.containers import discovery_spec
     from robocore.project import Project
 
