@@ -42,7 +42,7 @@ from harness import Figure, record
 from robot_host.hosts import RobotFleet
 
 from robocore.adapters.ssh import MULTIPLEX_SECONDS
-from robocore.plan.starts import docker_time
+from robocore.plan.starts import docker_epoch
 
 PROJECT = "robocore-it-demo"  # shares the cached images of the integration suites
 
@@ -111,23 +111,15 @@ def wait_heard(client: Any, container: str, needle: str, timeout: float = 120, *
             logs = ""
         for line in logs.splitlines():
             stamp, _, text = line.partition(" ")
-            if not text.startswith(f"I heard: {needle}") or log_time(stamp) < since:
+            if not text.startswith(f"I heard: {needle}") or docker_epoch(stamp) < since:
                 continue
             count = text.rpartition("#")[2].strip()
             if not first_counts or (count.isdigit() and int(count) <= first_counts):
-                return log_time(stamp)
+                return docker_epoch(stamp)
         time.sleep(0.2)
     talker = client.containers.get(container.replace("listener", "talker"))
     raise SystemExit(f"the listener never heard {needle!r} within {timeout:.0f} s\n--- listener\n{logs[-1500:]}\n"
                      f"--- talker ({talker.status}, {talker.labels})\n{talker.logs(tail=20).decode(errors='replace')}")
-
-
-def log_time(stamp: str) -> float:
-    """Seconds since the epoch of a Docker timestamp (RFC 3339, nanoseconds, UTC), to the microsecond."""
-    moment = docker_time(stamp)
-    if moment is None:
-        raise ValueError(f"not a Docker timestamp: {stamp!r}")
-    return moment.timestamp()
 
 
 def robocore_path(project: Path, client: Any, text: str, *, separate: bool) -> tuple[float, int, dict[str, float]]:
@@ -207,7 +199,7 @@ def dev_path(project: Path, client: Any, loop: DevLoop, text: str) -> tuple[floa
     if TRACE:
         talker = client.containers.get(f"{PROJECT}-talker")
         published = first_log(talker, "Publishing:", since=start)
-        started = log_time(talker.attrs["State"]["StartedAt"])
+        started = docker_epoch(talker.attrs["State"]["StartedAt"])
         dep = loop.deployed[count] if len(loop.deployed) > count else 0
         print(f"TRACE start {start:.3f} deployed {dep:.3f} started {started:.3f} published {published or 0:.3f} "
               f"heard {end:.3f}", file=sys.stderr, flush=True)
@@ -289,8 +281,8 @@ def first_log(container: Any, prefix: str, *, since: float) -> float | None:
     """The Docker log timestamp of the first line of ``container`` starting with ``prefix`` logged after ``since``."""
     for line in container.logs(timestamps=True, since=int(since)).decode(errors="replace").splitlines():
         stamp, _, text = line.partition(" ")
-        if text.startswith(prefix) and log_time(stamp) >= since:
-            return log_time(stamp)
+        if text.startswith(prefix) and docker_epoch(stamp) >= since:
+            return docker_epoch(stamp)
     return None
 
 

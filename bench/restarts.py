@@ -93,10 +93,7 @@ class Deployed:
 def started_at(container: Any) -> float:
     """The wall-clock time (epoch seconds) Docker recorded for the container's last start."""
     container.reload()
-    moment = starts.docker_time(container.attrs["State"]["StartedAt"])
-    if moment is None:
-        raise SystemExit(f"Docker gave no start time for {container.name}")
-    return moment.timestamp()
+    return starts.docker_epoch(container.attrs["State"]["StartedAt"])
 
 
 def heard_at(robot: Deployed, mark: int, timeout: float = 30.0) -> float:

@@ -28,7 +28,7 @@ import yaml
 from deploy_helpers import copy_project
 from robot_host.hosts import RobotFleet
 
-from robocore.plan.starts import docker_time
+from robocore.plan.starts import docker_epoch
 
 #: Where the talker's code is in its install tree (what a release of a changed talker changes).
 TALKER_PY = "demo_talker/lib/python3.11/site-packages/demo_talker/talker.py"
@@ -197,7 +197,7 @@ def container_lives(hosts: RobotFleet, index: int, since: float, until: float) -
     for line in kept.splitlines():
         container, service, running, started, finished = line.split()
         if not started.startswith("0001-"):  # made, never started
-            lives[container] = (service, _epoch(started), None if running == "true" else _epoch(finished))
+            lives[container] = (service, docker_epoch(started), None if running == "true" else docker_epoch(finished))
     for line in logged.splitlines():
         stamp, action, container, *service = line.split()
         if container in lives or not service:
@@ -206,14 +206,6 @@ def container_lives(hosts: RobotFleet, index: int, since: float, until: float) -
         name, begin, end = lives.get("removed-" + container, (service[0], since, None))
         lives["removed-" + container] = (name, when, end) if action == "start" else (name, begin, when)
     return [life for life in lives.values() if (life[2] is None or life[2] >= since) and life[1] <= until]
-
-
-def _epoch(stamp: str) -> float:
-    """Docker's RFC 3339 time (nanoseconds, Z) as seconds since the epoch, to the microsecond."""
-    moment = docker_time(stamp)
-    if moment is None:
-        raise ValueError(f"not a Docker timestamp: {stamp!r}")
-    return moment.timestamp()
 
 
 def overlaps(lives: Sequence[tuple[str, float, float | None]], since: float,

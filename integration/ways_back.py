@@ -15,20 +15,13 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from robocore.plan import starts
+from robocore.plan.starts import docker_epoch
 
 #: What the template's listeners log for each greeting (rclpy and rospy alike), before the talker's number.
 HEARD = "I heard: hello from talker #"
 #: Seconds a talker runs before it is crashed again: Docker doubles a restart policy's delay for a container
 #: that ran less than 10 s, which would time Docker's back-off, not the way back.
 POLICY_SPACING = 10.5
-
-
-def docker_time(stamp: str) -> float:
-    """Epoch seconds of a Docker timestamp (RFC 3339: ``State.StartedAt``, a log line's stamp)."""
-    moment = starts.docker_time(stamp)
-    assert moment is not None, f"not a Docker timestamp: {stamp!r}"
-    return moment.timestamp()
 
 
 class Pair:
@@ -78,9 +71,10 @@ class Pair:
         while time.monotonic() < deadline:
             started = self.talker().attrs["State"]["StartedAt"]
             if started != previous_start:
-                new = [stamp for stamp, _ in self.greetings()[mark:] if docker_time(stamp) >= docker_time(started)]
+                start = docker_epoch(started)
+                new = [when for when in (docker_epoch(stamp) for stamp, _ in self.greetings()[mark:]) if when >= start]
                 if new:
-                    return docker_time(new[0]) - docker_time(started)
+                    return new[0] - start
             time.sleep(0.1)
         raise AssertionError(f"the talker was not heard again within {timeout} s: {self.greetings()[-5:]}")
 
@@ -90,7 +84,7 @@ class Pair:
         seconds = []
         for _ in range(rounds):
             previous = self.talker().attrs["State"]["StartedAt"]
-            time.sleep(max(0.0, spacing - (time.time() - docker_time(previous))))
+            time.sleep(max(0.0, spacing - (time.time() - docker_epoch(previous))))
             mark = len(self.greetings())
             way()
             seconds.append(self.start_to_heard(mark, previous))

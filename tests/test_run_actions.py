@@ -14,7 +14,7 @@ from robocore.errors import DockerError
 from robocore.plan.actions import Action, Existing, in_stages, servers_started, with_node_restarts
 from robocore.plan.containers import ContainerSpec
 from robocore.plan.naming import ROLE_COMPONENT, ROLE_DISCOVERY
-from robocore.plan.starts import docker_time
+from robocore.plan.starts import docker_epoch, docker_time
 
 
 def spec(name: str, role: str) -> ContainerSpec:
@@ -97,6 +97,13 @@ def test_docker_times() -> None:
     assert docker_time(MASTER_AT) == datetime(2026, 11, 25, 10, 0, 5, 123456, tzinfo=timezone.utc)
     assert docker_time("2026-11-25T10:00:05Z") == datetime(2026, 11, 25, 10, 0, 5, tzinfo=timezone.utc)
     assert docker_time("") is None and docker_time("yesterday") is None
+
+
+def test_docker_epochs_are_the_times_in_seconds_and_refuse_what_they_cannot_read() -> None:
+    assert docker_epoch(MASTER_AT) == docker_time(MASTER_AT).timestamp()  # type: ignore[union-attr]
+    assert docker_epoch("2026-11-25T10:00:05Z") - docker_epoch(MASTER_AT) == pytest.approx(-0.123456)
+    with pytest.raises(ValueError, match="not a Docker timestamp: 'yesterday'"):
+        docker_epoch("yesterday")
 
 
 def row(name: str, started_at: str | None) -> Row:

@@ -22,7 +22,7 @@ import pytest
 from rclpy.qos import qos_profile_sensor_data
 from std_msgs.msg import String
 
-from robocore.plan import starts
+from robocore.plan.starts import docker_epoch
 from robocore.testing.faults import FaultError
 
 GREETING = "hello from talker #"
@@ -61,30 +61,23 @@ def figure(name: str, value: float) -> None:
     print(f"FIGURE {name} {value:.2f}", flush=True)
 
 
-def docker_time(stamp: str) -> float:
-    """Epoch seconds of a Docker timestamp (RFC 3339: ``State.StartedAt``, a log line's stamp)."""
-    moment = starts.docker_time(stamp)
-    assert moment is not None, f"not a Docker timestamp: {stamp!r}"
-    return moment.timestamp()
-
-
 def started_at(robot: Any, service: str) -> float:
     """Epoch seconds of ``service``'s last start, as Docker recorded it."""
-    return docker_time(robot.client.containers.get(robot.specs[service].name).attrs["State"]["StartedAt"])
+    return docker_epoch(robot.client.containers.get(robot.specs[service].name).attrs["State"]["StartedAt"])
 
 
 def logged_since_start(robot: Any, service: str) -> str:
     """What ``service`` logged since its last start (Docker's timestamps)."""
     since = started_at(robot, service) - 0.001
     text = robot.client.containers.get(robot.specs[service].name).logs(timestamps=True).decode(errors="replace")
-    return "\n".join(line for line in text.splitlines() if docker_time(line.split(" ", 1)[0]) >= since)
+    return "\n".join(line for line in text.splitlines() if docker_epoch(line.split(" ", 1)[0]) >= since)
 
 
 def listener_heard_since(robot: Any, since: float) -> float | None:
     """Epoch seconds of the listener's first greeting logged at or after ``since`` (Docker's timestamps)."""
     lines = robot.client.containers.get(robot.specs["listener"].name).logs(timestamps=True).decode(
         errors="replace").splitlines()
-    stamps = [docker_time(line.split(" ", 1)[0]) for line in lines if "I heard: hello from talker #" in line]
+    stamps = [docker_epoch(line.split(" ", 1)[0]) for line in lines if "I heard: hello from talker #" in line]
     return min((stamp for stamp in stamps if stamp >= since), default=None)
 
 

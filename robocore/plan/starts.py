@@ -24,6 +24,15 @@ def docker_time(text: str) -> datetime | None:
     return stamp if stamp.tzinfo is not None else stamp.replace(tzinfo=timezone.utc)
 
 
+def docker_epoch(text: str) -> float:
+    """A Docker timestamp as seconds since the epoch (to the microsecond), for timing what Docker recorded (a
+    container's start, a log line) against other such times; ValueError when it cannot be read."""
+    stamp = docker_time(text)
+    if stamp is None:
+        raise ValueError(f"not a Docker timestamp: {text!r}")
+    return stamp.timestamp()
+
+
 def latest_start(times: Iterable[str]) -> datetime | None:
     """The latest of Docker start times ``times`` that can be read, None when there is none."""
     known = [t for t in map(docker_time, times) if t is not None]
