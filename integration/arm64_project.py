@@ -8,6 +8,10 @@ from nothing they take about ten minutes, most of it the arm64 root's bootstrap 
 (:mod:`official_standins`), and its project's base and talker image (minutes more under qemu, off the suites'
 critical path).
 
+Before all that, the amd64 stand-ins of the official images (``ros:jazzy-ros-base``, ``ros:noetic-ros-base``) for
+``test_official_base.py``: about four minutes of Debian bootstraps, downloads and installs that would otherwise be
+on the suites' critical path, which that suite's fixture then finds current by their inputs' hash.
+
 Run as a script (``python integration/arm64_project.py``), this module makes those images in throw-away copies of
 the projects (``prepare-base`` and ``stage``, which contact no robot host; for the fleet's copy, kept at
 :data:`FLEET_BUILT`, ``build`` too), holding :data:`LOCK` while it works.
@@ -44,6 +48,8 @@ NO_HOSTS = ("192.0.2.201", "192.0.2.202")
 #: Where the script leaves the Swarm suite's all-arm64 copy of the project, built (its install trees and ccache),
 #: for the suite to copy and build again (:func:`built_fleet_project`).
 FLEET_BUILT = LOCK.with_name(f"robocore-it-arm64-fleet-{os.getuid()}")
+#: The line :data:`LOG` has once the amd64 stand-ins are made.
+STANDINS_DONE = "amd64 stand-ins made"
 
 
 def init_project(root: Path, hosts: Sequence[Mapping[str, object]], *, talker_host: str, server_host: str) -> None:
@@ -114,9 +120,22 @@ def wait_for_images(timeout: float = 3600) -> str | None:
     return "\n".join(lines[-20:]) or None
 
 
+def wait_for_standins(timeout: float = 1800) -> None:
+    """Wait while a run of this script is making the amd64 stand-ins (``timeout`` seconds at most), so that a suite
+    does not build them a second time beside it; returns at once when no run is under way."""
+    deadline = time.monotonic() + timeout
+    while is_running() and time.monotonic() < deadline:
+        with contextlib.suppress(OSError):
+            if STANDINS_DONE in LOG.read_text(errors="replace"):
+                return
+        time.sleep(2)
+
+
 def make_images() -> None:
-    """prepare-base and stage a throw-away copy of the project (placeholder hosts), then the other suites' copies
-    (:func:`_official_arm64`, and the fleet's, kept built at :data:`FLEET_BUILT`), printing each step's time."""
+    """The amd64 stand-ins (:func:`_official_amd64`), then prepare-base and stage of a throw-away copy of the
+    project (placeholder hosts), then the other suites' copies (:func:`_official_arm64`, and the fleet's, kept built
+    at :data:`FLEET_BUILT`), printing each step's time."""
+    _official_amd64()
     with tempfile.TemporaryDirectory(prefix="robocore-it-images-") as parent:
         root = Path(parent) / NAME
         hosts = [{"name": "robot-x86", "ip": NO_HOSTS[0], "user": "root", "arch": "amd64"},
@@ -159,6 +178,20 @@ def _step(root: Path, step: str, *extra: str) -> None:
     if code != 0:
         raise subprocess.CalledProcessError(code, argv)
     print(f"{root.name} {step}: {time.monotonic() - started:.1f} s", flush=True)
+
+
+def _official_amd64() -> None:
+    """test_official_base's stand-ins, first: that suite runs mid-way through the integration session, the arm64
+    suites last. Named with robocore's per-arch name only (the suite's fixture names them as a pull would)."""
+    import docker
+    import official_standins
+
+    client = docker.from_env(timeout=600)
+    for distro in ("jazzy", "noetic"):
+        started = time.monotonic()
+        official_standins.ensure(client, official_standins.Standin(distro, "amd64"), pin=True)
+        print(f"amd64 {distro} stand-in: {time.monotonic() - started:.1f} s", flush=True)
+    print(STANDINS_DONE, flush=True)
 
 
 def _official_arm64(parent: Path) -> None:

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import arm64_project
 import official_standins
 import pytest
 import yaml
@@ -84,6 +85,7 @@ def official(request: pytest.FixtureRequest, docker_client: Any, run_robocore: R
     """``robocore init --defaults`` (base: official) for the distro, on its stand-in: prepare-base, stage, build."""
     distro = request.param
     standin = official_standins.Standin(distro, "amd64")
+    arm64_project.wait_for_standins()  # made ahead of time by the background image run, when one is under way
     image_id = official_standins.ensure(docker_client, standin, say=print)
     official_standins.forget_pinned(docker_client, standin)
     parent = Path(tempfile.mkdtemp(prefix="robocore-it-"))
