@@ -16,7 +16,9 @@ edited text (the end is the Docker log timestamp of that line, so the polling in
 For each link speed (default: the unshaped bridge and 100 Mbit/s), prints both times, the ratio
 (goal >= 10x) and the bytes sync moved for the edit (goal < 50 KB).
 
-    python bench/deploy.py [--rounds N] [--links 0,100] [--separate] [--watch] [--profile DIR]
+    python bench/deploy.py [--rounds N] [--links 0,100] [--separate] [--watch] [--profile DIR] [--distro D]
+
+``--distro kilted`` times the same on ROS 2 Kilted (Fast DDS 3.x; its figures go to ``deploy-kilted.json``).
 
 With --watch, `robocore dev --component talker` (the watch mode) also runs, and its rounds (a save until
 heard, with the save-to-deployed part) print beside the one-command loop and the naive path.
@@ -64,12 +66,12 @@ def robocore(project: Path, *args: str, timed: bool = False) -> subprocess.Compl
     return harness.robocore(project, *args, timeout=3600, python=python)
 
 
-def make_project(parent: Path, ip: str) -> Path:
+def make_project(parent: Path, ip: str, distro: str) -> Path:
     import yaml
 
     root = parent / PROJECT
-    proc = subprocess.run([sys.executable, "-m", "robocore", "init", str(root), "--defaults", "--base", "wheels"],
-                          capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, "-m", "robocore", "init", str(root), "--defaults", "--base", "wheels",
+                           "--distro", distro], capture_output=True, text=True)
     if proc.returncode != 0:
         raise SystemExit(f"robocore init failed:\n{proc.stderr}")
     data = yaml.safe_load((root / "robot.yaml").read_text())
@@ -324,6 +326,8 @@ def main() -> int:
     parser.add_argument("--floor-rounds", type=int, default=5,
                         help="rounds of the floor: the talker's container, edited code already in it, restarted by "
                              "Docker on the host until heard (0: skip)")
+    parser.add_argument("--distro", default="jazzy", choices=["jazzy", "kilted"],
+                        help="the project's ROS 2 distro (kilted: Fast DDS 3.x)")
     parser.add_argument("--profile", type=Path, metavar="DIR",
                         help="run each timed robocore command under cProfile and write its profile into DIR "
                              "(slower: for finding where the time goes, not for the figures)")
@@ -340,7 +344,7 @@ def main() -> int:
     floors: list[Result] = []
     try:
         with RobotFleet(1) as fleet:
-            project = make_project(parent, fleet.hosts[0].ip)
+            project = make_project(parent, fleet.hosts[0].ip, args.distro)
             t = time.monotonic()
             for step in ("prepare-base", "stage", "build", "sync", "run"):
                 robocore(project, step, "--quiet")
@@ -442,11 +446,12 @@ def main() -> int:
                               detail=f"best {best_floor[0]:.2f} s ({detail}); no deploy is heard sooner"))
     print()
     print("\n".join(verdicts))
-    record("deploy", figures, goals=["naive / robocore >= 10x", "sync moves < 50 KB for a one-line edit",
-                                     "robocore dev: save to heard < 1 s"],
+    name = "deploy" if args.distro == "jazzy" else f"deploy-{args.distro}"
+    record(name, figures, goals=["naive / robocore >= 10x", "sync moves < 50 KB for a one-line edit",
+                                 "robocore dev: save to heard < 1 s"],
            notes=[f"{args.rounds} rounds per link, robocore as "
                   f"{'three commands' if args.separate else 'one command, build sync run'}; one simulated robot "
-                  "host (Docker-in-Docker + sshd) over ssh://"])
+                  f"host (Docker-in-Docker + sshd) over ssh://; ROS 2 {args.distro}"])
     return 0
 
 
