@@ -202,10 +202,9 @@ def main() -> int:
                                    else f"- : a talker was not heard within {heard_within(components):g} s"))
                 rows.append(Figure(f"{label}, {name}: busy CPU until all heard", cpu, "CPU-s",
                                    detail="" if cpu is None else f"{cpu / components:.2f} CPU-s per component"))
-                goal = goal_heard or goal_running
                 rows.append(Figure(f"{label}, {name}: CPU floor (that CPU on {cores} cores)", floor, "s",
-                                   f"< {goal:g} s" if goal else None,
-                                   met=floor < goal if goal and floor is not None else None,
+                                   f"< {goal_heard:g} s" if goal_heard else None,  # the floor of all heard
+                                   met=floor < goal_heard if goal_heard and floor is not None else None,
                                    detail="the least any ordering of that work could take here"))
     record("bringup", rows, goals=["16 components on 3 hosts running in < 3 s and all heard in < 5 s",
                                    "64 components on 4 hosts running in < 10 s"],
