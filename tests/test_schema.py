@@ -85,6 +85,20 @@ def test_schema_accepts_the_base_document_and_values_robocore_coerces(schema: di
     )
 
 
+@pytest.mark.parametrize(("written", "accepted"), [("7.0", 7), ("0.0", 0), ("7.5", None), ("true", None),
+                                                  ('"7"', None)])
+def test_a_whole_number_with_a_point_is_accepted_by_both_and_nothing_else(schema: dict[str, Any], written: str,
+                                                                          accepted: int | None) -> None:
+    """JSON Schema's integer takes 7.0, so robocore does too (as 7); 7.5, a boolean and a string neither does."""
+    data = yaml.safe_load(edit({2: f"ros_domain_id: {written}"}))
+    assert _validator(schema).is_valid(data) is (accepted is not None)
+    if accepted is None:
+        with pytest.raises(ValidationError):
+            Robot.model_validate(data)
+    else:
+        assert Robot.model_validate(data).ros_domain_id == accepted
+
+
 def test_cross_field_rules_are_left_to_validate(schema: dict[str, Any]) -> None:
     """The schema checks shape only: an unknown runs_on host passes it (robocore validate reports it)."""
     assert _validator(schema).is_valid(yaml.safe_load(edit({15: "    runs_on: rpi6"})))
