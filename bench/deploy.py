@@ -446,9 +446,9 @@ def main() -> int:
                               detail=f"best {best_floor[0]:.2f} s ({detail}); no deploy is heard sooner"))
     print()
     print("\n".join(verdicts))
-    name = "deploy" if args.distro == "jazzy" else f"deploy-{args.distro}"
-    record(name, figures, goals=["naive / robocore >= 10x", "sync moves < 50 KB for a one-line edit",
-                                 "robocore dev: save to heard < 1 s"],
+    record("deploy", figures, goals=["naive / robocore >= 10x", "sync moves < 50 KB for a one-line edit",
+                                     "robocore dev: save to heard < 1 s"],
+           variant="" if args.distro == "jazzy" else args.distro,
            notes=[f"{args.rounds} rounds per link, robocore as "
                   f"{'three commands' if args.separate else 'one command, build sync run'}; one simulated robot "
                   f"host (Docker-in-Docker + sshd) over ssh://; ROS 2 {args.distro}"])
