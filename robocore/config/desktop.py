@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterator, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
+from pydantic import Field
 
 from robocore.config.hints import Unknown, known_list
+from robocore.config.strict import Strict
 from robocore.config.values import Number, shown
-from robocore.config.whole_numbers import whole_float
 
 if TYPE_CHECKING:
     from robocore.config.model import Component
@@ -35,15 +35,8 @@ SIZE = r"[1-9][0-9]{2,4}x[1-9][0-9]{2,4}"
 _DISPLAY_RE = re.compile(r"^(?P<host>[^:]*):(?P<number>[0-9]+)(?:\.[0-9]+)?$")
 
 
-class Desktop(BaseModel):
+class Desktop(Strict):
     """A VNC desktop served by the component: an X server that other components' windows draw into."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    @field_validator("*", mode="before")
-    @classmethod
-    def _whole_numbers(cls, value: Any, info: ValidationInfo) -> Any:
-        return whole_float(value, cls.model_fields[info.field_name].annotation) if info.field_name else value
 
     display: Number = Field(default=1, ge=1, le=63, description="X display number (:1); unique per host.")
     size: str = Field(default="1280x800", pattern=f"^{SIZE}$", description="Screen size, WIDTHxHEIGHT.")

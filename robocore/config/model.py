@@ -10,7 +10,7 @@ import ipaddress
 from enum import Enum
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
+from pydantic import ConfigDict, Field, field_validator
 
 from robocore.config.desktop import Desktop
 from robocore.config.mappings import is_project_path as is_project_path
@@ -26,6 +26,7 @@ from robocore.config.sources import (
     git_protocol,
     url_rules,
 )
+from robocore.config.strict import Strict as Strict
 from robocore.config.values import (
     ENV_NAME,
     MULTI_LINE,
@@ -46,22 +47,10 @@ from robocore.config.values import (
     schema_pattern,
     shown,
 )
-from robocore.config.whole_numbers import whole_float
 
 #: ROS 2 distributions robocore knows, with the Fast DDS line each ship; ROS 1 ones (every other distro is ROS 2).
 FASTDDS_LINE: dict[str, int] = {"humble": 2, "jazzy": 2, "kilted": 3, "rolling": 3}
 ROS1_DISTROS = frozenset({"melodic", "noetic"})
-
-
-class Strict(BaseModel):
-    """Base for every robot.yaml model: frozen, unknown keys are errors."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    @field_validator("*", mode="before")
-    @classmethod
-    def _whole_numbers(cls, value: Any, info: ValidationInfo) -> Any:
-        return whole_float(value, cls.model_fields[info.field_name].annotation) if info.field_name else value
 
 
 class RosDistro(str, Enum):

@@ -437,7 +437,6 @@ SHELL_WORDS = "(?:" + "|".join([
 #: A command line written as text (entrypoint, launch arguments): split into words with shell quoting rules.
 ShellWords = Annotated[str, AfterValidator(shell_words), pattern_field(SHELL_WORDS)]
 #: A whole number that YAML wrote as a number: ``true``/``false`` (YAML booleans) are not 1 and 0, and ``"5"`` is
-#: not 5. ``5.0`` is 5 (:func:`robocore.config.whole_numbers.whole_float`, applied by the models).
+#: not 5. ``5.0`` is 5 (:class:`robocore.config.strict.Strict`, every model's base).
 Number = Annotated[int, Strict()]
-
 MultiLine = Annotated[str, AfterValidator(multi_line), pattern_field(MULTI_LINE)]

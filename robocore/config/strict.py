@@ -1,9 +1,25 @@
-"""Whole numbers written with a point (``5.0``): JSON Schema's ``integer`` takes them, so robocore does too."""
+"""The base of every robot.yaml model (:class:`Strict`): frozen, unknown keys are errors, and a whole number written
+with a point (``5.0``) is that number, as JSON Schema's ``integer`` (and so ``robocore schema``) already says."""
 
 from __future__ import annotations
 
 from types import UnionType
 from typing import Any, Union, get_args, get_origin
+
+from pydantic import BaseModel, ConfigDict, ValidationInfo, field_validator
+
+
+class Strict(BaseModel):
+    """Base for every robot.yaml model: frozen, unknown keys are errors."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _whole_numbers(cls, value: Any, info: ValidationInfo) -> Any:
+        if isinstance(value, float) and info.field_name:
+            return whole_float(value, cls.model_fields[info.field_name].annotation)
+        return value
 
 
 def whole_float(value: Any, annotation: Any) -> Any:
