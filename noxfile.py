@@ -8,11 +8,16 @@ own, with the images started by the integration session instead (a later start, 
 
 from __future__ import annotations
 
+import os
+
 import nox
 
 #: Seconds a session's pytest may take, after Ctrl-C or .ci/run's time limit, to tear its fixtures down and
 #: print its summary (nox's default of 0.3 s would cut the summary off).
 INTERRUPT_GRACE = 150.0
+
+#: Lanes of the integration session (pytest-xdist workers): ``ROBOCORE_IT_LANES`` sets another number, 0 none.
+LANES = 2
 
 nox.options.sessions = ["lint", "typecheck", "tests", "integration"]
 nox.options.reuse_existing_virtualenvs = True
@@ -47,6 +52,10 @@ def integration(session: nox.Session) -> None:
     _install(session)
     session.env["TESTCONTAINERS_RYUK_DISABLED"] = "true"
     # a test that hangs fails after 25 minutes (its fixtures' image builds included) instead of stalling CI;
-    # the 60 slowest tests are printed on every run (and on an interrupted one), so time growth is seen early
-    session.run("pytest", "integration", "-p", "no:cacheprovider", "--timeout=1500", "--durations=60",
+    # the 60 slowest tests are printed on every run (and on an interrupted one), so time growth is seen early;
+    # the modules run in lanes, xdist workers taking whole groups in integration/lanes.py's order, and the table of
+    # where the minutes went ends the output (integration/ci_times.py)
+    lanes = os.environ.get("ROBOCORE_IT_LANES", str(LANES))
+    session.run("pytest", "integration", "-p", "no:cacheprovider", "--timeout=1500", "--durations=60", "-v",
+                "-n", lanes, "--dist", "loadgroup", "--no-loadscope-reorder",
                 *session.posargs, interrupt_timeout=INTERRUPT_GRACE)

@@ -18,7 +18,7 @@ Docker, projects and robot hosts
 - ``robot_fleets`` (module) and ``fleet`` (module): Docker-in-Docker robot hosts reached over ssh://
   (bench/robot_host/); removed after the module's last test.
 - ``arm64_images`` (session): waits for the arm64 suites' images, made in the background
-  (:mod:`arm64_project`) while the other suites run; those suites (``RUN_LAST``) run last.
+  (:mod:`arm64_project`) while the other suites run; those suites (:data:`lanes.LAST`) run last.
 
 What a test creates is removed by a fixture, pass or fail
 - ``tracked_containers``: containers a test starts itself;
@@ -47,8 +47,11 @@ from pathlib import Path
 from typing import Any
 
 import arm64_project
+import ci_times
+import lanes
 import pytest
 from deploy_helpers import copy_project, output_tails, remove_project_containers, remove_test_runs
+from robot_host.build import ensure_image
 from robot_host.hosts import RobotFleet
 
 os.environ.setdefault("TESTCONTAINERS_RYUK_DISABLED", "true")
@@ -61,27 +64,45 @@ Env = Mapping[str, "str | None"]
 _STARTED: list[subprocess.Popen[str]] = []
 
 
-#: Modules that run last, in this order: they need the arm64 images (:mod:`arm64_project`), made meanwhile.
-RUN_LAST = ("test_arm64.py", "test_fleet_swarm.py", "test_host_build.py", "test_official_arm64.py")
 #: The background run of :mod:`arm64_project` this session started, if any.
 _IMAGES_AHEAD: list[subprocess.Popen[bytes]] = []
 
 
-def _last_rank(item: pytest.Item) -> int:
-    name = item.path.name
-    return RUN_LAST.index(name) + 1 if name in RUN_LAST else 0
+def pytest_configure(config: pytest.Config) -> None:
+    """The per-module time table (:mod:`ci_times`) and the ``quiet`` marker (:mod:`lanes`)."""
+    config.addinivalue_line("markers", "quiet: a timed test: no other lane builds while it runs (integration/lanes.py)")
+    ci_times.register(config)
 
 
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The arm64 suites go last (a stable sort: every other order is kept), so that their images are made in
-    the background while the others run."""
-    items.sort(key=_last_rank)
+    """Each module's tests join its group (:func:`lanes.group_of`: the xdist group a lane takes whole), and the
+    groups are put in :mod:`lanes`' queue order (a stable sort: the tests of a module keep their order). The arm64
+    suites go last, so that their images are made in the background while the others run."""
+    ranks = {}
+    for item in items:
+        rank, group = lanes.group_of(item.path.name)
+        ranks[item.nodeid] = rank
+        item.add_marker(pytest.mark.xdist_group(group))
+    items.sort(key=lambda item: ranks[item.nodeid])
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_call(item: pytest.Item) -> Iterator[None]:
+    """A quiet test's body runs while no other lane builds (:func:`lanes.quiet`)."""
+    if item.get_closest_marker("quiet") is None:
+        return (yield)
+    with lanes.quiet():
+        return (yield)
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:
     """Starts making the arm64 suites' images in the background when they are to run and nobody is making them
     (``scripts/test`` starts that before the unit tests)."""
-    if any(_last_rank(item) for item in session.items) and not arm64_project.is_running():
+    if session.config.option.collectonly:  # listing the tests (tests/test_proofs.py) makes no image
+        return
+    last = {module for group in lanes.LAST for module in group}
+    if any(item.path.name in last for item in session.items) and not arm64_project.is_running():
         _IMAGES_AHEAD.append(arm64_project.start())
 
 
@@ -162,10 +183,13 @@ class RobocoreCli:
     def __call__(self, project: Path | None, *args: str, check: bool = True, env: Env | None = None,
                  timeout: float = 1800) -> subprocess.CompletedProcess[str]:
         """Run the CLI to its end and return the completed process (text stdout and stderr). With ``check``,
-        a non-zero exit fails the test with the command line, the exit code and the ends of both outputs."""
+        a non-zero exit fails the test with the command line, the exit code and the ends of both outputs. A
+        command that builds waits while another lane runs a quiet test (:func:`lanes.heavy`)."""
         argv = self.argv(project, *args)
-        proc = subprocess.run(argv, env=self.environ(env), stdin=subprocess.DEVNULL, capture_output=True, text=True,
-                              timeout=timeout)
+        builds = bool(args) and args[0] in lanes.HEAVY_COMMANDS and "--dry-run" not in args
+        with lanes.heavy() if builds else contextlib.nullcontext():
+            proc = subprocess.run(argv, env=self.environ(env), stdin=subprocess.DEVNULL, capture_output=True,
+                                  text=True, timeout=timeout)
         if check and proc.returncode != 0:
             pytest.fail(f"`robocore {shlex.join(argv[3:])}` failed: {output_tails(proc, 4000)}", pytrace=False)
         return proc
@@ -280,8 +304,9 @@ def new_demo_project(docker_client: Any, run_robocore: RobocoreCli) -> Iterator[
 def demo_project(new_demo_project: Callable[[], Path], run_robocore: RobocoreCli) -> Path:
     """The template project (wheels base) after prepare-base, stage and build; returns its folder."""
     root = new_demo_project()
-    for step in ("prepare-base", "stage", "build"):
-        run_robocore(root, step, "--quiet")
+    with lanes.one_at_a_time("demo"):  # the first lane builds the images; the next finds them current
+        for step in ("prepare-base", "stage", "build"):
+            run_robocore(root, step, "--quiet")
     return root
 
 
@@ -294,7 +319,7 @@ def project_copies(demo_project: Path, tmp_path: Path, docker_client: Any) -> It
     made: list[str] = []
 
     def make(kind: str, **kwargs: Any) -> Path:
-        name = f"robocore-it-{kind}-{len(made)}-{int(time.time() * 1000) % 100000}"
+        name = f"robocore-it-{kind}-{lanes.lane()}{len(made)}-{int(time.time() * 1000) % 100000}"
         made.append(name)
         return copy_project(demo_project, tmp_path, name, **kwargs)
 
@@ -387,7 +412,10 @@ def robot_fleets(docker_client: Any) -> Iterator[Callable[..., RobotFleet]]:
     def start(count: int = 2, **kwargs: Any) -> RobotFleet:
         fleet = RobotFleet(count, **kwargs)
         fleets.append(fleet)  # before start: a fleet that fails halfway is removed too
-        fleet.start()
+        with lanes.one_at_a_time("robot-host"):  # one lane bootstraps the hosts' image, the others find it made
+            ensure_image()
+        with lanes.heavy():  # dockerd starting in each host
+            fleet.start()
         return fleet
 
     yield start

@@ -24,6 +24,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import lanes
 import pytest
 import yaml
 from robot_host.polling import wait_for as wait_for  # re-exported: the suites' one wait loop
@@ -43,15 +44,12 @@ def compose_command() -> list[str]:
                 pytrace=False)
 
 
-#: Ports the suites pick for servers they start later: below the kernel's ephemeral range (32768-60999 here),
-#: so that a port found free is not handed to some client's socket before the server binds it.
-TEST_PORTS = range(20000, 32768)
-
-
 def free_udp_port() -> int:
-    """A UDP port nobody listens on right now (host networking: the discovery server binds it)."""
+    """A UDP port nobody listens on right now (host networking: the discovery server binds it), of this lane's
+    ports (:func:`lanes.ports`: below the kernel's ephemeral range, so that a port found free is not handed to some
+    client's socket before the server binds it, and never one another lane may pick)."""
     for _ in range(200):
-        port = random.choice(TEST_PORTS)
+        port = random.choice(lanes.ports())
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
             try:
                 sock.bind(("0.0.0.0", port))
@@ -89,7 +87,7 @@ def copy_project(source: Path, parent: Path, name: str, *, transport: str = "shm
         for state in install.parent.glob(".robocore-*.json"):  # the build's state (what run labels)
             shutil.copy2(state, target / state.name)
     data = yaml.safe_load((source / "robot.yaml").read_text())
-    data["ros_domain_id"] = random.randint(100, 230)
+    data["ros_domain_id"] = random.choice(lanes.domain_ids())
     data["discovery"] = {"servers": [{"host": data["hosts"][0]["name"], "port": free_udp_port()}],
                          "transport": transport}
     if edit is not None:

@@ -23,7 +23,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from deploy_helpers import TEST_PORTS, wait_for
+import lanes
+from deploy_helpers import wait_for
 
 RGB = tuple[int, int, int]
 
@@ -47,13 +48,15 @@ def tcp_free(port: int) -> bool:
     return True
 
 
-def free_display(numbers: range = range(20, 64)) -> tuple[int, int, int]:
-    """A display number no X server uses here, with its free VNC port (5900 + N) and a free web port."""
+def free_display(numbers: range | None = None) -> tuple[int, int, int]:
+    """A display number no X server uses here (of this lane's share of 20-63: two lanes never race for one),
+    with its free VNC port (5900 + N) and a free web port."""
+    numbers = numbers or lanes.share(20, 63)
     for number in random.sample(numbers, len(numbers)):
         if display_taken(number) or not tcp_free(5900 + number):
             continue
         for _ in range(100):
-            web = random.choice(TEST_PORTS)
+            web = random.choice(lanes.ports())
             if tcp_free(web):
                 return number, 5900 + number, web
     raise RuntimeError("no free X display and ports")

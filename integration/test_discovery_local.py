@@ -167,6 +167,7 @@ def _restart_server_and_listener(dep: Deployment, timeout: float, *, graceful: b
     return time.monotonic() - started if resumed else None
 
 
+@pytest.mark.quiet
 def test_discovery_server_restart_recovers(deployment: Any) -> None:
     """The server container is SIGKILLed and started 4 s later; a listener started after it finds the talker
     again. The server holds only what is left of its hold since its last heartbeat (12 + 1 - 4 or 5 s, in whole
@@ -197,6 +198,7 @@ def test_restart_without_the_hold_never_recovers(deployment: Any) -> None:
         "recovered without the hold: the hold may no longer be needed (check dds.restart_hold_seconds)"
 
 
+@pytest.mark.quiet
 def test_a_graceful_restart_holds_nothing_and_needs_nothing(deployment: Any) -> None:
     """The control's counterpart: the server as ``run`` plans it (its 12 s hold set), restarted gracefully, says
     goodbye (it runs under Docker's init, which passes SIGTERM on), so its clients drop it; it ended cleanly, so

@@ -53,6 +53,7 @@ def figures(proc: subprocess.CompletedProcess[str]) -> dict[str, float]:
     return {name: float(value) for name, value in re.findall(r"FIGURE (\w+) ([0-9.]+)", proc.stdout)}
 
 
+@pytest.mark.quiet
 def test_every_fault_is_observed_and_undone_on_a_two_host_robot(project_copies: Callable[..., Path]) -> None:
     proc = run_suite(project_copies, "faults_two_hosts.py", two_hosts_two_servers)
     print(figures(proc), re.findall(r"NOTE [^\n]*", proc.stdout))

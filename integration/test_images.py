@@ -21,6 +21,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import lanes
 import pytest
 from deploy_helpers import free_tcp_port, wait_for
 
@@ -83,7 +84,7 @@ def test_talker_and_listener_exchange_messages(docker_client: Any, demo_project:
     project = _project(demo_project)
     talker, listener = _role(project, "talker"), _role(project, "listener")
     assert talker.entrypoint and listener.entrypoint
-    domain = random.randint(150, 220)  # a domain of our own: other suites share the host network
+    domain = random.choice(lanes.domain_ids()[:-1])  # this one and the next are ours: suites share the host network
     containers.append(_start(docker_client, project, talker, shlex.split(talker.entrypoint), domain))
     containers.append(_start(docker_client, project, listener, shlex.split(listener.entrypoint), domain))
     # negative control: the same listener on another domain must hear nothing
@@ -184,7 +185,7 @@ def _talker_says(client: Any, project: Project, comp: Component, needle: str, st
     """Start the talker from its install tree (its container goes into ``started``, tracked_containers); return
     its output once it prints ``needle`` or exits (or after ``timeout`` seconds)."""
     assert comp.entrypoint
-    container = _start(client, project, comp, shlex.split(comp.entrypoint), random.randint(150, 220))
+    container = _start(client, project, comp, shlex.split(comp.entrypoint), random.choice(lanes.domain_ids()))
     started.append(container)
 
     def said() -> str | None:

@@ -117,6 +117,7 @@ def kilted_copy(kilted_project: Path, tmp_path: Path, docker_client: Any) -> Ite
         remove_project_containers(docker_client, name)
 
 
+@pytest.mark.quiet
 def test_a_node_started_after_a_kilted_servers_restart_is_heard_within_5_s(kilted_copy: Project,
                                                                              docker_client: Any) -> None:
     project = kilted_copy
@@ -131,6 +132,7 @@ def test_a_node_started_after_a_kilted_servers_restart_is_heard_within_5_s(kilte
         f"the listener matched before the kill missed messages across it: {numbers}"
 
 
+@pytest.mark.quiet
 def test_control_with_the_8_s_lease_the_node_is_heard_only_after_the_bound(kilted_copy: Project,
                                                                            docker_client: Any) -> None:
     """Negative control: the same restart, the server announcing 2.x's 8 s lease every 2 s. The talker keeps the
@@ -152,6 +154,7 @@ ROUNDS = 5
 BACK_WITHIN = 2.0
 
 
+@pytest.mark.quiet
 def test_a_kilted_talker_back_in_place_is_heard_within_2_s(kilted_copy: Project, docker_client: Any) -> None:
     """Fast DDS 3.x, robocore's specs with their restart policy: the talker SIGKILLed and started again in place,
     then crashed (its process killed from outside Docker) and started again by its policy."""

@@ -1,7 +1,7 @@
 """The official base (``base: official``) on arm64: noetic's stand-in for linux/arm64, on this amd64 machine (qemu).
 
 The arm64 stand-in of ``ros:noetic-ros-base`` (:mod:`official_standins`) is built FROM the arm64 Debian root the
-arm64 suites bootstrap (:mod:`arm64_project`; this module runs after them, ``RUN_LAST``), and takes the name
+arm64 suites bootstrap (:mod:`arm64_project`; this module runs after them, ``lanes.LAST``), and takes the name
 ``ros:noetic-ros-base`` as ``docker pull --platform linux/arm64`` would. robocore's ``prepare-base`` then resolves
 the arm64 root from that name (its per-arch name ``robocore/arm64/ros:noetic-ros-base`` removed first).
 
@@ -26,6 +26,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import lanes
 import official_standins
 import pytest
 from deploy_helpers import free_tcp_port, remove_project_containers
@@ -49,7 +50,7 @@ def arm64_official(arm64_images: None, docker_client: Any, run_robocore: Robocor
     parent = Path(tempfile.mkdtemp(prefix="robocore-it-"))
     root = parent / NAME
     run_robocore(None, "init", str(root), "--defaults", "--distro", "noetic")
-    official_standins.arm64_project(root, domain=random.randint(100, 230), port=free_tcp_port())
+    official_standins.arm64_project(root, domain=random.choice(lanes.domain_ids()), port=free_tcp_port())
     timings = {}
     for step, extra in (("prepare-base", ()), ("stage", ("--component", "talker")),
                         ("build", ("--component", "talker"))):

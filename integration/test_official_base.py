@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import arm64_project
+import lanes
 import official_standins
 import pytest
 import yaml
@@ -93,7 +94,7 @@ def official(request: pytest.FixtureRequest, docker_client: Any, run_robocore: R
     run_robocore(None, "init", str(root), "--defaults", "--distro", distro)
     data = yaml.safe_load((root / "robot.yaml").read_text())
     assert data["base"] == {"kind": "official"}, data["base"]
-    data["ros_domain_id"] = random.randint(100, 230)
+    data["ros_domain_id"] = random.choice(lanes.domain_ids())
     port = free_tcp_port() if distro == "noetic" else free_udp_port()
     data["discovery"] = {"servers": [{"host": data["hosts"][0]["name"], "port": port}]}
     (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))

@@ -181,6 +181,7 @@ def test_stopped_master_keeps_connections_and_run_brings_the_graph_back(noetic: 
     assert _graph(_status(run_robocore, noetic))["not_registered"] == []
 
 
+@pytest.mark.quiet
 def test_a_ros1_talker_back_in_place_is_heard_within_2_s(noetic: Path, run_robocore: RobocoreCli,
                                                          docker_client: Any) -> None:
     """The roscpp talker deployed by ``run`` (restart policy ``unless-stopped``) SIGKILLed and started again in
@@ -222,6 +223,7 @@ def test_the_noetic_projects_own_nox_sessions_pass(noetic: Path) -> None:
     assert "demo_talker" in text and "demo_listener" in text, output_tails(proc)  # both packages' tests ran
 
 
+@pytest.mark.quiet
 def test_faults_on_a_two_host_ros1_robot_cut_off_and_reconnect(noetic: Path, tmp_path: Path) -> None:
     """``robot.faults`` on ROS 1: the pytest plugin's bring-up of a copy of the noetic project on two robot hosts
     (talker and master on ``main``, listener on ``arm``). Cutting ``main`` off stops the listener's TCPROS

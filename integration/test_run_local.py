@@ -295,6 +295,7 @@ def _stop(container: Any, timeout: int) -> tuple[float, int]:
     return seconds, int(container.attrs["State"]["ExitCode"])
 
 
+@pytest.mark.quiet
 def test_discovery_server_stops_gracefully_at_once(running: Path, docker_client: Any) -> None:
     """`docker stop` of the discovery server ends in well under Docker's 10 s: the container's init passes SIGTERM on
     and the server stops by itself (exit 0, not SIGKILL's 137). Started again, it serves the robot (a clean stop

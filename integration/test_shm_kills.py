@@ -154,6 +154,7 @@ def deployed(demo_project: Path, tmp_path_factory: pytest.TempPathFactory, docke
         remove_project_containers(docker_client, name)
 
 
+@pytest.mark.quiet
 def test_a_crashed_talker_restarted_by_its_policy_is_heard_within_2_s(deployed: Deployed) -> None:
     """The talker's process killed from outside Docker (a crash): Docker's restart policy starts it again."""
     pair = deployed.pair
@@ -163,6 +164,7 @@ def test_a_crashed_talker_restarted_by_its_policy_is_heard_within_2_s(deployed: 
     assert statistics.median(seconds) < BOUND, seconds
 
 
+@pytest.mark.quiet
 def test_a_talker_sigkilled_then_started_by_run_in_place_is_heard_within_2_s(deployed: Deployed,
                                                                              run_robocore: Any) -> None:
     """``docker kill`` (which its restart policy leaves dead), then ``robocore run``: it starts the same container
@@ -181,6 +183,7 @@ def test_a_talker_sigkilled_then_started_by_run_in_place_is_heard_within_2_s(dep
     assert statistics.median(seconds) < BOUND, seconds
 
 
+@pytest.mark.quiet
 def test_a_talker_started_again_after_a_sigkill_is_heard_within_2_s(robot: Any) -> None:
     """The ``robot`` fixture's ``kill`` then ``start``: the same container in place."""
     pair = Pair(robot.client, robot.specs["talker"].name, robot.specs["listener"].name)
@@ -194,6 +197,7 @@ def test_a_talker_started_again_after_a_sigkill_is_heard_within_2_s(robot: Any) 
     assert statistics.median(seconds) < BOUND, seconds
 
 
+@pytest.mark.quiet
 def test_a_talker_restarted_gracefully_is_heard_within_2_s(robot: Any) -> None:
     """The ``robot`` fixture's ``restart``: SIGTERM, the node's clean shutdown, a start in place."""
     pair = Pair(robot.client, robot.specs["talker"].name, robot.specs["listener"].name)
