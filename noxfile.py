@@ -16,8 +16,10 @@ import nox
 #: print its summary (nox's default of 0.3 s would cut the summary off).
 INTERRUPT_GRACE = 150.0
 
-#: Lanes of the integration session (pytest-xdist workers): ``ROBOCORE_IT_LANES`` sets another number, 0 none.
-LANES = 2
+#: Lanes of the integration session (pytest-xdist workers): ``ROBOCORE_IT_LANES`` sets another number, 0 none (the
+#: session in one process). 0 until a whole clean-clone run in 2 lanes has passed: the first such CI run ran the tests
+#: of one module in both lanes at once (pytest 9.2 drops xdist's group marks, pytest-xdist#1386) and failed.
+LANES = 0
 
 nox.options.sessions = ["lint", "typecheck", "tests", "integration"]
 nox.options.reuse_existing_virtualenvs = True

@@ -106,6 +106,19 @@ def pytest_collection_finish(session: pytest.Session) -> None:
         _IMAGES_AHEAD.append(arm64_project.start())
 
 
+def pytest_xdist_node_collection_finished(node: Any, ids: list[str]) -> None:
+    """Refuses a session whose lanes would not take each group whole (the modules of a group share a project:
+    run in two lanes at once, they would remove each other's containers). xdist's ``--dist loadgroup`` marks a
+    group in its tests' node IDs; pytest 9.2 drops that mark (pytest-xdist#1386) and the session would go on as
+    ``--dist load``, one test here, the next there."""
+    ungrouped = [nodeid for nodeid in ids if "@" not in nodeid.rpartition("]")[2]]
+    if node.config.getvalue("dist") == "loadgroup" and ungrouped:
+        raise pytest.UsageError(
+            f"pytest-xdist's --dist loadgroup did not take with pytest {pytest.__version__} ({ungrouped[0]} has no "
+            "group): a group's modules would run in two lanes at once; install the pins of the test extra "
+            "(pip install -e '.[test]')")
+
+
 def pytest_sessionfinish() -> None:
     """Stops the background image run this session started, if it is still going (an interrupted session)."""
     for proc in _IMAGES_AHEAD:

@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import random
 import shutil
@@ -27,6 +28,7 @@ from typing import Any
 import lanes
 import pytest
 import yaml
+from docker.errors import NotFound
 from robot_host.polling import wait_for as wait_for  # re-exported: the suites' one wait loop
 
 HEARD = "I heard"
@@ -60,10 +62,18 @@ def free_udp_port() -> int:
 
 
 def free_tcp_port() -> int:
-    """A TCP port of the loopback interface that nobody listens on right now (the kernel picks it)."""
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
+    """A TCP port nobody listens on right now, of this lane's ports (:func:`lanes.ports`: below the kernel's
+    ephemeral range, so that another lane's outgoing connection (ssh, a registry pull) is never given it before
+    the server binds it, and never one another lane may pick)."""
+    for _ in range(200):
+        port = random.choice(lanes.ports())
+        with socket.socket() as sock:
+            try:
+                sock.bind(("0.0.0.0", port))
+            except OSError:
+                continue
+            return port
+    raise RuntimeError("no free TCP port")
 
 
 def output_tails(proc: subprocess.CompletedProcess[str], tail: int = 6000) -> str:
@@ -110,18 +120,26 @@ def log_lines(container: Any, marker: str, since: float | None = None) -> list[s
     return [line for line in text.splitlines() if marker in line]
 
 
+def project_containers(client: Any, project: str, *, all: bool = True) -> list[Any]:
+    """The containers robocore made for ``project``: its label and a ``<project>-*`` name (a build's intermediate
+    containers inherit the labels of the image they start from, under names of Docker's own)."""
+    found = client.containers.list(all=all, filters={"label": f"dev.robocore.project={project}"}, ignore_removed=True)
+    return [c for c in found if c.name.startswith(f"{project}-")]
+
+
 def remove_project_containers(client: Any, project: str) -> None:
-    """Remove every container of ``project`` (by label or ``<project>-*`` name) and its server state volumes."""
-    seen = set()
-    for container in client.containers.list(all=True, filters={"label": f"dev.robocore.project={project}"}):
-        seen.add(container.id)
-        container.remove(force=True)
-    for container in client.containers.list(all=True, filters={"name": f"{project}-"}):
-        if container.id not in seen and container.name.startswith(f"{project}-"):
-            container.remove(force=True)
+    """Remove every container named ``<project>-*`` and the project's server state volumes.
+
+    By name, not by the project label alone: a build's intermediate containers inherit the labels of the image
+    they start from (another lane may be building on this project's base image), and have names of Docker's own."""
+    for container in client.containers.list(all=True, filters={"name": f"{project}-"}, ignore_removed=True):
+        if container.name.startswith(f"{project}-"):
+            with contextlib.suppress(NotFound):
+                container.remove(force=True)
     for volume in client.volumes.list(filters={"name": f"{project}-discovery-"}):
         if volume.name.startswith(f"{project}-discovery-"):
-            volume.remove(force=True)
+            with contextlib.suppress(NotFound):
+                volume.remove(force=True)
 
 
 def remove_test_runs(client: Any, project: str) -> None:
@@ -130,12 +148,15 @@ def remove_test_runs(client: Any, project: str) -> None:
     from robocore.plan.testrun import LABEL_RUN
 
     prefix = f"{project}-t"
-    for container in client.containers.list(all=True, filters={"label": LABEL_RUN}):
+    for container in client.containers.list(all=True, filters={"label": LABEL_RUN}, ignore_removed=True):
         if container.name.startswith(prefix):
-            container.remove(force=True, v=True)
+            with contextlib.suppress(NotFound):
+                container.remove(force=True, v=True)
     for network in client.networks.list(filters={"label": LABEL_RUN}):
         if network.name.startswith(prefix):
-            network.remove()
+            with contextlib.suppress(NotFound):
+                network.remove()
     for volume in client.volumes.list(filters={"label": LABEL_RUN}):
         if volume.name.startswith(prefix):
-            volume.remove(force=True)
+            with contextlib.suppress(NotFound):
+                volume.remove(force=True)

@@ -27,7 +27,15 @@ from pathlib import Path
 
 #: Groups of modules in the order the lanes take them. A module not listed is a group of its own, handed out
 #: after these and before :data:`LAST`.
-QUEUE: tuple[tuple[str, ...], ...] = ()
+QUEUE: tuple[tuple[str, ...], ...] = (
+    ("test_cmake_interfaces.py",),
+    ("test_gui.py",),
+    ("test_ros1_robot.py", "test_rviz.py"),  # one image_prefix, robocore-it-noetic-: the same base and images
+    ("test_official_base.py",),
+    ("test_faults.py",),
+    ("test_multihost.py",),
+    ("test_kilted_restart.py",),
+)
 #: The groups that go last, in this order: they need the arm64 images (:mod:`arm64_project`), made meanwhile.
 LAST: tuple[tuple[str, ...], ...] = (
     ("test_arm64.py", "test_host_build.py", "test_fleet_swarm.py", "test_official_arm64.py"),

@@ -41,6 +41,15 @@ pytestmark = [pytest.mark.docker, pytest.mark.timeout(3000)]
 NAME = official_standins.ARM64_PROJECT
 
 
+@pytest.fixture(scope="module", autouse=True)
+def official_names() -> Iterator[None]:
+    """Held for the whole module: the stand-ins of the official images are named as a pull leaves them
+    (``ros:noetic-ros-base``), and Docker holds one arch of a name at a time: this suite and
+    test_official_base.py must not name the other arch meanwhile."""
+    with lanes.one_at_a_time("official-names"):
+        yield
+
+
 @pytest.fixture(scope="module")
 def arm64_official(arm64_images: None, docker_client: Any, run_robocore: RobocoreCli) -> Iterator[Path]:
     """The noetic project (base: official) on one arm64 host, after prepare-base, and stage and build of the talker."""

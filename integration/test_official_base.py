@@ -81,6 +81,15 @@ def _package_xml(root: Path, component: str) -> Path:
     return found
 
 
+@pytest.fixture(scope="module", autouse=True)
+def official_names() -> Iterator[None]:
+    """Held for the whole module: the stand-ins of the official images are named as a pull leaves them
+    (``ros:noetic-ros-base``), and Docker holds one arch of a name at a time: this suite and
+    test_official_arm64.py must not name the other arch meanwhile."""
+    with lanes.one_at_a_time("official-names"):
+        yield
+
+
 @pytest.fixture(scope="module", params=["jazzy", "noetic"])
 def official(request: pytest.FixtureRequest, docker_client: Any, run_robocore: RobocoreCli) -> Iterator[Official]:
     """``robocore init --defaults`` (base: official) for the distro, on its stand-in: prepare-base, stage, build."""

@@ -69,7 +69,7 @@ def _pytest(project: Path, *args: str, env: dict[str, str] | None = None,
 
 
 def _run_containers(client: Any, owner_pid: int | None = None) -> list[Any]:
-    found = client.containers.list(all=True, filters={"label": LABEL_RUN})
+    found = client.containers.list(all=True, filters={"label": LABEL_RUN}, ignore_removed=True)
     if owner_pid is None:
         return list(found)
     return [c for c in found if c.labels.get(LABEL_OWNER, "").split("|")[2:3] == [str(owner_pid)]]

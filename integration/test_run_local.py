@@ -26,6 +26,7 @@ from deploy_helpers import (
     copy_project,
     free_udp_port,
     log_lines,
+    project_containers,
     remove_project_containers,
     wait_for,
 )
@@ -39,8 +40,7 @@ HEAR_WITHIN = 60.0
 
 
 def ids(client: Any, project: str) -> dict[str, str]:
-    found = client.containers.list(all=True, filters={"label": f"dev.robocore.project={project}"})
-    return {c.labels["dev.robocore.component"]: c.id for c in found}
+    return {c.labels["dev.robocore.component"]: c.id for c in project_containers(client, project)}
 
 
 @pytest.fixture
@@ -132,7 +132,7 @@ def test_generated_compose_file_is_accepted_and_matches_run(project_copy: Any, d
         proc = subprocess.run([*compose_command(), "-f", str(path), "config"], capture_output=True, text=True)
         assert proc.returncode == 0, proc.stderr
         services = yaml.safe_load(proc.stdout)["services"]
-        for container in docker_client.containers.list(filters={"label": f"dev.robocore.project={root.name}"}):
+        for container in project_containers(docker_client, root.name, all=False):
             service = services[container.labels["dev.robocore.component"]]
             assert service["labels"]["dev.robocore.spec"] == container.labels["dev.robocore.spec"]
             assert service["network_mode"] == container.attrs["HostConfig"]["NetworkMode"] == "host"

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import pytest
-from deploy_helpers import wait_for
+from deploy_helpers import project_containers, wait_for
 
 from robocore.plan import naming
 
@@ -100,7 +100,7 @@ def shell_image(docker_client: Any, root_image: str) -> str:
 
 
 def _containers(client: Any, project: str) -> list[Any]:
-    return list(client.containers.list(all=True, filters={"label": f"{naming.LABEL_PROJECT}={project}"}))
+    return project_containers(client, project)
 
 
 @pytest.fixture

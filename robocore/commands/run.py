@@ -10,6 +10,7 @@ with a per-host summary and a :class:`~robocore.errors.GroupError`.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -227,7 +228,7 @@ def apply_action(client: docker.DockerClient, action: Action, spec: ContainerSpe
     A replaced node's container gets ``kind``'s successor environment (the next client profile after its
     predecessor's) and keeps the spec's labels, so a later run keeps it; a created discovery server is waited for
     (``ready_timeout``). Docker's refusals become one :class:`DockerError` line, with a hint where one helps."""
-    from docker.errors import APIError
+    from docker.errors import APIError, NotFound
     from rich.markup import escape
 
     def say(text: str) -> None:
@@ -235,7 +236,8 @@ def apply_action(client: docker.DockerClient, action: Action, spec: ContainerSpe
 
     try:
         if action.verb == "remove":
-            container.remove(force=True)
+            with contextlib.suppress(NotFound):  # gone meanwhile: removed all the same
+                container.remove(force=True)
             say(f"removed {action.name} ({action.reason})")
         elif action.verb == "keep":
             return
@@ -249,7 +251,8 @@ def apply_action(client: docker.DockerClient, action: Action, spec: ContainerSpe
                 if spec.role != ROLE_DISCOVERY:  # the hash label stays the spec's: a later run keeps it
                     kwargs["environment"] = kind.successor_environment(environment_of(container),
                                                                          kwargs["environment"])
-                container.remove(force=True)
+                with contextlib.suppress(NotFound):  # gone meanwhile: made anew all the same
+                    container.remove(force=True)
             created = client.containers.create(**kwargs)
             created.start()
             if spec.role == ROLE_DISCOVERY:

@@ -103,7 +103,7 @@ def reap_leftovers(client: Any) -> int:
             gone[text] = owner_is_gone(text)
         return gone[text]
 
-    found = client.containers.list(all=True, filters={"label": testrun.LABEL_OWNER})
+    found = client.containers.list(all=True, filters={"label": testrun.LABEL_OWNER}, ignore_removed=True)
     removed = 0
     for container in sorted(found, key=lambda c: c.labels.get(naming.LABEL_ROLE) == testrun.ROLE_HOST):
         if dead(container.labels):

@@ -52,9 +52,14 @@ def prefetch_connections(project: Project) -> None:
 
 
 def managed_containers(client: docker.DockerClient, project: str) -> list[Any]:
-    """This project's component and discovery containers on a host (running or not)."""
-    found = client.containers.list(all=True, filters={"label": f"{naming.LABEL_PROJECT}={project}"})
-    return [c for c in found if c.labels.get(naming.LABEL_ROLE) in naming.MANAGED_ROLES]
+    """This project's component and discovery containers on a host (running or not).
+
+    Known by label and by the ``<project>-`` name robocore gives them: a build's intermediate containers inherit
+    the labels of the image they start from, and one removed meanwhile (another terminal's ``down``) is left out."""
+    found = client.containers.list(all=True, filters={"label": f"{naming.LABEL_PROJECT}={project}"},
+                                   ignore_removed=True)
+    return [c for c in found
+            if c.labels.get(naming.LABEL_ROLE) in naming.MANAGED_ROLES and (c.name or "").startswith(f"{project}-")]
 
 
 def running_container(client: docker.DockerClient, name: str) -> Any:
