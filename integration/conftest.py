@@ -260,6 +260,15 @@ def _reap(pid: int, grace: float) -> int:
         time.sleep(0.05)
 
 
+@pytest.fixture(scope="module")
+def official_names() -> Iterator[None]:
+    """Held for a whole module by the official-base suites (test_official_base.py, test_official_arm64.py): the
+    stand-ins of the official images are named as a pull leaves them (``ros:noetic-ros-base``), and Docker holds one
+    arch of a name at a time, so one suite must not name the other arch meanwhile."""
+    with lanes.one_at_a_time("official-names"):
+        yield
+
+
 @pytest.fixture(scope="session")
 def run_robocore() -> RobocoreCli:
     """``run_robocore(project, *args, check=True, env=None, timeout=1800)``: the robocore CLI (:class:`RobocoreCli`)."""

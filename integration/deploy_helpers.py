@@ -48,32 +48,28 @@ def compose_command() -> list[str]:
 
 def free_udp_port() -> int:
     """A UDP port nobody listens on right now (host networking: the discovery server binds it), of this lane's
-    ports (:func:`lanes.ports`: below the kernel's ephemeral range, so that a port found free is not handed to some
-    client's socket before the server binds it, and never one another lane may pick)."""
-    for _ in range(200):
-        port = random.choice(lanes.ports())
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-            try:
-                sock.bind(("0.0.0.0", port))
-            except OSError:
-                continue
-            return port
-    raise RuntimeError("no free UDP port")
+    ports (:func:`free_port`)."""
+    return free_port(socket.SOCK_DGRAM)
 
 
 def free_tcp_port() -> int:
-    """A TCP port nobody listens on right now, of this lane's ports (:func:`lanes.ports`: below the kernel's
-    ephemeral range, so that another lane's outgoing connection (ssh, a registry pull) is never given it before
-    the server binds it, and never one another lane may pick)."""
+    """A TCP port nobody listens on right now, of this lane's ports (:func:`free_port`)."""
+    return free_port(socket.SOCK_STREAM)
+
+
+def free_port(kind: socket.SocketKind) -> int:
+    """A port of socket ``kind`` nobody listens on right now, of this lane's ports (:func:`lanes.ports`: below the
+    kernel's ephemeral range, so that a port found free is not handed to some client's socket (ssh, a registry
+    pull) before the server binds it, and never one another lane may pick)."""
     for _ in range(200):
         port = random.choice(lanes.ports())
-        with socket.socket() as sock:
+        with socket.socket(socket.AF_INET, kind) as sock:
             try:
                 sock.bind(("0.0.0.0", port))
             except OSError:
                 continue
             return port
-    raise RuntimeError("no free TCP port")
+    raise RuntimeError(f"no free {'UDP' if kind == socket.SOCK_DGRAM else 'TCP'} port")
 
 
 def output_tails(proc: subprocess.CompletedProcess[str], tail: int = 6000) -> str:

@@ -36,18 +36,10 @@ from robocore.plan import arches
 if TYPE_CHECKING:
     from conftest import RobocoreCli
 
-pytestmark = [pytest.mark.docker, pytest.mark.timeout(3000)]
+pytestmark = [pytest.mark.docker, pytest.mark.timeout(3000), pytest.mark.usefixtures("official_names")]
 
 NAME = official_standins.ARM64_PROJECT
 
-
-@pytest.fixture(scope="module", autouse=True)
-def official_names() -> Iterator[None]:
-    """Held for the whole module: the stand-ins of the official images are named as a pull leaves them
-    (``ros:noetic-ros-base``), and Docker holds one arch of a name at a time: this suite and
-    test_official_base.py must not name the other arch meanwhile."""
-    with lanes.one_at_a_time("official-names"):
-        yield
 
 
 @pytest.fixture(scope="module")

@@ -43,7 +43,7 @@ from deploy_helpers import HEARD, free_tcp_port, free_udp_port, log_lines, remov
 if TYPE_CHECKING:
     from conftest import Restorer, RobocoreCli
 
-pytestmark = [pytest.mark.docker, pytest.mark.timeout(2400)]
+pytestmark = [pytest.mark.docker, pytest.mark.timeout(2400), pytest.mark.usefixtures("official_names")]
 
 TALKER_TEXT = {"jazzy": "hello", "noetic": "hello from talker #"}
 #: Per distro, a rosdep key of the stand-in's offline database and a Debian package it resolves to that the stand-in
@@ -80,14 +80,6 @@ def _package_xml(root: Path, component: str) -> Path:
     [found] = (root / "components" / component / "src").glob("*/package.xml")
     return found
 
-
-@pytest.fixture(scope="module", autouse=True)
-def official_names() -> Iterator[None]:
-    """Held for the whole module: the stand-ins of the official images are named as a pull leaves them
-    (``ros:noetic-ros-base``), and Docker holds one arch of a name at a time: this suite and
-    test_official_arm64.py must not name the other arch meanwhile."""
-    with lanes.one_at_a_time("official-names"):
-        yield
 
 
 @pytest.fixture(scope="module", params=["jazzy", "noetic"])
