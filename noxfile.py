@@ -16,10 +16,9 @@ import nox
 #: print its summary (nox's default of 0.3 s would cut the summary off).
 INTERRUPT_GRACE = 150.0
 
-#: Lanes of the integration session (pytest-xdist workers): ``ROBOCORE_IT_LANES`` sets another number, 0 none (the
-#: session in one process). 0 until a whole clean-clone run in 2 lanes has passed: the first such CI run ran the tests
-#: of one module in both lanes at once (pytest 9.2 drops xdist's group marks, pytest-xdist#1386) and failed.
-LANES = 0
+#: Lanes of the integration session (pytest-xdist workers, one per core of CI's machine): ``ROBOCORE_IT_LANES`` sets
+#: another number, 0 none (the session in one process, as before lanes).
+LANES = 2
 
 nox.options.sessions = ["lint", "typecheck", "tests", "integration"]
 nox.options.reuse_existing_virtualenvs = True
@@ -45,7 +44,8 @@ def typecheck(session: nox.Session) -> None:
 @nox.session
 def tests(session: nox.Session) -> None:
     _install(session)
-    session.run("pytest", "tests", *session.posargs, interrupt_timeout=INTERRUPT_GRACE)
+    # on both cores (pytest-xdist), the arm64 images being made in the background meanwhile
+    session.run("pytest", "tests", "-n", "2", *session.posargs, interrupt_timeout=INTERRUPT_GRACE)
 
 
 @nox.session

@@ -95,6 +95,8 @@ def main() -> int:
     parent = Path(tempfile.mkdtemp(prefix="robocore-ci-bench-"))
     clone = parent / "robocore"
     subprocess.run(["git", "clone", "-q", "--", str(ROOT), str(clone)], check=True)
+    cloned = subprocess.run(["git", "-C", str(clone), "rev-parse", "HEAD"], capture_output=True, text=True,
+                            check=True).stdout.strip()
     times = parent / "times.json"
     code, total, starts, lines = run_ci(clone, times)
     print("\n".join(lines[-80:]))
@@ -104,7 +106,8 @@ def main() -> int:
                       goal=f"< {goal} min", met=code == 0 and total < goal * 60, ratio=goal * 60 / total,
                       ratio_of="goal / time"),
                *phase_figures(starts, total)]
-    notes = []
+    # the record's own commit is this checkout's at the end, which may have moved on during the run
+    notes = [f"ran on a clone of commit {cloned}"]
     if times.is_file():
         table = json.loads(times.read_text())
         floor = table["busy_cpu"] / table["cores"] if table.get("busy_cpu") else None
@@ -119,7 +122,8 @@ def main() -> int:
             figures.append(Figure(f"module {row['module'].removeprefix('integration/')}", row["wall"], "s",
                                   detail=f"lane {','.join(row['lanes'])}, {row['tests']} tests, starts at "
                                          f"{row['first_start']:.0f} s; set-up {row['setup']:.0f} s, tests "
-                                         f"{row['call']:.0f} s{cpu}"))
+                                         f"{row['call']:.0f} s, tear-down {row.get('teardown', 0):.0f} s, of which "
+                                         f"held back by another lane {row.get('held_back', 0):.0f} s{cpu}"))
     else:
         notes.append("the integration session wrote no table (it did not run, or did not finish)")
     summary = [line for line in lines if re.search(r"\d+ (passed|failed)", line)]

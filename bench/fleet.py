@@ -113,7 +113,7 @@ def main() -> None:
         with serve_registry(hosts, parent / "registry-data") as registry:
             waves = [{"name": "canary", "robots": ["r1"]}, {"name": "half", "percent": 50}, {"name": "rest"}]
             project = make_project(demo, parent, NAME, hosts, registry, waves=waves)
-            records = make_releases(client, demo, NAME, registry, parent / "contexts",
+            records = make_releases(client, demo, registry, parent / "contexts",
                                     {"v1": "same", "v2": "v2", "v3": "crash"})
             write_records(project, records)
             prepull(hosts, json.loads(records["v1"])["base"]["amd64"], range(1, ROBOTS + 1))

@@ -18,7 +18,11 @@ fleet of N robots in three waves (a canary, 10 %, the rest), each with a label. 
    Kubernetes 1.30 and the newest bundled (each model's base is validated once);
 4. **overlays change only ...**: every object of every robot compared with the same object of the first robot:
    the only differences allowed are the namespace, the robot's labels, the images and the robot's node pinning.
-   With step 3, every rendered object of the fleet is as valid as the checked ones.
+   With step 3, every rendered object of the fleet is as valid as the checked ones;
+5. **a change to one robot, on Fleet**: the exported fleet.yaml through the model of Fleet's partition code
+   (tests/fleet_model.py). Fleet's deployment ID hashes the whole bundle, so one robot's change is a new
+   deployment for every robot; the figure is how many robots then take a turn, one at a time (the controller
+   passes until every robot is on it), and the model's own time.
 
 Between 2 and 3 the rendered text is parsed (timed on its own line, counted with steps 3 and 4: it is the
 checks' input, not kustomize's work).
@@ -28,7 +32,10 @@ step prints its wall-clock seconds and the CPU seconds it used (this process and
 its wall-clock time to its goal (< 1 meets it): on a shared machine the CPU figure is the one that says what the
 step costs.
 
-    python bench/k8s_export.py [--robots 1000] [--keep DIR] [--gogc 400]
+``--baseline DIR`` (a folder holding another robocore package, e.g. ``git archive main robocore | tar -x -C DIR``)
+exports the fleet with that robocore too, just before, prints its row beside and checks both exports byte-identical.
+
+    python bench/k8s_export.py [--robots 1000] [--keep DIR] [--gogc 400] [--baseline DIR]
 """
 
 from __future__ import annotations
@@ -50,6 +57,7 @@ import yaml
 from harness import Figure, record
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from fleet_model import Cluster, roll_out, targets
 from k8s_checks import VERSIONS
 
 COMPONENTS = 8
@@ -103,12 +111,19 @@ def differences(a: Any, b: Any, path: tuple[Any, ...] = ()) -> list[tuple[Any, .
 
 def allowed(path: tuple[Any, ...], kind: str) -> bool:
     """A difference the overlays may make: namespace, labels, an image, the robot's node pinning (and the
-    Namespace object's own name)."""
+    Namespace object's own name, and the namespace of the RoleBinding's service account)."""
     if kind == "Namespace" and path == ("metadata", "name"):
         return True
+    if kind == "RoleBinding" and path[:1] == ("subjects",) and path[-1] == "namespace":
+        return True  # the health Job's service account, in the robot's namespace
     if any(path[:len(prefix)] == prefix for prefix in ALLOWED):
         return True
     return len(path) >= 2 and path[-1] == "image" and any(p in ("containers", "initContainers") for p in path)
+
+
+def by_robot_names(by_robot: dict[str, list[dict[str, Any]]]) -> list[str]:
+    """The robots' names, from their namespaces (``robot-<name>``), in wave order (r0 the canary, then by number)."""
+    return sorted((ns.removeprefix("robot-") for ns in by_robot), key=lambda name: int(name[1:]))
 
 
 def cpu() -> float:
@@ -139,26 +154,44 @@ def render_all(export: Path, scratch: Path, gogc: int) -> list[str]:
         return list(pool.map(render, batches))
 
 
+def export(root: Path, out: Path, env: dict[str, str] | None) -> tuple[float, float]:
+    """Wall-clock and CPU seconds of ``robocore export kubernetes`` of ``root`` into ``out`` (``env``: another
+    robocore first on PYTHONPATH); a failed export stops the bench."""
+    started, used = time.monotonic(), cpu()
+    done = subprocess.run([sys.executable, "-m", "robocore", "-p", str(root), "export", "kubernetes", str(out),
+                           "--tag", "v1"], capture_output=True, text=True, env=env)
+    if done.returncode != 0:
+        raise SystemExit(f"export failed: {done.stderr}")
+    return time.monotonic() - started, cpu() - used
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", type=int, default=1000)
     parser.add_argument("--keep", type=Path, help="work in this folder and keep it")
     parser.add_argument("--gogc", type=int, default=GOGC, help=f"Go's GOGC for kustomize (default {GOGC}; Go's "
                         "own: 100)")
+    parser.add_argument("--baseline", type=Path, help="a folder holding another robocore package: its export too")
     args = parser.parse_args()
     work = args.keep or Path(tempfile.mkdtemp(prefix="robocore-k8s-bench-"))
     rows: list[tuple[str, float, float, str, float | None]] = []
     try:
         root = project(work / "fleetbot", args.robots)
         out = work / "export"
-        started, used = time.monotonic(), cpu()
-        done = subprocess.run([sys.executable, "-m", "robocore", "-p", str(root), "export", "kubernetes", str(out),
-                               "--tag", "v1"], capture_output=True, text=True)
-        export_s, export_c = time.monotonic() - started, cpu() - used
-        if done.returncode != 0:
-            raise SystemExit(f"export failed: {done.stderr}")
+        if args.baseline is not None:
+            old = work / "export-baseline"
+            seconds, used_s = export(root, old, {**os.environ, "PYTHONPATH": str(args.baseline.resolve())})
+            rows.append(("export, baseline robocore (new process)", seconds, used_s, "", None))
+        export_s, export_c = export(root, out, None)
         files = sum(1 for p in out.rglob("*") if p.is_file())
-        rows.append(("export (new process)", export_s, export_c, f"{files} files", None))
+        if args.baseline is not None:
+            differ = subprocess.run(["diff", "-rq", str(old), str(out)], capture_output=True, text=True)
+            if differ.returncode != 0:
+                raise SystemExit(f"the export differs from the baseline's:\n{differ.stdout[:3000]}")
+            files_text = f"{files} files, = baseline"
+        else:
+            files_text = f"{files} files"
+        rows.append(("export (new process)", export_s, export_c, files_text, None))
         started, used = time.monotonic(), cpu()
         texts = render_all(out, work / "batches", args.gogc)
         render_s, render_c = time.monotonic() - started, cpu() - used
@@ -198,6 +231,15 @@ def main() -> None:
         rows.append(("overlays change only ns/labels/images/pinning", proof_s, proof_c, f"{compared} objects", None))
         rows.append(("parse + strict once + proof", parse_s + strict_s + proof_s, parse_c + strict_c + proof_c, "",
                      30.0))
+        started, used = time.monotonic(), cpu()
+        fleet_yaml = yaml.safe_load((out / "fleet.yaml").read_text())
+        clusters = targets(fleet_yaml, [Cluster(r, {"robocore.dev/robot": r}) for r in by_robot_names(by_robot)])
+        roll_out(fleet_yaml, clusters, "v1", lambda cluster, deployment: True)
+        turns = roll_out(fleet_yaml, clusters, "v1+r0", lambda cluster, deployment: True, passes=10 * args.robots)
+        turns_s, turns_c = time.monotonic() - started, cpu() - used
+        assert all(len(step) == 1 for step in turns) and len(turns) == args.robots, "not one robot a turn"
+        rows.append((f"Fleet: one robot changed, {len(turns)} turns", turns_s, turns_c,
+                     f"{len(turns)} robots", None))
     finally:
         if args.keep is None:
             shutil.rmtree(work, ignore_errors=True)

@@ -23,7 +23,7 @@ BENCH = Path(__file__).resolve().parent
 ROOT = BENCH.parent
 PAGE = ROOT / "docs" / "performance.md"
 #: Modules of bench/ that are not bench scripts.
-NOT_BENCHES = ("harness", "render_performance", "run_all")
+NOT_BENCHES = ("harness", "render_performance", "run_all", "chromium", "fleet_views")  # helpers
 HEAD = """\
 # Performance
 

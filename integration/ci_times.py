@@ -1,11 +1,14 @@
 """Where the integration session's minutes go: a table per test module, printed at the end of every run.
 
 For each module: its tests, the seconds spent in set-up, in the tests themselves and in tear-down (summed over its
-tests, as pytest's ``--durations`` counts them), its wall time (from its first test's start to its last test's end,
-which includes waiting on a shared fixture another module made), the lane (xdist worker) that ran it, and the
-machine's busy CPU over that wall time (all cores, from ``/proc/stat``: the other lane's work and the background
-image run count too). The last line is the whole session: its wall time, its busy CPU, and that CPU over the
-cores, the floor no ordering of the same work could beat.
+tests, as pytest's ``--durations`` counts them), how many of those seconds its phases were held back (waiting for
+another lane's quiet test, or for the arm64 project's lock: :func:`held_back`; pytest counts that wait in the
+phase, so a module run beside a quiet test shows a long tear-down that costs nothing alone), how many seconds its
+quiet tests held the machine alone (every other lane standing still: :func:`held_alone`), its wall time (from
+its first test's start to its last test's end, which includes waiting on a shared fixture another module made), the
+lane (xdist worker) that ran it, and the machine's busy CPU over that wall time (all cores, from ``/proc/stat``: the
+other lane's work and the background image run count too). The last line is the whole session: its wall time, its
+busy CPU, and that CPU over the cores, the floor no ordering of the same work could beat.
 
 With ``ROBOCORE_CI_TIMES=FILE`` the same table is written to FILE as JSON (``bench/ci.py`` records it in the bench
 results). Under pytest-xdist the table is made by the controller, from the reports the workers send; a worker
@@ -26,6 +29,37 @@ import pytest
 
 #: Seconds between two readings of /proc/stat.
 SAMPLE_EVERY = 1.0
+#: The name of a test's user property that holds the seconds a phase waited before it ran (``HELD_BACK + when``).
+HELD_BACK = "held back in "
+
+
+def held_back(item: pytest.Item, when: str, seconds: float) -> None:
+    """Record that phase ``when`` (setup, call, teardown) of ``item`` waited ``seconds`` for the machine before it
+    ran: the phase's report carries it (as a user property, which pytest-xdist sends to the controller)."""
+    item.user_properties.append((HELD_BACK + when, round(seconds, 3)))
+
+
+#: The name of a test's user property that holds the seconds its body held the machine alone (a quiet test).
+HELD_ALONE = "held the machine alone"
+
+
+def held_alone(item: pytest.Item, seconds: float) -> None:
+    """Record that the body of ``item`` held the machine alone for ``seconds`` (every other lane stood still)."""
+    if seconds > 0:
+        item.user_properties.append((HELD_ALONE, round(seconds, 3)))
+
+
+def held_alone_of(report: pytest.TestReport) -> float:
+    """The seconds the body of ``report``'s test held the machine alone (counted on the call's report only)."""
+    if report.when != "call":
+        return 0.0
+    return sum(float(value) for name, value in report.user_properties if name == HELD_ALONE)
+
+
+def held_back_of(report: pytest.TestReport) -> float:
+    """The seconds the phase of ``report`` waited before it ran (0 when it did not say)."""
+    key = HELD_BACK + report.when if report.when else ""
+    return sum(float(value) for name, value in report.user_properties if name == key)
 
 
 def busy_jiffies() -> tuple[int, int] | None:
@@ -89,6 +123,8 @@ class ModuleTimes:
     setup: float = 0.0
     call: float = 0.0
     teardown: float = 0.0
+    held_back: float = 0.0  # of setup + call + teardown: waiting for another lane (a quiet test, a project's lock)
+    alone: float = 0.0  # of call: the machine held alone (every other lane standing still)
     first_start: float = 0.0
     last_stop: float = 0.0
     lanes: set[str] = field(default_factory=set)
@@ -124,6 +160,8 @@ class CiTimes:
         module = report.nodeid.split("::", 1)[0]
         times = self.modules.setdefault(module, ModuleTimes(module, first_start=report.start))
         setattr(times, report.when, getattr(times, report.when) + report.duration)
+        times.held_back += held_back_of(report)
+        times.alone += held_alone_of(report)
         times.first_start = min(times.first_start, report.start)
         times.last_stop = max(times.last_stop, report.stop)
         times.lanes.add(lane_of(report))
@@ -140,6 +178,7 @@ class CiTimes:
             row = asdict(times)
             row.update(lanes=sorted(times.lanes), wall=round(times.wall, 1), busy_cpu=busy and round(busy, 1),
                        setup=round(times.setup, 1), call=round(times.call, 1), teardown=round(times.teardown, 1),
+                       held_back=round(times.held_back, 1), alone=round(times.alone, 1),
                        first_start=round(times.first_start - self.started, 1),
                        last_stop=round(times.last_stop - self.started, 1))
             out.append(row)
@@ -152,13 +191,13 @@ class CiTimes:
         busy = self.clock.busy_between(self.started, time.time())
         write = terminalreporter.write_line
         terminalreporter.section("where the minutes went (per module)")
-        write(f"{'module':<44} {'lane':<7} {'tests':>5} {'set-up':>7} {'tests':>7} {'tear':>6} {'from':>6} "
-              f"{'wall':>7} {'busy CPU':>9}")
+        write(f"{'module':<44} {'lane':<7} {'tests':>5} {'set-up':>7} {'tests':>7} {'tear':>6} {'held':>6} "
+              f"{'alone':>6} {'from':>6} {'wall':>7} {'busy CPU':>9}")
         for row in rows:
             cpu = "-" if row["busy_cpu"] is None else f"{row['busy_cpu']:.0f} s"
             write(f"{row['module']:<44} {','.join(row['lanes']):<7} {row['tests']:>5} {row['setup']:>7.1f} "
-                  f"{row['call']:>7.1f} {row['teardown']:>6.1f} {row['first_start']:>6.0f} {row['wall']:>7.1f} "
-                  f"{cpu:>9}")
+                  f"{row['call']:>7.1f} {row['teardown']:>6.1f} {row['held_back']:>6.1f} {row['alone']:>6.1f} "
+                  f"{row['first_start']:>6.0f} {row['wall']:>7.1f} {cpu:>9}")
         floor = "" if busy is None else f", busy CPU {busy:.0f} s: {busy / self.cores:.0f} s on {self.cores} cores"
         write(f"session: {wall:.0f} s wall{floor}")
         target = os.environ.get("ROBOCORE_CI_TIMES")

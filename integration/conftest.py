@@ -18,7 +18,7 @@ Docker, projects and robot hosts
 - ``robot_fleets`` (module) and ``fleet`` (module): Docker-in-Docker robot hosts reached over ssh://
   (bench/robot_host/); removed after the module's last test.
 - ``arm64_images`` (session): waits for the arm64 suites' images, made in the background
-  (:mod:`arm64_project`) while the other suites run; those suites (:data:`lanes.LAST`) run last.
+  (:mod:`arm64_project`) while the other suites run; those suites (:data:`lanes.ARM64_IMAGES`) run late.
 
 What a test creates is removed by a fixture, pass or fail
 - ``tracked_containers``: containers a test starts itself;
@@ -87,13 +87,50 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     items.sort(key=lambda item: ranks[item.nodeid])
 
 
+#: The lock of the arm64 project this lane holds while one of :data:`lanes.ARM64_PROJECT` runs (its descriptor).
+_PROJECT_HELD: list[int] = []
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_setup(item: pytest.Item) -> Iterator[None]:
+    """Every test's set-up holds the machine shared: it waits while another lane runs a quiet test's body. The first
+    test of a module of :data:`lanes.ARM64_PROJECT` first waits for that project (before the machine's lock). The
+    seconds each phase waited go to the time table (:func:`ci_times.held_back`): pytest counts them in the phase."""
+    asked = time.monotonic()
+    if item.path.name in lanes.ARM64_PROJECT and not _PROJECT_HELD:
+        _PROJECT_HELD.append(lanes.hold_project("robocore-it-arm64"))
+    with lanes.working():
+        ci_times.held_back(item, "setup", time.monotonic() - asked)
+        return (yield)
+
+
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_call(item: pytest.Item) -> Iterator[None]:
-    """A quiet test's body runs while no other lane builds (:func:`lanes.quiet`)."""
-    if item.get_closest_marker("quiet") is None:
-        return (yield)
-    with lanes.quiet():
-        return (yield)
+    """A quiet test's body runs while every other lane stands still between two phases (:func:`lanes.quiet`), but
+    for its untimed stretches (:func:`lanes.untimed`); any other body holds the machine shared. How long the body
+    held the machine alone goes to the time table (:func:`ci_times.held_alone`)."""
+    asked = time.monotonic()
+    alone = lanes.alone_seconds()
+    try:
+        with lanes.quiet() if item.get_closest_marker("quiet") is not None else lanes.working():
+            ci_times.held_back(item, "call", time.monotonic() - asked)
+            return (yield)
+    finally:
+        ci_times.held_alone(item, lanes.alone_seconds() - alone)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
+    """Every test's teardown holds the machine shared, as its set-up does; after a module's last test (its module
+    fixtures torn down), the arm64 project's lock goes, when this lane held it."""
+    asked = time.monotonic()
+    try:
+        with lanes.working():
+            ci_times.held_back(item, "teardown", time.monotonic() - asked)
+            return (yield)
+    finally:
+        if _PROJECT_HELD and (nextitem is None or nextitem.path != item.path):
+            lanes.let_go(_PROJECT_HELD.pop())
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:
@@ -101,8 +138,7 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     (``scripts/test`` starts that before the unit tests)."""
     if session.config.option.collectonly:  # listing the tests (tests/test_proofs.py) makes no image
         return
-    last = {module for group in lanes.LAST for module in group}
-    if any(item.path.name in last for item in session.items) and not arm64_project.is_running():
+    if any(item.path.name in lanes.ARM64_IMAGES for item in session.items) and not arm64_project.is_running():
         _IMAGES_AHEAD.append(arm64_project.start())
 
 
@@ -196,13 +232,11 @@ class RobocoreCli:
     def __call__(self, project: Path | None, *args: str, check: bool = True, env: Env | None = None,
                  timeout: float = 1800) -> subprocess.CompletedProcess[str]:
         """Run the CLI to its end and return the completed process (text stdout and stderr). With ``check``,
-        a non-zero exit fails the test with the command line, the exit code and the ends of both outputs. A
-        command that builds waits while another lane runs a quiet test (:func:`lanes.heavy`)."""
+        a non-zero exit fails the test with the command line, the exit code and the ends of both outputs. (It
+        runs in a test phase, which already waits while another lane runs a quiet test: :func:`lanes.working`.)"""
         argv = self.argv(project, *args)
-        builds = bool(args) and args[0] in lanes.HEAVY_COMMANDS and "--dry-run" not in args
-        with lanes.heavy() if builds else contextlib.nullcontext():
-            proc = subprocess.run(argv, env=self.environ(env), stdin=subprocess.DEVNULL, capture_output=True,
-                                  text=True, timeout=timeout)
+        proc = subprocess.run(argv, env=self.environ(env), stdin=subprocess.DEVNULL, capture_output=True,
+                              text=True, timeout=timeout)
         if check and proc.returncode != 0:
             pytest.fail(f"`robocore {shlex.join(argv[3:])}` failed: {output_tails(proc, 4000)}", pytrace=False)
         return proc
@@ -436,8 +470,7 @@ def robot_fleets(docker_client: Any) -> Iterator[Callable[..., RobotFleet]]:
         fleets.append(fleet)  # before start: a fleet that fails halfway is removed too
         with lanes.one_at_a_time("robot-host"):  # one lane bootstraps the hosts' image, the others find it made
             ensure_image()
-        with lanes.heavy():  # dockerd starting in each host
-            fleet.start()
+        fleet.start()
         return fleet
 
     yield start

@@ -53,7 +53,8 @@ def write_fleet(root: Path, manager: str, robot_ip: str, registry: str, robot_ti
         "robots": [{"name": ROBOT, "hosts": {"robot": {"ip": robot_ip}}}],
         "rollout": {
             "health": {"running": 3, "nodes": ["/talker", "/listener"], "heard": ["/chatter"]},
-            "timeouts": {"robot": robot_timeout, "wave": 600},
+            # the graph's bound as long as the robot's: under emulation its nodes take long to start
+            "timeouts": {"robot": robot_timeout, "heard": robot_timeout, "wave": 600},
         },
     }
     (root / "fleet.yaml").write_text(yaml.safe_dump(fleet, sort_keys=False))

@@ -32,8 +32,10 @@ from robocore.plan.starts import docker_epoch
 
 #: Where the talker's code is in its install tree (what a release of a changed talker changes).
 TALKER_PY = "demo_talker/lib/python3.11/site-packages/demo_talker/talker.py"
-#: The release variants: the demo as built, a talker that says "v2", a talker that exits 3 at start.
-VARIANTS = ("same", "v2", "crash")
+#: The release variants: the demo as built, a talker that says "v2", a talker that exits 3 at start, a talker that
+#: says "v4" (a release no robot holds yet: swarm_faults' registry-down test), a talker that runs as a node but
+#: publishes on another topic (a silent canary: it runs, and /chatter is not heard).
+VARIANTS = ("same", "v2", "crash", "v4", "silent")
 #: The hosts of a robot of one host, and of two (the first runs the discovery server and the talker).
 ONE_HOST = ("robot",)
 TWO_HOSTS = ("main", "aux")
@@ -54,6 +56,9 @@ def make_project(demo: Path, parent: Path, name: str, hosts: RobotFleet, registr
         data["discovery"] = {"servers": [{"host": names[0], "port": 11811}], "transport": "shm"}
         for component in data["components"]:
             component["runs_on"] = names[-1] if component["name"] == "listener" else names[0]
+            if component["name"] == "listener":  # robot.yaml's resources, as the services carry them
+                component["resources"] = {"requests": {"cpu": 0.25, "memory": "64Mi"},
+                                          "limits": {"cpu": "500m", "memory": "256Mi"}}
 
     root = copy_project(demo, parent, name, edit=edit)
     fleet = {
@@ -83,21 +88,26 @@ def _push(docker_client: Any, ref: str) -> str:
     return str(digests[0])
 
 
-def push_base(docker_client: Any, name: str, registry: str) -> str:
-    """Push the demo's base image (what discovery servers and the health probe run) as ``name``'s; its digest
-    reference."""
-    base_ref = f"{registry}/{name}-base:fleet"
-    docker_client.images.get("robocore-it-demo-base:latest").tag(base_ref)
+#: The demo's image prefix, which every copy keeps (deploy_helpers.copy_project): the local images the releases are
+#: made from, and their repositories in the registry, as robocore believes a release record only when each image
+#: is that component's repository in the fleet's registry.
+PREFIX = "robocore-it-demo-"
+
+
+def push_base(docker_client: Any, registry: str) -> str:
+    """Push the demo's base image (what discovery servers and the health probe run); its digest reference."""
+    base_ref = f"{registry}/{PREFIX}base:fleet"
+    docker_client.images.get(f"{PREFIX}base:latest").tag(base_ref)
     return _push(docker_client, base_ref)
 
 
-def make_releases(docker_client: Any, demo: Path, name: str, registry: str, contexts: Path,
+def make_releases(docker_client: Any, demo: Path, registry: str, contexts: Path,
                   versions: dict[str, str], base: str | None = None) -> dict[str, str]:
-    """Push each release of ``versions`` (version -> variant of :data:`VARIANTS`) under ``name``'s repositories,
+    """Push each release of ``versions`` (version -> variant of :data:`VARIANTS`) under :data:`PREFIX`'s repositories,
     with ``base`` (:func:`push_base`'s reference; pushed here when None); version -> its release record (the
     file's text, see :func:`write_records`)."""
     if base is None:
-        base = push_base(docker_client, name, registry)
+        base = push_base(docker_client, registry)
     records = {}
     built: dict[tuple[str, str], str] = {}  # (component, variant) -> pushed: the listener is the same in each
     for version, variant in versions.items():
@@ -111,13 +121,16 @@ def make_releases(docker_client: Any, demo: Path, name: str, registry: str, cont
             shutil.rmtree(context, ignore_errors=True)
             shutil.copytree(demo / ".robocore" / "build" / component / "install", context / "install", symlinks=True)
             code = context / "install" / TALKER_PY
-            if component == "talker" and variant == "v2":
-                code.write_text(code.read_text().replace("hello from talker", "hello v2 from talker"))
+            if component == "talker" and variant in ("v2", "v4"):
+                code.write_text(code.read_text().replace("hello from talker", f"hello {variant} from talker"))
+            if component == "talker" and variant == "silent":
+                assert '"chatter"' in code.read_text(), code
+                code.write_text(code.read_text().replace('"chatter"', '"chatter_elsewhere"'))
             if component == "talker" and variant == "crash":
                 code.write_text("raise SystemExit(3)\n" + code.read_text())
-            (context / "Dockerfile").write_text(f"FROM robocore-it-demo-{component}:latest\n"
+            (context / "Dockerfile").write_text(f"FROM {PREFIX}{component}:latest\n"
                                                 "COPY install /robocore/install\n")
-            ref = f"{registry}/{name}-{component}:{version}"
+            ref = f"{registry}/{PREFIX}{component}:{version}"
             docker_client.images.build(path=str(context), tag=ref, rm=True)
             refs[component] = built[(component, variant if component == "talker" else "same")] = \
                 _push(docker_client, ref)

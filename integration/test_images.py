@@ -165,7 +165,9 @@ def test_images_have_the_runtime_contract(docker_client: Any, demo_project: Path
 def test_noop_build_then_one_edit_rebuilds_only_that_package(demo_project: Path, run_robocore: RobocoreCli) -> None:
     project = _project(demo_project)
     result = json.loads(run_robocore(demo_project, "build", "--json").stdout)
-    assert {r["action"] for r in result["results"]} == {"up-to-date"}, result
+    # the message names each component's action and reason (e.g. "image changed": a staged image re-tagged)
+    assert {r["action"] for r in result["results"]} == {"up-to-date"}, \
+        {r["what"]: (r["action"], r.get("reason")) for r in result["results"]}
     talker = _role(project, "talker")
     assert talker.folder
     sources = [p for p in (demo_project / talker.folder).rglob("*.py") if p.name != "setup.py" and "talker" in p.name]

@@ -96,6 +96,10 @@ def test_run_is_idempotent_and_recreates_only_what_changed(project_copy: Any, do
     data = yaml.safe_load((root / "robot.yaml").read_text())
     listener_entry = next(c for c in data["components"] if c["name"] == "listener")
     listener_entry["environment"] = {"ROBOCORE_IT_CHANGED": "1"}
+    # no priority: critical here: its --oom-score-adj -900 needs a daemon with CAP_SYS_RESOURCE, which the CI
+    # machines' Docker lacks (runc: "can't get final child's PID from pipe"); its mapping is unit-tested
+    listener_entry["resources"] = {"requests": {"cpu": 0.25, "memory": "64Mi"},
+                                   "limits": {"cpu": "500m", "memory": "256Mi"}}
     (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
     plan = run_robocore(root, "run", "--dry-run").stdout
     # offline: the plan names the containers, and what each host runs now is unknown (the run below decides)
@@ -109,6 +113,12 @@ def test_run_is_idempotent_and_recreates_only_what_changed(project_copy: Any, do
     assert changed == {"listener"}
     new_listener = docker_client.containers.get(f"{root.name}-listener")
     assert new_listener.attrs["Config"]["Env"].count("ROBOCORE_IT_CHANGED=1") == 1
+    # robot.yaml's resources, as Docker runs the container (and it still hears, under those limits)
+    host_config = new_listener.attrs["HostConfig"]
+    assert (host_config["NanoCpus"], host_config["CpuShares"]) == (500_000_000, 256)
+    assert (host_config["Memory"], host_config["MemoryReservation"]) == (256 << 20, 64 << 20)
+    talker_config = docker_client.containers.get(f"{root.name}-talker").attrs["HostConfig"]
+    assert (talker_config["NanoCpus"], talker_config["Memory"], talker_config["OomScoreAdj"]) == (0, 0, 0)
     assert wait_for(lambda: log_lines(new_listener, HEARD), HEAR_WITHIN), "recreated listener heard nothing"
 
     # A component removed from robot.yaml is removed from its host; the others stay.

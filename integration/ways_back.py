@@ -15,6 +15,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import lanes
+
 from robocore.plan.starts import docker_epoch
 
 #: What the template's listeners log for each greeting (rclpy and rospy alike), before the talker's number.
@@ -80,11 +82,15 @@ class Pair:
 
     def timed_rounds(self, way: Callable[[], None], name: str, rounds: int, spacing: float = 0.0) -> list[float]:
         """``rounds`` times: the talker brought back ``way``, then seconds from its start to heard. ``spacing``:
-        seconds the talker runs from its start before the next round."""
+        seconds the talker runs from its start before the next round (or longer: in a quiet test the other lanes
+        work meanwhile, :func:`lanes.untimed`, and the round waits for their phases under way to end)."""
         seconds = []
         for _ in range(rounds):
             previous = self.talker().attrs["State"]["StartedAt"]
-            time.sleep(max(0.0, spacing - (time.time() - docker_epoch(previous))))
+            left = spacing - (time.time() - docker_epoch(previous))
+            if left > 0:
+                with lanes.untimed():  # the talker running times nothing: the other lanes may work meanwhile
+                    time.sleep(left)
             mark = len(self.greetings())
             way()
             seconds.append(self.start_to_heard(mark, previous))

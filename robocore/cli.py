@@ -231,31 +231,62 @@ def _run_recording(memo: Any, args: list[str]) -> None:
         memo.record(out.kept.getvalue(), err.kept.getvalue())
 
 
-#: ``robocore fleet join|rollout|status|rollback ...``: the ``fleet`` task, its verb a flag.
+#: ``robocore fleet join|rollout|status|rollback|page ...``: the ``fleet`` task, its verb a flag.
 FLEET_WORD = "fleet"
-FLEET_VERBS = ("join", "rollout", "status", "rollback")
+FLEET_VERBS = ("join", "rollout", "status", "rollback", "page", "logs", "connect")
+#: The fleet task's flags that take a value as the next word (``logs r1 --component talker``).
+FLEET_VALUE_FLAGS = frozenset({"--component", "--out", "--port", "--bind", "--version", "--robot"})
+#: ``robocore fleet --help`` (and ``fleet VERB --help``): the commands as they are typed, not the task's flags.
+FLEET_USAGE = """\
+Usage: robocore [-p DIR] fleet COMMAND [--dry-run] [--json]
+
+  join                   the swarm on the manager, every host of every robot joined and labelled
+  rollout VERSION        release VERSION (made by release --fleet --tag VERSION) wave by wave,
+                         each robot behind the health gate; a robot that fails goes back;
+                         a robot is asked first (update lock, maintenance window): --force does not ask
+  status                 every robot: online or offline, the release it runs and its target, health
+  rollback [ROBOT...]    robots back to the release each ran before (default: every robot)
+  page --out DIR         the fleet page as one HTML file (opens offline)
+  page --serve [--port N] [--bind ADDR]
+                         the fleet page served live, read-only (127.0.0.1:8765 by default)
+  logs ROBOT [--component C] [--follow]
+                         a robot's logs through the manager (no connection to the robot)
+  connect ROBOT COMPONENT
+                         a shell in the component's live container (found through the manager,
+                         entered through the robot host's daemon, as robocore connect does)
+
+  --dry-run              say what would be done and how the manager is reached; contact nothing
+  --json                 the results as JSON on stdout
+
+fleet.yaml names the manager, the registry and the robots: see docs/fleets.md."""
 
 
 def fleet_task(rest: list[str]) -> list[str]:
     """``fleet VERB ...`` as the ``fleet`` task's flags: ``--verb VERB``; ``rollout VERSION`` gives ``--version
-    VERSION`` and ``rollback ROBOT...`` one ``--robot ROBOT`` each (operands after ``--`` too). Other command
-    lines are kept."""
+    VERSION``, ``rollback ROBOT...`` and ``logs ROBOT`` one ``--robot ROBOT`` each, ``connect ROBOT COMPONENT``
+    ``--robot ROBOT --component COMPONENT`` (operands after ``--`` too). Other command lines are kept."""
     if len(rest) < 2 or rest[0] != FLEET_WORD or rest[1].startswith("-"):
         return rest
     verb, args = rest[1], rest[2:]
     if verb not in FLEET_VERBS:
         raise CommandLineError(f"unknown fleet command {verb!r} (fleet {'|'.join(FLEET_VERBS)})")
     out = [FLEET_WORD, "--verb", verb]
-    operand_flag = {"rollout": "--version", "rollback": "--robot"}.get(verb)
-    operands_only = False
+    operand_flag = {"rollout": "--version", "rollback": "--robot", "logs": "--robot", "connect": "--robot"}.get(verb)
+    operands = 0
+    operands_only = value_next = False
     for arg in args:
         if arg == "--" and not operands_only:
             operands_only = True
-            continue
-        if operand_flag is not None and (operands_only or not arg.startswith("-")):
+        elif operand_flag is not None and (operands_only or not arg.startswith("-")) and not value_next:
+            if verb == "connect":  # connect ROBOT COMPONENT
+                if operands == 2:
+                    raise CommandLineError(f"fleet connect takes one robot and one component (got {arg!r} too)")
+                operand_flag = ("--robot", "--component")[operands]
             out += [operand_flag, arg]
+            operands += 1
         else:
             out.append(arg)
+            value_next = arg in FLEET_VALUE_FLAGS
     return out
 
 
@@ -286,6 +317,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     names = set(cli_namespace.task_names) | {n.replace("_", "-") for n in cli_namespace.task_names}
     try:
         project, rest = split_project(args, names)
+        if rest[:1] == [FLEET_WORD] and {"-h", "--help"} & set(rest):
+            print(FLEET_USAGE)
+            return
         rest = fleet_task(rest)
     except CommandLineError as error:
         from robocore.ui import bounded, clean

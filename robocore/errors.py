@@ -43,7 +43,9 @@ class Problem:
     def __str__(self) -> str:
         where = f"{self.file}:{self.line}" if self.line is not None else self.file
         message = f"warning: {self.message}" if self.severity == "warning" else self.message
-        return f"{where}: {self.path}: {message}" if self.path else f"{where}: {message}"
+        # a key path is built from the file's own keys: a newline in one must not start a forged line
+        path = self.path if self.path.isprintable() else repr(self.path)[1:-1]
+        return f"{where}: {path}: {message}" if path else f"{where}: {message}"
 
 
 class ConfigError(RobocoreError):

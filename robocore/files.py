@@ -67,6 +67,36 @@ PRIVATE = 0o600
 SHARED = 0o644
 #: Bits no file or folder robocore creates ever has, whatever the umask: no one else may write to them.
 NEVER = 0o022
+#: Largest state record robocore reads (build and sync state, run history, the warmed hosts, a folder's record of
+#: names): those it writes are kilobytes, a build state of 100,000 files about 10 MB; a bigger one is not one it
+#: wrote, and is read as none, in bounded time and memory.
+MAX_STATE_RECORD_BYTES = 64_000_000
+
+
+@contextlib.contextmanager
+def creating_for_this_user() -> Iterator[None]:
+    """Within: files and folders made by this process and its children (a template engine, git) are writable by no
+    one else whatever the umask (:data:`NEVER` added to it). Only where no other thread creates files meanwhile."""
+    old = os.umask(UMASK | NEVER)
+    try:
+        yield
+    finally:
+        os.umask(old)
+
+
+def narrow_new(root: Path, before: set[Path]) -> None:
+    """Remove the bits that let others write from every entry under ``root`` (``root`` included) of this user that is
+    not in ``before`` (what was there already): what a tool copied with its source's modes. Links are not followed."""
+    _narrow(root, before)
+    for here, folders, names in os.walk(root):
+        for name in [*folders, *names]:
+            _narrow(Path(here) / name, before)
+
+
+def _narrow(path: Path, before: set[Path]) -> None:
+    info = os.lstat(path)
+    if path not in before and not stat.S_ISLNK(info.st_mode) and info.st_mode & NEVER and info.st_uid == os.geteuid():
+        os.chmod(path, stat.S_IMODE(info.st_mode) & ~NEVER)
 
 
 def default_mode() -> int:
@@ -204,10 +234,12 @@ def write_atomic(path: Path, content: str | bytes, *, mode: int | None = None, p
     (:func:`state_mode`); an explicit mode is applied as given, less the bits that let others write
     (:data:`SHARED` for the files another user reads), whatever the umask. A :data:`PRIVATE` file's folder is
     made 0700 (as ``private_dir`` asks). An unchanged file keeps its content but still gets its mode, so a file
-    written before with a wider mode is narrowed. A symlink at ``path`` or on the way to
+    written before with a wider mode is narrowed (one with more than one link is replaced instead, so that another
+    name of it, outside, is left as it is). A symlink at ``path`` or on the way to
     it from the project folder is refused (:func:`check_no_links`) before anything is written.
     ``durable`` False skips the fsync before the rename: for files the same command writes again when they come
-    out wrong after a crash (:func:`write_tree`'s), where one fsync per file costs more than the writing.
+    out wrong after a crash (:func:`robocore.export_folder.write_tree`'s), where one fsync per file costs more than
+    the writing.
     """
     data = content.encode("utf-8") if isinstance(content, str) else content
     wanted = state_mode(path, mode)
@@ -215,7 +247,8 @@ def write_atomic(path: Path, content: str | bytes, *, mode: int | None = None, p
     make_folder(path.parent, private=private_dir or mode == PRIVATE, shared=mode == SHARED)
     if os.path.lexists(path) and not stat.S_ISREG(os.lstat(path).st_mode):
         raise UnsafePath(f"{path}: is not a regular file; robocore writes its own file there", hint=f"remove {path}")
-    if read_own_file(path) == data:
+    # a file with another link (a hard link to a file elsewhere) is replaced by the rename below, never chmodded
+    if read_own_file(path) == data and os.lstat(path).st_nlink == 1:
         if (os.lstat(path).st_mode & 0o7777) != wanted:
             os.chmod(path, wanted)
         return False
@@ -274,7 +307,7 @@ def write_generated(folder: Path, files: Mapping[str, str | bytes], *, mode: int
     not write. The folder is private (0700) when ``mode`` is :data:`PRIVATE`, 0755 when :data:`SHARED`."""
     make_folder(folder, private=mode == PRIVATE, shared=mode == SHARED)
     record = folder / WRITTEN_RECORD
-    before = (read_own_file(record) or b"").decode("utf-8", errors="replace").splitlines()
+    before = (read_own_file(record, limit=MAX_STATE_RECORD_BYTES) or b"").decode("utf-8", errors="replace").splitlines()
     paths = []
     for name, content in files.items():
         write_atomic(folder / name, content, mode=mode)
@@ -360,67 +393,3 @@ def path_kind(path: Path) -> tuple[str, str]:
     except (OSError, ValueError) as error:  # ValueError: a NUL byte in the name
         return "unusable", getattr(error, "strerror", None) or str(error)
     return ("dir" if stat.S_ISDIR(mode) else "file"), ""
-
-
-def _record_names(text: bytes) -> list[str]:
-    """The relative paths a :data:`WRITTEN_RECORD` lists, those that could name a file robocore writes (no absolute
-    path, no ``..``, no empty part): a hand-edited record never makes robocore remove a file outside the folder."""
-    names = []
-    for line in text.decode("utf-8", errors="replace").splitlines():
-        parts = line.split("/")
-        if line and not line.startswith("/") and all(p and p not in (".", "..") for p in parts):
-            names.append(line)
-    return names
-
-
-def write_tree(folder: Path, files: Mapping[str, str | bytes], *, mode: int | None = None) -> list[Path]:
-    """Write ``files`` (relative path -> content) under ``folder``, a folder robocore owns entirely: one it made,
-    or one holding its :data:`WRITTEN_RECORD`. A folder that exists and holds anything without that record is
-    refused (:class:`~robocore.errors.UnsafePath`), so a user's files are never mixed with or replaced by
-    robocore's. In its own folder robocore replaces only the files it wrote (its record lists them), removes
-    the ones no longer wanted, and leaves any other file alone. Nothing is written or removed through a link:
-    ``folder`` itself and every folder on the way from it are checked with lstat (:func:`check_no_links`).
-    The record is written first with old and new names, so an interrupted run still owns all it wrote. The files
-    are not fsynced one by one (an export is thousands of them): each is compared with what it should hold when
-    the command runs again, so one a crash left empty is written again then."""
-    try:
-        info = os.lstat(folder)
-    except FileNotFoundError:
-        info = None
-    if info is not None and stat.S_ISLNK(info.st_mode):
-        raise UnsafePath(f"{folder}: a symlink; robocore does not write through links", hint=f"give the folder "
-                         f"the link points to, or remove {folder}")
-    if info is not None and not stat.S_ISDIR(info.st_mode):
-        raise UnsafePath(f"{folder}: is not a folder", hint="give a new or empty folder")
-    record = folder / WRITTEN_RECORD
-    before: list[str] = []
-    if info is not None:
-        own = read_own_file(record)
-        if own is None and any(os.scandir(folder)):
-            raise UnsafePath(f"{folder}: holds files robocore did not write (no {WRITTEN_RECORD} record in it); "
-                             "robocore writes only into a new or empty folder, or one it wrote before",
-                             hint="give a new folder, or empty this one")
-        before = _record_names(own or b"")
-    for name in files:
-        check_no_links(folder / name, anchor=folder)
-    make_folder(folder, private=mode == PRIVATE)
-    write_atomic(record, "".join(f"{n}\n" for n in sorted(set(before) | set(files))))
-    paths = []
-    for name, content in files.items():
-        path = folder / name
-        check_no_links(path, anchor=folder)
-        make_folder(path.parent, private=mode == PRIVATE)
-        write_atomic(path, content, mode=mode, durable=False)
-        paths.append(path)
-    for stale in sorted(set(before) - set(files)):
-        path = folder / stale
-        with contextlib.suppress(UnsafePath):  # a name now held by a link or a folder is left alone
-            check_no_links(path, anchor=folder)
-            remove_file(path)
-            for parent in path.parents:  # the folders it leaves empty, up to the export folder
-                if parent == folder or not parent.is_relative_to(folder):
-                    break
-                with contextlib.suppress(OSError):
-                    os.rmdir(parent)
-    write_atomic(record, "".join(f"{n}\n" for n in sorted(files)))
-    return paths

@@ -66,13 +66,12 @@ def reported(body: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
-def _given(value: str | None, flag: str) -> str | None:
+def _given(value: str | None, flag: str, *, required: bool = False) -> str | None:
     """An option's value: None when the option was not given; an empty (or blank) value is refused in one line,
-    never read as "not given" (``down --host ""`` must not mean every host)."""
+    never read as "not given" (``down --host ""`` must not mean every host) nor as the current folder."""
     if value is not None and not value.strip():
         from robocore.errors import UsageError
-
-        raise UsageError(f"{flag} was given an empty value; name one (or leave {flag} out)")
+        raise UsageError(f"{flag} was given an empty value; name one" + ("" if required else f" (or leave {flag} out)"))
     return value
 
 
@@ -80,7 +79,6 @@ def _require(component: str | None, task_name: str) -> str:
     component = _given(component, "--component")
     if component is None:
         from robocore.errors import UsageError
-
         raise UsageError(f"{task_name} needs --component NAME", hint=f"robocore {task_name} --component talker")
     return component
 
@@ -94,7 +92,6 @@ def _tag(tag: str | None) -> str | None:
 
     if not is_image_tag(tag):
         from robocore.errors import UsageError
-
         raise UsageError(f"--tag {tag!r} is not a valid image tag (a letter, digit or '_', then up to 127 "
                          "letters, digits, '_', '.' or '-')")
     return tag
@@ -110,7 +107,6 @@ def _count(value: str, flag: str) -> int:
     text = value.strip()
     if not text.isdigit() or not text.isascii() or len(text) > len(str(MAX_COUNT)) or int(text) > MAX_COUNT:
         from robocore.errors import UsageError
-
         shown = value if len(value) <= 40 else value[:37] + "..."
         raise UsageError(f"{flag} takes a whole number from 0 to {MAX_COUNT:,} (got {shown!r})")
     return int(text)
@@ -180,7 +176,6 @@ def init(
 def schema(c: Context, fleet: bool = False) -> None:
     """Print the JSON Schema of robot.yaml (of fleet.yaml with --fleet)."""
     from robocore.config.schema import schema_json
-
     print(schema_json(fleet=fleet))
 
 
@@ -403,8 +398,8 @@ def export(c: Context, engine: str, path: str, tag: str | None = None, git_repo:
     if engine != "kubernetes":
         raise UsageError(f"unknown export {engine!r} (known: kubernetes)", hint="robocore export kubernetes DIR")
     options = _options(c, "export", dry_run=dry_run, json=json)
-    folder = Path(path)
-    models = [Path(m) for m in model or []]
+    folder = Path(_given(path, "DIR", required=True) or "")  # "" would be read as the current folder
+    models = [Path(_given(m, "--model", required=True) or "") for m in model or []]
     repository = _given(git_repo, "--git-repo")
     inside = _given(git_path, "--git-path")
     _execute(options, lambda: command.export_kubernetes(options, folder, tag=_tag(tag), git_repo=repository,
@@ -426,19 +421,24 @@ def doctor(c: Context, host: str | None = None, json: bool = False) -> None:
 def desktop_password(c: Context) -> None:
     """Print the project's VNC password (made once, kept 0600 in .robocore/desktop/), which noVNC asks for."""
     from robocore.commands import desktop_password as command
-
     options = _options(c, "desktop-password")
     print(_execute(options, lambda: command.desktop_password(options.load())))
 
 
-@task(iterable=["robot"], help={"verb": "join | rollout | status | rollback", "robot": "rollback: only this robot."})
+@task(iterable=["robot"], help={"verb": "join|rollout|status|rollback|page|logs|connect", "robot": "this robot",
+                                "out": "page: write DIR/index.html", "serve": "page: serve it live (read-only)",
+                                "component": "logs: only this one", "follow": "logs: live"})
 @reported
-def fleet(c: Context, verb: str = "", version: str | None = None, robot: list[str] | None = None,
-          dry_run: bool = False, json: bool = False) -> None:
-    """The fleet on Docker Swarm: join, rollout VERSION (waves, health gate), status, rollback [ROBOT...]."""
-    from robocore.commands.fleet import fleet as run
-    _execute(options := _options(c, f"fleet-{verb}", dry_run=dry_run, json=json),
-             lambda: run(options, verb=verb, version=_tag(version), robots=robot or []))
+def fleet(c: Context, verb: str = "", version: str | None = None, robot: list[str] | None = None, dry_run: bool = False,
+          json: bool = False, out: str | None = None, serve: bool = False, port: str | None = None,
+          bind: str | None = None, force: bool = False, component: str | None = None, follow: bool = False) -> None:
+    """The fleet on Docker Swarm: join, rollout VERSION [--force], status, rollback [ROBOT...], page, logs, connect."""
+    from robocore.commands import fleet as command
+    code = _execute(options := _options(c, f"fleet-{verb}", dry_run=dry_run, json=json), lambda: command.fleet(
+        options, verb=verb, version=_tag(version), robots=robot or [], page=command.page_flags(out, serve, port, bind),
+        force=force, component=_given(component, "--component"), follow=follow))
+    if verb == "connect" and code:
+        raise Exit(code=code)  # the shell's own exit code
 
 
 PROJECT_TASKS = (validate, prepare_base, stage, build, test, dev, sync, run, down, status, logs, shell, connect,

@@ -17,6 +17,9 @@ if [ "${ROBOCORE_TEST_TOOLS:-0}" = 1 ]; then
   command -v docker-registry >/dev/null || need_debs+=(docker-registry)
   command -v ssh-keygen >/dev/null || need_debs+=(openssh-client)
   command -v file >/dev/null || need_debs+=(file)
+  # the fleet page's browser tests (integration/test_fleet_page.py): Debian's headless Chromium and its driver
+  command -v chromium >/dev/null || need_debs+=(chromium)
+  command -v chromedriver >/dev/null || need_debs+=(chromium-driver)
   # the arm64 suites run arm64 containers on amd64 through qemu (registered below)
   if [ "$(uname -m)" = x86_64 ]; then
     command -v qemu-aarch64-static >/dev/null || need_debs+=(qemu-user-static)

@@ -64,6 +64,10 @@ components:
     entrypoint: ros2 launch camera_bringup bringup.launch.py
     devices:
       - "/dev:/dev"
+    resources:
+      requests: {cpu: 0.5, memory: 256Mi}
+      limits: {cpu: "1500m", memory: 1Gi}
+      priority: critical
   - name: vnc
     image: ghcr.io/tiryoh/ros2-desktop-vnc:humble
     runs_on: rpi5

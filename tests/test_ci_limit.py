@@ -1,9 +1,10 @@
 """``.ci/run`` stops itself before CI's limit, and the stopped run still shows its progress and slowest tests.
 
 The real ``.ci/run`` and ``noxfile.py`` run in a copy of the repository's layout whose ``scripts/test`` is a
-stand-in running nox's integration session on two small tests: one passes, one sleeps past a 15-second limit
-(long enough for nox and pytest to start on a loaded machine: with 4 s, a busy one was stopped while pytest was
-still importing).
+stand-in running nox's integration session, as CI runs it (in the noxfile's lanes), on two small tests: one
+passes, one sleeps past a 30-second limit (long enough for nox, pytest and its lanes' workers to start on a loaded
+machine: 4 s stopped a busy one while pytest was still importing, and 15 s one whose two workers had not yet
+collected).
 """
 
 from __future__ import annotations
@@ -57,15 +58,21 @@ def make_copy(tmp_path: Path) -> Path:
     return repo
 
 
+def ci_env(**extra: str) -> dict[str, str]:
+    """The environment of CI's run: the lanes the noxfile sets (not this shell's ``ROBOCORE_IT_LANES``)."""
+    env = {**os.environ, "PATH": f"{BIN}{os.pathsep}{os.environ['PATH']}", **extra}
+    env.pop("ROBOCORE_IT_LANES", None)
+    return env
+
+
 def test_ci_run_stops_at_its_limit_with_progress_and_durations(tmp_path: Path) -> None:
     repo = make_copy(tmp_path)
-    env = {**os.environ, "PATH": f"{BIN}{os.pathsep}{os.environ['PATH']}", "ROBOCORE_CI_LIMIT": "15s",
-           "ROBOCORE_CI_GRACE": "60s", "TERM": "dumb"}
+    env = ci_env(ROBOCORE_CI_LIMIT="30s", ROBOCORE_CI_GRACE="60s", TERM="dumb")
     done = subprocess.run(["bash", str(repo / ".ci" / "run")], cwd=tmp_path, env=env, stdin=subprocess.DEVNULL,
                           capture_output=True, text=True, timeout=180)
     output = done.stdout + done.stderr
     assert done.returncode == 124, output
-    assert "ci: stopped after 15s" in done.stderr
+    assert "ci: stopped after 30s" in done.stderr
     assert "KeyboardInterrupt" in output  # where the run was when it stopped
     assert "slowest 60 durations" in output  # --durations=60 of the integration session
     assert "1 passed" in output  # the progress so far
@@ -75,7 +82,7 @@ def test_ci_run_stops_at_its_limit_with_progress_and_durations(tmp_path: Path) -
 def test_ci_run_passes_the_exit_code_of_a_run_within_its_limit(tmp_path: Path) -> None:
     repo = make_copy(tmp_path)
     (repo / "integration" / "test_limit.py").write_text("def test_quick():\n    pass\n")
-    env = {**os.environ, "PATH": f"{BIN}{os.pathsep}{os.environ['PATH']}", "ROBOCORE_CI_LIMIT": "100s"}
+    env = ci_env(ROBOCORE_CI_LIMIT="100s")
     done = subprocess.run(["bash", str(repo / ".ci" / "run")], cwd=tmp_path, env=env, stdin=subprocess.DEVNULL,
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stdout + done.stderr

@@ -167,6 +167,18 @@ def test_help_lists_tasks_and_the_project_flag() -> None:
         assert f"  {name} " in done.stdout
 
 
+@pytest.mark.parametrize("args", [("fleet", "--help"), ("fleet", "rollout", "-h")])
+def test_fleet_help_shows_the_commands_as_typed(args: tuple[str, ...]) -> None:
+    """Not the task's internal flags (--verb, --version, --robot) but ``fleet rollout VERSION`` and the rest."""
+    done = robocore(*args)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[0].startswith("Usage: robocore [-p DIR] fleet COMMAND")
+    for form in ("join", "rollout VERSION", "status", "rollback [ROBOT...]", "page --out DIR", "page --serve"):
+        assert any(line.startswith(f"  {form}") for line in lines), form
+    assert "--verb" not in done.stdout and "--version" not in done.stdout
+
+
 def test_version() -> None:
     from robocore import __version__
 

@@ -165,3 +165,18 @@ def test_warnings_name_their_line_and_key(make_project: MakeProject, monkeypatch
     ], got
     assert "mounts the Docker socket of main" in got[2]
     assert robot_warnings(project / "robot.yaml", parse_robot_text(HEAD)) == []
+
+
+@pytest.mark.parametrize(("distro", "domain", "warned"), [
+    ("jazzy", 101, False), ("jazzy", 102, True), ("jazzy", 232, True), ("noetic", 200, False)])
+def test_a_ros2_domain_whose_ports_fall_in_the_ephemeral_range_is_a_warning_on_its_line(
+        distro: str, domain: int, warned: bool, make_project: MakeProject, monkeypatch: pytest.MonkeyPatch) -> None:
+    project = make_project(f"ros_distro: {distro}\nros_domain_id: {domain}\n"
+                           "hosts:\n  - {name: main, ip: 192.168.1.10}\n")
+    monkeypatch.chdir(project)
+    got = [str(w) for w in robot_warnings(project / "robot.yaml", load_robot(project), project)]
+    if not warned:
+        assert got == []
+        return
+    assert len(got) == 1 and got[0].startswith("robot.yaml:2: ros_domain_id: warning: "), got
+    assert f"from {7400 + 250 * domain}" in got[0] and "0-101" in got[0]

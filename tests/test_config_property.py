@@ -42,7 +42,8 @@ KEYS = [
     "repo", "branch", "runs_on", "image", "apt_packages", "pip_packages", "repositories", "postinstall", "entrypoint",
     "launch_args", "devices", "ports", "environment", "volumes", "network", "nvidia", "gui", "privileged", "servers",
     "desktop", "display", "web_port", "vnc_port", "local_only", "open", "size",
-    "port", "host", "transport", "kind", "url", "version", "bogus", "",
+    "port", "host", "transport", "kind", "url", "version", "resources", "requests", "limits", "cpu", "memory",
+    "priority", "bogus", "",
 ]
 
 scalars = st.one_of(
@@ -54,7 +55,8 @@ scalars = st.one_of(
     st.text(max_size=30),
     st.sampled_from(["humble", "iron", "rpi5", "pi5.local", "127.0.0.1", "localhost", "::1", "6080:80", "/dev:/dev",
                      "../..", "/", ".", "tcp", "tls", "ssh", "local", "wheels", "host", "bridge", "arm64", "~", "-1",
-                     "components/camera", "a" * 300, "line\nbreak", "tab\there", "\u00e9\u4e2d", "0x1F", "1e400"]),
+                     "components/camera", "a" * 300, "line\nbreak", "tab\there", "\u00e9\u4e2d", "0x1F", "1e400",
+                     "500m", "256Mi", "1.5", "critical"]),
 )
 yaml_values = st.recursive(
     scalars,

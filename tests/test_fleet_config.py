@@ -97,7 +97,7 @@ def test_field_errors_name_the_fleet_file_line_and_key(robot: Robot) -> None:
         "fleet.yaml:20: rollout.health.heard[0]: 'chatter' is not a valid value here (expected an absolute ROS name "
         "such as /talker or /robot/chatter)",
         "fleet.yaml:22: colour: unknown key 'colour'; did you mean 'rollout'? (allowed: engine, gitops, manager, "
-        "registry, robots, rollout)",
+        "registry, registry_ca, robots, rollout)",
     ]
 
 
@@ -170,8 +170,8 @@ def test_a_field_error_and_a_cross_check_are_reported_in_one_run(robot: Robot) -
 
 def test_the_top_level_must_be_a_mapping_and_yaml_errors_are_one_line(robot: Robot) -> None:
     assert refusal("- a\n- b\n", robot) == [
-        "fleet.yaml:1: top level must be a mapping of keys (engine, gitops, manager, registry, robots, rollout), "
-        "got a list"]
+        "fleet.yaml:1: top level must be a mapping of keys (engine, gitops, manager, registry, registry_ca, robots, "
+        "rollout), got a list"]
     assert refusal("robots: [\n", robot)[0].startswith("fleet.yaml:2: YAML syntax error")
     assert "fleet.yaml:2: robots: this key appears twice" in refusal("robots: []\nrobots: []\n", robot)
 
@@ -233,6 +233,29 @@ def test_gitops_names_the_repository_and_a_bad_url_is_one_line(robot: Robot) -> 
     lines = refusal(FLEET + "gitops:\n  repo: https://bot:s3cret@git.example.org/fleet.git\n  path: ../up\n", robot)
     assert [line.split(": ")[0:2] for line in lines] == [["fleet.yaml:23", "gitops.repo"],
                                                          ["fleet.yaml:24", "gitops.path"]]
-    assert "password or token" in lines[0] and "s3cret" not in lines[0]
+    assert "password" in lines[0] and "s3cret" not in lines[0] and "bot" not in lines[0]
     assert refusal(FLEET + "gitops: {repo: 'ftp://git.example.org/fleet'}\n", robot)[0].startswith(
-        "fleet.yaml:22: gitops.repo: must be a git repository URL")
+        "fleet.yaml:22: gitops.repo: must be a git URL")
+
+
+def test_a_dev_host_kept_in_a_fleet_model_is_a_warning_naming_its_line(tmp_path: Path) -> None:
+    """The template's robot.yaml names this machine (127.0.0.1) as its host: in a fleet model each robot would get
+    a host of that name, reached as the developer's user. validate warns, on robot.yaml's line; a robot's own
+    computer (not loopback) is no warning, and a user given for every robot drops that part of it."""
+    from robocore.config.loader import fleet_model_warnings, parse_robot_text
+
+    text = ("ros_distro: jazzy\nhosts:\n  - {name: main, ip: 10.0.0.5, user: robot}\n"
+            "  - {name: devmachine, ip: 127.0.0.1, user: me}\n"
+            "components:\n  - {name: talker, folder: components/talker, runs_on: main, "
+            "entrypoint: ros2 run demo_talker talker}\n")
+    path = tmp_path / "robot.yaml"
+    path.write_text(text)
+    robot = parse_robot_text(text)
+    warned = fleet_model_warnings(path, robot, {"main": False, "devmachine": False})
+    assert [(w.line, w.path, w.severity) for w in warned] == [(4, "hosts[1].ip", "warning")], warned
+    assert "devmachine is this machine (127.0.0.1), a dev host" in warned[0].message
+    assert "reached as robot.yaml's user me there" in warned[0].message
+    users_given = fleet_model_warnings(path, robot, {"main": False, "devmachine": True})
+    assert len(users_given) == 1 and "user me" not in users_given[0].message
+    robot_only = parse_robot_text(text.replace("127.0.0.1", "10.0.0.6"))
+    assert fleet_model_warnings(path, robot_only, {}) == []

@@ -9,32 +9,18 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import fleet_world
 import pytest
+from fleet_world import TWO_ROBOTS, Clock
 
 from robocore.adapters import swarm
-from robocore.commands import fleet_rollout
-from robocore.commands.fleet_rollout import FAILED, HEALTHY, Change, Gate
+from robocore.commands import fleet_gate
+from robocore.commands.fleet_gate import FAILED, HEALTHY, Change, Gate
 from robocore.commands.fleet_swarm import FleetProject
 from robocore.commands.support.context import Options
-from robocore.config.fleet import parse_fleet_text
-from robocore.config.loader import parse_robot_text
 from robocore.plan import swarm_services as plan
-from robocore.plan.fleet import fleet_instances
-from robocore.project import Project
 
-ROBOT = """\
-ros_distro: jazzy
-hosts:
-  - {name: main, ip: 127.0.0.1, user: me}
-components:
-  - {name: talker, folder: components/talker, runs_on: main, entrypoint: ros2 run demo_talker talker}
-"""
-FLEET = """\
-manager: {ip: 10.0.0.2}
-registry: 10.0.0.2:5000
-robots:
-  - {name: r1, hosts: {main: {ip: 10.1.1.1}}}
-  - {name: r2, hosts: {main: {ip: 10.1.2.1}}}
+FLEET = TWO_ROBOTS + """\
 rollout:
   health: {running: 2}
   timeouts: {robot: 1000, wave: 30}
@@ -44,27 +30,12 @@ RELEASE = plan.Release(version="v2", components={"talker": {"amd64": "10.0.0.2:5
                        base={"amd64": "10.0.0.2:5000/p-base" + DIGEST})
 
 
-class Clock:
-    """``time`` for the gate: ``monotonic()`` is what its ``sleep``s added up to."""
-
-    def __init__(self) -> None:
-        self.now = 1000.0
-
-    def monotonic(self) -> float:
-        return self.now
-
-    def sleep(self, seconds: float) -> None:
-        self.now += seconds
-
-
 @pytest.fixture
 def gate(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[Gate, FleetProject, Clock, dict[str, str]]:
     """A gate over a fake swarm where both robots' nodes are ready; ``states[robot]`` is the state of the new task
     of each of that robot's services ("" : none yet)."""
-    robot = parse_robot_text(ROBOT)
-    fleet = parse_fleet_text(FLEET, robot)
-    project = Project(root=tmp_path / "p", robot=robot)
-    fleet_project = FleetProject(project=project, fleet=fleet, instances=fleet_instances(robot, fleet))
+    fleet_project = fleet_world.fleet_project(tmp_path / "p", FLEET)
+    project = fleet_project.project
     clock = Clock()
     states = {"r1": "", "r2": ""}
     nodes = [swarm.NodeInfo(id=f"n{r}", hostname=r, labels=plan.node_labels(project.name, r, "main", "amd64"),
@@ -77,7 +48,7 @@ def gate(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[Gate, FleetPr
         return [swarm.TaskInfo(id=f"t-{service}", node_id=f"n{robot_name}", state=state, desired="running",
                                image=image, created="1", error="", exit_code=None, container="c")] if state else []
 
-    monkeypatch.setattr(fleet_rollout, "time", clock)
+    monkeypatch.setattr(fleet_gate, "time", clock)
     monkeypatch.setattr(swarm, "nodes", lambda _client: nodes)
     monkeypatch.setattr(swarm, "tasks", tasks)
     monkeypatch.setattr(swarm, "updating", lambda _client, _name: False)
@@ -152,7 +123,7 @@ def test_a_probe_whose_output_comes_late_is_read_again(gate: Any, monkeypatch: p
         the_gate.probe(change, clock.now)
         clock.sleep(0.5)
     assert (change.verdict, change.reason) == (FAILED, "the health probe printed no verdict (failed)")
-    assert clock.now - started >= fleet_rollout.PROBE_LOG_WAIT
+    assert clock.now - started >= fleet_gate.PROBE_LOG_WAIT
     change = _ended_probe(gate, monkeypatch, "complete", 0, ["", "", '{"ok": true}'])
     for _ in range(3):
         the_gate.probe(change, clock.now)
@@ -170,4 +141,4 @@ def test_a_probe_that_exited_0_with_no_output_passes_after_the_wait(gate: Any, m
         the_gate.probe(change, clock.now)
         clock.sleep(0.5)
     assert change.verdict == HEALTHY
-    assert clock.now - started >= fleet_rollout.PROBE_LOG_WAIT
+    assert clock.now - started >= fleet_gate.PROBE_LOG_WAIT

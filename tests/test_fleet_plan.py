@@ -46,15 +46,16 @@ robots:
   - name: r1
     hosts:
       main: {ip: 10.0.1.5, user: root, ssh_port: 2022}
-      arm: {ip: r1-arm.lan, docker: tls, docker_port: 2376}
+      arm: {ip: r1-arm.lan, docker: ssh}
     ros_domain_id: 3
   - {name: r2, hosts: {main: {ip: 10.0.2.5}, arm: {ip: 10.0.2.6}}}
 """, robot)
     one = robot_instance(robot, fleet.robot("r1"), registry=fleet.registry_for(robot))
     main, arm = one.hosts
     assert (main.ip, main.user, main.ssh_port, main.access.value) == ("10.0.1.5", "root", 2022, "ssh")
+    # (docker: tls here would never connect: robot.yaml's arm host has no TLS files; fleet.yaml refuses it)
     assert (arm.ip, arm.user, arm.ssh_port, arm.access.value, arm.docker_port) == ("r1-arm.lan", "root", 2200,
-                                                                                   "tls", 2376)
+                                                                                   "ssh", None)
     assert arm.arch.value == "arm64" and not main.is_local  # robot.yaml's local dev machine is a robot host here
     assert one.ros_domain_id == 3 and one.registry == "10.0.0.2:5000"
     assert one.components == robot.components and one.discovery == robot.discovery

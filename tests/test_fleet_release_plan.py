@@ -6,17 +6,16 @@ import json
 import os
 import sys
 from pathlib import Path, PurePosixPath
+from typing import Any
 
 import pytest
 from conftest import built_project
-from golden_files import check_golden
 
 from robocore.cli import main
 from robocore.commands.fleet_release import load_release_record, plan_for, record_path
 from robocore.config.loader import parse_robot_text
 from robocore.errors import UnsafePath, UsageError
 from robocore.plan.fleet_release import (
-    LAYER_ROOT,
     FleetSource,
     LayerFile,
     ReleaseRecord,
@@ -24,8 +23,6 @@ from robocore.plan.fleet_release import (
     digest_ref,
     fleet_tag,
     is_digest_ref,
-    layer_context,
-    layer_dockerfile,
     layer_files,
     parse_release_record,
     plan_fleet_release,
@@ -58,14 +55,6 @@ def test_the_layer_holds_the_install_tree_and_the_read_only_project_files_only(t
                      LayerFile(tmp_path / "config/params", PurePosixPath("/params")))
     assert baked_volumes(talker) == ("./config/params:/params:ro",)  # ./data (writable) stays a host folder
     assert layer_files(robot.component("prebuilt"), None, tmp_path) == ()
-    assert [(e.dest, e.source) for e in layer_context(files)] == [
-        (f"{LAYER_ROOT}/robocore/install", tmp_path / "install"), (f"{LAYER_ROOT}/params", tmp_path / "config/params")]
-
-
-def test_the_layer_dockerfile_adds_exactly_one_layer() -> None:
-    text = layer_dockerfile("sha256:" + "1" * 64, {"dev.robocore.release": "v1", "dev.robocore.component": "talker"})
-    check_golden("fleet/layer.Dockerfile", text)
-    assert sum(line.split()[0] in {"COPY", "ADD", "RUN"} for line in text.splitlines()) == 1
 
 
 def test_the_plan_tags_every_image_per_arch_and_labels_layered_ones() -> None:
@@ -80,7 +69,7 @@ def test_the_plan_tags_every_image_per_arch_and_labels_layered_ones() -> None:
         ("talker", "10.0.0.2:5000/bot-talker:v1.2-arm64-fleet", False, True),
         ("prebuilt", "10.0.0.2:5000/bot-prebuilt:v1.2-amd64-fleet", False, False),
     ]
-    assert plan.images[1].labels == {"dev.robocore.release": "v1.2", "dev.robocore.component": "talker"}
+    assert plan.images[1].labels == {"dev.robocore.component": "talker"}  # no release: same content, same digest
     assert plan.images[2].labels == {}
     with pytest.raises(UsageError, match="not a version a fleet release can take"):
         fleet_tag("v" * 120, "amd64")
@@ -113,7 +102,8 @@ def test_release_fleet_dry_run_says_what_it_would_push_and_writes_nothing(
                                       "--dry-run"])
     main(["-p", str(project.root), "release", "--fleet", "--tag", "v1", "--dry-run"])  # no SystemExit: success
     out = capsys.readouterr().out
-    assert "10.0.0.2:5000/bot-talker:v1-amd64-fleet (amd64): bot-talker:latest + one layer (/robocore/install)" in out
+    assert ("10.0.0.2:5000/bot-talker:v1-amd64-fleet (amd64): bot-talker:latest + 1 layer(s): install tree "
+            "/robocore/install\n") in out
     assert "10.0.0.2:5000/bot-prebuilt:v1-amd64-fleet (amd64): ros:jazzy-ros-base" in out
     assert not project.releases_dir.exists()
 
@@ -179,21 +169,57 @@ def test_a_bad_record_is_refused_whole(text: str, why: str) -> None:
 def test_load_release_record_reads_only_a_regular_file_inside_the_project(tmp_path: Path) -> None:
     project = Project(root=tmp_path, robot=parse_robot_text(ROBOT))
     with pytest.raises(UsageError, match="no fleet release v1"):
-        load_release_record(project, "v1")
+        load_release_record(project, "v1", "10.0.0.2:5000")
     path = record_path(project, "v1")
     path.parent.mkdir(parents=True)
     outside = tmp_path.parent / f"{tmp_path.name}-outside.json"
     outside.write_text(record().to_json())
     path.symlink_to(outside)
-    with pytest.raises(UsageError, match="outside the project"):
-        load_release_record(project, "v1")
+    with pytest.raises(UsageError, match="a symlink"):
+        load_release_record(project, "v1", "10.0.0.2:5000")
     path.unlink()
     os.mkfifo(path)
     with pytest.raises(UsageError, match="not a regular file"):
-        load_release_record(project, "v1")
+        load_release_record(project, "v1", "10.0.0.2:5000")
     path.unlink()
     path.write_text(record().to_json())
-    assert load_release_record(project, "v1") == record()
+    path.chmod(0o600)
+    assert load_release_record(project, "v1", "10.0.0.2:5000") == record()
     with pytest.raises(UsageError, match="not a release version"):
         record_path(project, "../x")
     assert is_digest_ref(record().base["amd64"])
+
+
+def test_a_long_push_says_how_far_it_is_every_few_seconds(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two layers pushed over 12 (fake) seconds: a line every 5 s with the megabytes sent of the layers' sizes; a
+    push faster than that says nothing (the negative control)."""
+    import time
+
+    from robocore.adapters import image_delivery
+
+    now = [0.0]
+    monkeypatch.setattr(time, "monotonic", lambda: now[0])
+
+    def events(seconds: float) -> Any:
+        for step in range(1, 13):
+            now[0] += seconds / 12
+            yield {"status": "Pushing", "id": "a", "progressDetail": {"current": step * 1_000_000,
+                                                                     "total": 12_000_000}}
+            yield {"status": "Pushing", "id": "b", "progressDetail": {"current": 500_000, "total": 3_000_000}}
+        yield {"aux": {"Digest": "sha256:" + "c" * 64}}
+
+    class Client:
+        def __init__(self, seconds: float) -> None:
+            self.images, self.seconds = self, seconds
+
+        def push(self, *_: Any, **__: Any) -> Any:
+            return events(self.seconds)
+
+    said: list[str] = []
+    digest = image_delivery.push_digest(Client(12.0), "reg:5000/p-talker", "v2", said.append)  # type: ignore[arg-type]
+    assert digest == "sha256:" + "c" * 64
+    assert said == ["pushing reg:5000/p-talker:v2: 5.5 of 15.0 MB sent",
+                    "pushing reg:5000/p-talker:v2: 10.5 of 15.0 MB sent"], said
+    said.clear()
+    image_delivery.push_digest(Client(3.0), "reg:5000/p-talker", "v2", said.append)  # type: ignore[arg-type]
+    assert said == []

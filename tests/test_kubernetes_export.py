@@ -84,7 +84,8 @@ def test_every_overlay_and_the_root_render_and_validate_strict(template_export: 
     overlay = render(template_export / "robots" / "myrobot")
     assert render(template_export) == overlay  # the root lists the one robot
     kinds = sorted(d["kind"] for d in overlay)
-    assert kinds == ["ConfigMap", "DaemonSet", "DaemonSet", "DaemonSet", "Namespace", "Service"]
+    assert kinds == ["ConfigMap", "ConfigMap", "DaemonSet", "DaemonSet", "DaemonSet", "Job", "Namespace", "Role",
+                     "RoleBinding", "Service", "ServiceAccount"]
     for doc in overlay:
         assert doc["metadata"].get("namespace", doc["metadata"]["name"]) == "robot-myrobot"
         validate(doc)
@@ -164,7 +165,9 @@ def test_a_changed_entrypoint_changes_only_that_component(template_project: Path
     def edit(doc: dict[str, Any]) -> None:
         doc["components"][1]["entrypoint"] = "ros2 run demo_listener listener --ros-args -r chatter:=talk"
 
-    assert changed_files(template_project, tmp_path, edit) == {"bases/myrobot/listener.yaml"}
+    # and the health Job's name: a Job's pods cannot change, so any change to the robot is a new Job
+    assert changed_files(template_project, tmp_path, edit) == {"bases/myrobot/listener.yaml",
+                                                               "bases/myrobot/health.yaml"}
 
 
 def test_a_changed_domain_changes_every_workload_and_nothing_else(template_project: Path, tmp_path: Path) -> None:
@@ -172,7 +175,8 @@ def test_a_changed_domain_changes_every_workload_and_nothing_else(template_proje
         doc["ros_domain_id"] = 7
 
     assert changed_files(template_project, tmp_path, edit) == {
-        "bases/myrobot/discovery-0.yaml", "bases/myrobot/listener.yaml", "bases/myrobot/talker.yaml"}
+        "bases/myrobot/discovery-0.yaml", "bases/myrobot/listener.yaml", "bases/myrobot/talker.yaml",
+        "bases/myrobot/health.yaml"}
 
 
 def test_udp_transport_drops_host_ipc_and_changes_the_profiles(template_project: Path, tmp_path: Path) -> None:
@@ -306,3 +310,48 @@ def test_a_later_export_replaces_only_its_own_files(template_project: Path, tmp_
     assert not (folder / "bases" / "myrobot" / "old.yaml").exists()
     assert (tmp_path / "escape").read_text() == "outside"
     assert "newTag: v2" in (folder / "robots" / "myrobot" / "kustomization.yaml").read_text()
+
+
+def test_robot_namespaces_carry_the_pod_security_level_their_pods_need(template_export: Path) -> None:
+    """Host network, host IPC and hostPath are refused by the baseline and restricted levels that hardened clusters
+    enforce: the namespace says privileged, for enforce, audit and warn."""
+    (namespace,) = by_kind(render(template_export / "robots" / "myrobot"), "Namespace").values()
+    labels = namespace["metadata"]["labels"]
+    assert {labels[f"pod-security.kubernetes.io/{mode}"] for mode in ("enforce", "audit", "warn")} == {"privileged"}
+
+
+def test_bare_image_names_are_said_with_their_components(template_project: Path, tmp_path: Path) -> None:
+    """Without a registry the images are bare names a node reads as Docker Hub's: the export warns, naming the
+    components; with a registry it does not."""
+    done = cli_export(template_project, tmp_path / "a", "--tag", TAG)
+    assert done.returncode == 0, done.stderr
+    (line,) = [line for line in done.stderr.splitlines() if "no registry" in line]
+    assert line.startswith("warning: myrobot: no registry") and "talker, listener" in line
+    assert "Docker Hub" in line and "k3s ctr images import" in line
+    project = copy_project(template_project, tmp_path / "withreg")
+    (project / "robot.yaml").write_text("registry: 10.0.0.2:5000\n" + (project / "robot.yaml").read_text())
+    done = cli_export(project, tmp_path / "b", "--tag", TAG)
+    assert done.returncode == 0, done.stderr
+    assert "no registry" not in done.stderr
+
+
+def test_a_component_waits_for_discovery_at_each_start_not_only_at_pod_start(template_export: Path) -> None:
+    """The kubelet restarts a crashed container without its pod's init containers: the component's own command waits
+    for the discovery names, then execs the component. Run here with sh, as the container would (``$$`` is
+    Kubernetes' escape of ``$``): it waits while a name does not resolve, and starts the component once it does."""
+    talker = by_kind(render(template_export / "robots" / "myrobot"), "DaemonSet")["talker"]
+    (container,) = talker["spec"]["template"]["spec"]["containers"]
+    argv = [a.replace("$$", "$") for a in container["command"] + container["args"]]
+    assert argv[:2] == ["sh", "-c"] and argv[3:6] == ["robocore-start", "discovery-devmachine", "--"]
+    assert argv[6:] == ["/robocore/entrypoint.sh", "ros2", "run", "demo_talker", "talker"]
+
+    def start(*names: str) -> subprocess.CompletedProcess[str] | None:
+        try:
+            return subprocess.run([*argv[:4], *names, "--", "echo", "started"], capture_output=True, text=True,
+                                  timeout=3)
+        except subprocess.TimeoutExpired:
+            return None  # still waiting
+
+    done = start("localhost")
+    assert done is not None and done.stdout == "started\n"
+    assert start("localhost", "discovery-nowhere.invalid") is None  # negative control: it waits

@@ -134,13 +134,13 @@ def test_the_ros1_robot_reaches_its_master_by_the_services_name(rendered: dict[s
         assert {"name": "ROS_MASTER_URI", "value": "http://discovery-base:11311"} in env
         assert {"name": "ROS_IP", "valueFrom": {"fieldRef": {"fieldPath": "status.hostIP"}}} in env
         assert not any(e["name"] == "ROS_HOSTNAME" for e in env)
-    assert not by_kind(docs, "ConfigMap")  # ROS 1 has no DDS profiles
+    assert [n.rsplit("-", 1)[0] for n in by_kind(docs, "ConfigMap")] == ["robocore-health"]  # no DDS profiles
 
 
 # ---------------------------------------------------------------- the controllers' files
 
-#: The fields robocore writes in Rancher Fleet's fleet.yaml, as its reference documents them (robocore's own
-#: schema of what it writes: the controllers' CRDs are not on these machines).
+#: The fields robocore writes in Rancher Fleet's fleet.yaml, as its reference documents them: robocore's own,
+#: narrower schema of what it writes (Fleet's own CRDs' schema is checked in test_kubernetes_rollout.py).
 SELECTOR = {"type": "object", "additionalProperties": False, "properties": {
     "matchLabels": {"type": "object", "additionalProperties": {"type": "string"}},
     "matchExpressions": {"type": "array", "items": {"type": "object", "additionalProperties": False,
@@ -149,10 +149,15 @@ SELECTOR = {"type": "object", "additionalProperties": False, "properties": {
                                                         "values": {"type": "array", "items": {"type": "string"}}}}}}}
 FLEET_SCHEMA = {"type": "object", "additionalProperties": False, "properties": {
     "labels": {"type": "object", "additionalProperties": {"type": "string"}},
+    "overrideTargets": {"type": "array", "items": {"type": "object", "additionalProperties": False,
+                                                   "required": ["name", "clusterSelector"], "properties": {
+        "name": {"type": "string"}, "clusterSelector": SELECTOR}}},
     "targetCustomizations": {"type": "array", "items": {"type": "object", "additionalProperties": False,
                                                         "required": ["name", "clusterSelector"], "properties": {
         "name": {"type": "string"}, "clusterSelector": SELECTOR, "doNotDeploy": {"type": "boolean"},
         "kustomize": {"type": "object", "additionalProperties": False, "properties": {"dir": {"type": "string"}}}}}},
+    "helm": {"type": "object", "additionalProperties": False, "properties": {
+        "timeoutSeconds": {"type": "integer"}, "waitForJobs": {"type": "boolean"}}},
     "rolloutStrategy": {"type": "object", "additionalProperties": False, "properties": {
         "maxUnavailable": {"type": ["integer", "string"]}, "maxUnavailablePartitions": {"type": ["integer", "string"]},
         "partitions": {"type": "array", "items": {"type": "object", "additionalProperties": False,
@@ -170,6 +175,12 @@ def test_fleet_partitions_are_the_waves(fleet_export: Path) -> None:
     dirs = {t["name"]: t.get("kustomize", {}).get("dir") for t in doc["targetCustomizations"]}
     assert dirs == {"r1": "robots/r1", "r2": "robots/r2", "r3": "robots/r3", "not-a-robot": None}
     assert doc["targetCustomizations"][-1] == {"name": "not-a-robot", "clusterSelector": {}, "doNotDeploy": True}
+    (override,) = doc["overrideTargets"]  # the robots' clusters, whatever the GitRepo targets
+    assert override["clusterSelector"]["matchExpressions"][0]["values"] == ["r1", "r2", "r3"]
+    strategy = doc["rolloutStrategy"]  # the gate is the bundle's limit; a partition's 0 would stop every update
+    assert (strategy["maxUnavailable"], strategy["maxUnavailablePartitions"]) == (1, 0)
+    assert all("maxUnavailable" not in p for p in partitions)
+    assert doc["helm"]["waitForJobs"] is True  # the agent's Helm upgrade waits for the health Jobs to complete
 
 
 def test_argo_rolling_sync_steps_are_the_waves(fleet_export: Path) -> None:
@@ -179,6 +190,7 @@ def test_argo_rolling_sync_steps_are_the_waves(fleet_export: Path) -> None:
     steps = spec["strategy"]["rollingSync"]["steps"]
     assert spec["strategy"]["type"] == "RollingSync"
     assert [s["matchExpressions"][0]["values"] for s in steps] == [["canary"], ["rest"]]
+    assert [s["maxUpdate"] for s in steps] == [1, 1]  # one robot at a time within a wave, as with Fleet
     elements = spec["generators"][0]["list"]["elements"]
     assert [(e["robot"], e["wave"], e["path"]) for e in elements] == [
         ("r1", "canary", "robots-k8s/robots/r1"), ("r2", "rest", "robots-k8s/robots/r2"),
@@ -186,7 +198,8 @@ def test_argo_rolling_sync_steps_are_the_waves(fleet_export: Path) -> None:
     template = spec["template"]
     assert template["metadata"]["labels"]["robocore.dev/wave"] == "{{.wave}}"
     assert template["spec"]["source"]["repoURL"] == "https://git.example.org/fleet.git"
-    assert "automated" not in template["spec"].get("syncPolicy", {})  # RollingSync drives the syncs
+    # RollingSync switches automated sync off and syncs itself; it prunes only when the template says prune
+    assert template["spec"]["syncPolicy"]["automated"] == {"prune": True}
 
 
 def test_images_by_digest_per_arch(tmp_path: Path) -> None:
@@ -351,25 +364,50 @@ def test_images_by_tag_are_said_to_hold_no_install_tree(tmp_path: Path) -> None:
     (warning,) = [line for line in done.stderr.splitlines() if line.startswith("warning:")]
     assert "amr: release v9 has no fleet release record" in warning and "driver, perception" in warning
     assert "release --fleet --tag v9" in warning
-    ref = "10.0.0.2:5000/amr-{}@sha256:" + "6" * 64
-    record = ReleaseRecord(version="v9", registry="10.0.0.2:5000",
-                           components={"driver": {"amd64": ref.format("driver")},
-                                       "perception": {"arm64": ref.format("perception")}},
-                           base={"amd64": ref.format("base"), "arm64": ref.format("base")})
-    (amr / ".robocore" / "releases").mkdir(parents=True)
-    (amr / ".robocore" / "releases" / "v9.json").write_text(record.to_json())
+    write_amr_release(amr, "v9")
     done = cli(amr, str(tmp_path / "b"), "--tag", "v9")
     assert done.returncode == 0, done.stderr
     assert "warning:" not in done.stderr
 
 
+def write_amr_release(amr: Path, version: str) -> None:
+    """A fleet release record of the amr project (its driver amd64, its perception arm64), by digest."""
+    ref = "10.0.0.2:5000/amr-{}@sha256:" + "6" * 64
+    record = ReleaseRecord(version=version, registry="10.0.0.2:5000",
+                           components={"driver": {"amd64": ref.format("driver")},
+                                       "perception": {"arm64": ref.format("perception")}},
+                           base={"amd64": ref.format("base"), "arm64": ref.format("base")})
+    (amr / ".robocore" / "releases").mkdir(parents=True)
+    (amr / ".robocore" / "releases" / f"{version}.json").write_text(record.to_json())
+
+
 def test_a_bad_repository_option_is_one_line_and_nothing_is_written(tmp_path: Path) -> None:
     amr = write(tmp_path / "amr", AMR, AMR_FLEET, ("driver", "perception"))
-    for args, shown in ((("--git-repo", "https://bot:s3cret@git.example.org/f.git"), "password or token"),
-                        (("--git-repo", "file:///srv/fleet"), "must be a git repository URL"),
+    for args, shown in ((("--git-repo", "https://bot:s3cret@git.example.org/f.git"), "must not hold a password"),
+                        (("--git-repo", "file:///srv/fleet"), "a GitOps controller clones"),
                         (("--git-path", "../elsewhere"), "no '.' or '..' part")):
         done = cli(amr, str(tmp_path / "out"), "--tag", "v2", *args)
         assert done.returncode == 2 and "Traceback" not in done.stderr
         (line,) = [line for line in done.stderr.splitlines() if line.startswith("error:")]
         assert line.startswith(f"error: {args[0]}: ") and shown in line and "s3cret" not in line
         assert not (tmp_path / "out").exists()
+
+
+def test_maintenance_windows_are_said_not_to_be_in_the_export(tmp_path: Path) -> None:
+    """fleet.yaml's rollout.windows (and the update lock) have no counterpart in Fleet's or Argo CD's files: one
+    warning line at the key's line, and the files are those of a fleet without windows."""
+    repo = "gitops: {repo: 'https://git.example.org/f.git'}\n"
+    windows = "  windows:\n    - {robots: [r1], from: '22:00', to: '06:00', timezone: Europe/Berlin}\n"
+    amr = write(tmp_path / "amr", AMR, AMR_FLEET + windows + repo, ("driver", "perception"))
+    write_amr_release(amr, "v2")  # a fleet release, so that no other warning comes
+    done = cli(amr, str(tmp_path / "a"), "--tag", "v2")
+    assert done.returncode == 0, done.stderr
+    (warning,) = [line for line in done.stderr.splitlines() if "warning" in line]
+    line = AMR_FLEET.count("\n") + 1  # windows: is the line after the fleet file's
+    assert warning.startswith(f"fleet.yaml:{line}: rollout.windows: warning: not in the Kubernetes export")
+    assert "/robocore/update_lock" in warning
+    (amr / "fleet.yaml").write_text(AMR_FLEET + repo)  # negative control: no windows, no warning, the same files
+    done = cli(amr, str(tmp_path / "b"), "--tag", "v2")
+    assert done.returncode == 0 and "warning" not in done.stderr, done.stderr
+    assert [p.read_bytes() for p in sorted((tmp_path / "a").rglob("*")) if p.is_file()] == [
+        p.read_bytes() for p in sorted((tmp_path / "b").rglob("*")) if p.is_file()]

@@ -7,6 +7,7 @@ quoted exactly as PyYAML quotes them, so that docker compose reads what ``run`` 
 
 from __future__ import annotations
 
+import re
 import string
 from typing import Any
 
@@ -30,11 +31,16 @@ HOSTILE = [
     "2001-12-14 21:59:43.10 -5", "<<", "=", "a=b", "$$HOME", "${VAR:-x}", "C:\\path", "back\\slash", "x" * 127,
     "x" * 128, "x" * 300, "word " * 40, "w " * 60 + "w",
     "marker=\"/robocore/x\"; if [ -e \"$$m\" ]; then echo 'a: b'; fi",
+    "a\udc80b", "\ud800", "lone \udfff surrogate",  # a lone surrogate, which libyaml cannot encode
 ]
 
 
 def pyyaml(document: Any, dumper: type[yaml.SafeDumper] = yaml_text.DUMPER) -> str:
-    return yaml.dump(document, Dumper=dumper, sort_keys=False, default_flow_style=False, width=yaml_text.WIDTH)
+    try:
+        return yaml.dump(document, Dumper=dumper, sort_keys=False, default_flow_style=False, width=yaml_text.WIDTH)
+    except UnicodeEncodeError:  # libyaml cannot encode a lone surrogate; PyYAML's own emitter escapes it
+        return yaml.dump(document, Dumper=yaml.SafeDumper, sort_keys=False, default_flow_style=False,
+                         width=yaml_text.WIDTH)
 
 
 def shaped(value: Any) -> dict[str, Any]:
@@ -110,7 +116,7 @@ def test_shared_objects_read_back_equal() -> None:
     assert yaml.safe_load(yaml_text.dump(document)) == document
 
 
-_ALPHABET = string.ascii_letters[:8] + string.digits[:3] + " -_.:/@'\"#,%~=+?!&*|>{}[]\n\t\\\u00e9\u2028\x85yYnN"
+_ALPHABET = string.ascii_letters[:8] + string.digits[:3] + " -_.:/@'\"#,%~=+?!&*|>{}[]\n\t\\\u00e9\u2028\x85yYnN\udc80"
 _scalars = st.one_of(
     st.text(alphabet=_ALPHABET, max_size=16),
     st.sampled_from(HOSTILE),
@@ -132,5 +138,6 @@ _values = st.recursive(
                        max_size=6))
 def test_any_document_is_written_as_pyyaml_writes_it(document: dict[str, Any]) -> None:
     text = yaml_text.dump(document)
-    assert text == pyyaml(document)
+    if not re.search(r"\\ud[89a-f]", repr(document)):  # a lone surrogate's entry is PyYAML's own emitter's text,
+        assert text == pyyaml(document)  # which differs from libyaml's elsewhere: that document reads back, below
     assert yaml.safe_load(text) == document

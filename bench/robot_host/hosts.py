@@ -20,11 +20,12 @@ import subprocess
 import tempfile
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from docker.types import Mount
 from testcontainers.core.container import DockerContainer
 from testcontainers.core.network import Network
 
@@ -72,10 +73,15 @@ class RobotFleet:
     """
 
     def __init__(self, count: int = 2, tag: str = "", *, env: list[dict[str, str]] | None = None,
-                 setup: Callable[[RobotHost], None] | None = None) -> None:
+                 setup: Callable[[RobotHost], None] | None = None, disks: Collection[int] = ()) -> None:
         """``env[i]``: extra environment of host i (e.g. DOCKERD_ARGS); ``setup(host)`` runs once its
-        address is known and before waiting for its daemon (e.g. to put TLS certificates in)."""
+        address is known and before waiting for its daemon (e.g. to put TLS certificates in); ``disks``: the
+        hosts that can be restarted or lose their power (:meth:`power_off`, :meth:`power_on`) as a machine can: their
+        /var/lib/docker is a volume of their own (a disk, kept across a restart, where the others' is a tmpfs) and
+        their /run a tmpfs emptied at each start (as a machine's at boot: dockerd refuses to start while the pid
+        file of the boot before names a running process, and in a container that is PID 1, itself)."""
         self.count = count
+        self.disks = frozenset(disks)
         self.env = env or [{} for _ in range(count)]
         self.setup = setup
         self.tag = tag or uuid.uuid4().hex[:6]
@@ -115,14 +121,15 @@ class RobotFleet:
                 .with_env("AUTHORIZED_KEY", public)
                 .with_network(self.network)
                 .with_volume_mapping("/sys/fs/cgroup", "/sys/fs/cgroup", "rw")
-                .with_tmpfs_mount("/var/lib/docker", "exec")
-                .with_kwargs(
-                    cap_add=["ALL"],
-                    cap_drop=["SYS_RESOURCE"],
-                    security_opt=["seccomp=unconfined", "apparmor=unconfined"],
-                    hostname=name,
-                )
             )
+            kwargs: dict[str, Any] = {"cap_add": ["ALL"], "cap_drop": ["SYS_RESOURCE"], "hostname": name,
+                                      "security_opt": ["seccomp=unconfined", "apparmor=unconfined"]}
+            if index in self.disks:  # an anonymous volume: removed with the container (remove(v=True))
+                kwargs["mounts"] = [Mount(target="/var/lib/docker", source=None, type="volume")]
+                container.with_tmpfs_mount("/run", "exec")
+            else:
+                container.with_tmpfs_mount("/var/lib/docker", "exec")
+            container.with_kwargs(**kwargs)
             for key, value in self.env[index].items():
                 container.with_env(key, value)
             container.start()
@@ -185,6 +192,31 @@ class RobotFleet:
     def stop(self, index: int) -> None:
         """Stop host ``index`` (its address stops answering)."""
         self.hosts[index].container.get_wrapped_container().stop(timeout=2)
+
+    def power_off(self, index: int, *, cut: bool) -> None:
+        """Host ``index`` (one of ``disks``) goes down: with ``cut``, as in a power cut (every process of it killed
+        at once, its daemon and containers with no word); else shut down (its daemon stops its own way, SIGTERM,
+        as ``systemctl stop docker`` or a reboot does)."""
+        assert index in self.disks, f"host {index} has no disk of its own: it would come back empty"
+        wrapped = self.hosts[index].container.get_wrapped_container()
+        if cut:
+            wrapped.kill()
+        else:
+            wrapped.stop(timeout=30)
+        wrapped.wait(timeout=60)
+
+    def power_on(self, index: int, timeout: float = 90) -> None:
+        """Start host ``index`` again after :meth:`power_off` and wait for its sshd and dockerd; it has the address
+        it had (nothing else joined the network meanwhile), which is checked: a robot's or a manager's address is
+        fixed in the fleet's files and in the swarm."""
+        host = self.hosts[index]
+        wrapped = host.container.get_wrapped_container()
+        wrapped.start()
+        wrapped.reload()
+        assert self.network is not None
+        ip = wrapped.attrs["NetworkSettings"]["Networks"][self.network.name]["IPAddress"]
+        assert ip == host.ip, f"{host.name} came back at {ip}, not {host.ip}"
+        self._wait_ready(host, timeout)
 
     def close(self) -> None:
         """Close the clients; remove the hosts, the network and the keys; restore ROBOCORE_SSH_CONFIG."""

@@ -6,6 +6,7 @@ failure becomes a :class:`~robocore.errors.RobocoreError` here, and only here.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -109,8 +110,15 @@ def copy(request: CopyRequest) -> None:
     """Render the template into ``request.destination``."""
     import copier
 
+    from robocore.files import creating_for_this_user, narrow_new
+
     skip = ("*", "**", ".*") if request.keep_existing else ()
-    with _copier_errors(f"{request.destination}: copying template {request.template}"):
+    destination = request.destination
+    before = {Path(here) / name for here, dirs, names in os.walk(destination) for name in [*dirs, *names]} \
+        if request.keep_existing else set()
+    before |= {destination} if os.path.lexists(destination) else set()
+    # nothing the template makes may be written by others, whatever the umask (anyone local could replace tasks.py)
+    with _copier_errors(f"{request.destination}: copying template {request.template}"), creating_for_this_user():
         copier.run_copy(
             request.template,
             request.destination,
@@ -124,6 +132,8 @@ def copy(request: CopyRequest) -> None:
             unsafe=False,
             quiet=False,
         )
+    if not request.pretend and os.path.isdir(destination):
+        narrow_new(destination, before)
 
 
 def update(destination: Path, *, defaults: bool = True, pretend: bool = False, vcs_ref: str | None = None) -> None:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from robocore.errors import DockerError
+from robocore.plan.registry_trust import push_hint
 from robocore.ui import human_size
 
 if TYPE_CHECKING:
@@ -149,24 +150,41 @@ def check_stream(events: Iterable[dict[str, Any]], what: str) -> None:
                               hint="is the registry reachable from this machine and from the host?")
 
 
-def push_digest(client: docker.DockerClient, target: str, tag: str) -> str:
+#: Seconds between two lines of a push's progress (:func:`push_digest`): a long push is never silent.
+PUSH_PROGRESS = 5.0
+
+
+def push_digest(client: docker.DockerClient, target: str, tag: str,
+                progress: Callable[[str], None] | None = None) -> str:
     """Push ``target:tag`` from this machine and return the digest the registry gave its manifest
-    (``sha256:...``, from the push stream's last ``aux`` event); DockerError when the push fails or names none."""
+    (``sha256:...``, from the push stream's last ``aux`` event); DockerError when the push fails or names none.
+    ``progress`` is given a line every :data:`PUSH_PROGRESS` seconds while layers are sent: the megabytes sent of
+    the layers being pushed (layers the registry has already are not sent)."""
+    import time
+
     from docker.errors import APIError
 
     digest = ""
+    sent: dict[str, tuple[int, int]] = {}  # layer id -> (bytes sent, its size)
+    said = time.monotonic()
     try:
         for event in client.images.push(target, tag, stream=True, decode=True):
             if "error" in event:
                 detail = event.get("errorDetail", {}).get("message") or event["error"]
-                raise DockerError(f"push {target}:{tag} failed: {detail}",
-                                  hint="is the registry reachable (and trusted) from this machine?")
+                raise DockerError(f"push {target}:{tag} failed: {detail}", hint=push_hint(target, str(detail)))
+            detail = event.get("progressDetail") or {}
+            if event.get("status") == "Pushing" and isinstance(detail.get("current"), int):
+                sent[str(event.get("id"))] = (detail["current"], int(detail.get("total") or detail["current"]))
+            if progress is not None and sent and time.monotonic() - said >= PUSH_PROGRESS:
+                done, total = sum(d for d, _ in sent.values()), sum(t for _, t in sent.values())
+                progress(f"pushing {target}:{tag}: {done / 1e6:.1f} of {total / 1e6:.1f} MB sent")
+                said = time.monotonic()
             aux = event.get("aux")
             if isinstance(aux, dict) and isinstance(aux.get("Digest"), str):
                 digest = aux["Digest"]
     except APIError as exc:
-        raise DockerError(f"push {target}:{tag} failed: {exc.explanation or exc}",
-                          hint="is the registry reachable (and trusted) from this machine?") from None
+        detail = str(exc.explanation or exc)
+        raise DockerError(f"push {target}:{tag} failed: {detail}", hint=push_hint(target, detail)) from None
     if not digest.startswith("sha256:"):
         raise DockerError(f"push {target}:{tag}: the registry named no digest for it")
     return digest

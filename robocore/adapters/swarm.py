@@ -7,12 +7,15 @@ what failed. Clients come from :mod:`robocore.adapters.docker_hosts` (ssh, TLS, 
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from robocore.errors import DockerError
+from robocore.plan.registry_trust import pull_hint
+from robocore.plan.resources import swarm_resources
 from robocore.plan.swarm_services import ConfigFile, ServiceSpec
 
 if TYPE_CHECKING:
@@ -170,7 +173,7 @@ def service_kwargs(spec: ServiceSpec, config_ids: dict[str, str]) -> dict[str, A
         # what the daemon fills in on an update when absent: given from the start, the first update of an
         # unchanged service replaces no task
         "stop_grace_period": STOP_GRACE_NS,
-        "resources": Resources(),
+        "resources": Resources(**swarm_resources(spec.limits)),
         "dns_config": DNSConfig(),
     }
 
@@ -188,6 +191,16 @@ class TaskInfo:
     error: str
     exit_code: int | None
     container: str  # the task's container id ("" until one was made)
+
+    @property
+    def hint(self) -> str:
+        """What to do when the task's error is a pull that failed (:func:`pull_hint`); "" otherwise."""
+        return pull_hint(self.image, self.error)
+
+    @property
+    def why(self) -> str:
+        """The task's error, with :attr:`hint` when it has one."""
+        return f"{self.error} ({self.hint})" if self.hint else self.error
 
 
 @dataclass(frozen=True)
@@ -247,7 +260,7 @@ def apply_service(client: docker.DockerClient, spec: ServiceSpec, config_ids: di
         try:
             service = client.services.get(spec.name)  # type: ignore[no-untyped-call]
             if mode_of(service.attrs) != mode_of({"Spec": {"Mode": kwargs["mode"]}}):
-                service.remove()  # Swarm never changes a service's mode (replicated, global): made anew
+                remove_stopped(client, [spec.name])  # Swarm never changes a service's mode: made anew, stop-first
                 raise NotFound(spec.name)
         except NotFound:
             service = client.services.create(**kwargs)  # type: ignore[no-untyped-call]
@@ -348,6 +361,34 @@ def remove_service(client: docker.DockerClient, name: str) -> None:
             client.services.get(name).remove()  # type: ignore[no-untyped-call]
         except NotFound:
             return
+
+
+#: Seconds :func:`remove_stopped` waits for a removed service's containers to stop: their stop grace period, and
+#: a few seconds for the robot's daemon to report it to the manager.
+STOPPED_WAIT = STOP_GRACE_NS / 1e9 + 10
+
+
+def remove_stopped(client: docker.DockerClient, names: list[str], timeout: float = STOPPED_WAIT) -> list[str]:
+    """Remove the services ``names`` and wait until every task of theirs that ran has stopped (its container
+    stopped, as its node's daemon reported), at most ``timeout`` seconds; return the ids of the tasks still not
+    stopped then. Swarm removes a service at once and stops its containers afterwards: a service made anew under the
+    same name without this wait starts its container beside the old one (two copies of one ROS node, measured at
+    0.7 s on a canary's way back). A task on a node that is not ready is not waited for: nothing can report it,
+    and its node stops it when it is back, before it takes the new spec."""
+    ready = {n.id for n in nodes(client) if n.state == "ready"}
+    live = [t.id for name in names for t in tasks(client, name)
+            if t.state not in ENDED and t.node_id in ready]
+    for name in names:
+        remove_service(client, name)
+    end = time.monotonic() + timeout
+    while live:
+        with swarm_errors("docker service ps"):
+            found = [_task(t) for t in client.api.tasks(filters={"id": live})]  # type: ignore[no-untyped-call]
+        live = [t.id for t in found if t.id in live and t.state not in ENDED]
+        if not live or time.monotonic() >= end:
+            break
+        time.sleep(0.2)
+    return live
 
 
 def tasks(client: docker.DockerClient, service: str) -> list[TaskInfo]:

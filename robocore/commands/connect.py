@@ -23,7 +23,7 @@ if TYPE_CHECKING:
 
 
 #: Interactive shell: bash when the image has it, else sh (a fixed script, nothing interpolated).
-_SHELL = ["sh", "-c", "if command -v bash >/dev/null 2>&1; then exec bash; else exec sh; fi"]
+SHELL_ARGV = ["sh", "-c", "if command -v bash >/dev/null 2>&1; then exec bash; else exec sh; fi"]
 
 
 def exec_argv(entrypoint: list[str] | None, command: list[str]) -> list[str]:
@@ -38,7 +38,7 @@ def connect(options: Options, *, component: str, cmd: str | None) -> int:
     host = project.host(comp.runs_on)
     name = naming.container_name(project.name, comp.name)
     env = discovery.for_robot(project.robot).observer_environment(host.name)
-    command = _SHELL if cmd is None else ["sh", "-c", cmd]
+    command = SHELL_ARGV if cmd is None else ["sh", "-c", cmd]
     if options.dry_run:
         entry = None if comp.image else [naming.ENTRYPOINT]
         where = f"on {host.name} ({'interactive' if cmd is None else 'no tty'}), in {name}"

@@ -2,8 +2,9 @@
 
 The plan is pure (:mod:`robocore.plan.kubernetes`); this module loads the projects, refuses what cannot
 be exported (every problem, one line each, before anything is written), picks the release's images
-and writes the folder with :func:`robocore.files.write_tree`: a new or empty folder, or one a previous
-export wrote, where only robocore's own files are replaced.
+and writes the folder with :func:`robocore.export_folder.write_tree`: a new or empty folder, or one a previous
+export wrote, where only robocore's own files are replaced (its record is believed only as robocore's own records
+are; see that module).
 
 Each project is one model (its robot.yaml). Its robots are those of its fleet file, in their waves
 (:func:`robocore.plan.fleet.plan_waves`); a project without a fleet file exports its one robot, named after
@@ -23,12 +24,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
 
 from robocore.commands.support.context import Options
-from robocore.config.loader import located
+from robocore.config.loader import located, located_warnings
 from robocore.errors import ConfigError, Problem, UsageError
-from robocore.files import PRIVATE, write_tree
+from robocore.export_folder import check_folder, path_text, write_tree
+from robocore.files import PRIVATE
 from robocore.plan import naming
-from robocore.plan.kubernetes import ExportOptions, ImageRef, ImageSource, RobotTarget, plan_export, problems
-from robocore.plan.kubernetes.gitops import APPLICATION_SET
+from robocore.plan.kubernetes import ExportOptions, Gate, ImageRef, ImageSource, RobotTarget, plan_export, problems
+from robocore.plan.kubernetes.gitops import APPLICATION_SET, ETCD_REQUEST_LIMIT, FLEET_FILE, fleet_bundle_bytes
 from robocore.plan.kubernetes.names import is_dns_label, k8s_name
 from robocore.project import Project
 
@@ -37,6 +39,10 @@ if TYPE_CHECKING:
 
 #: The wave of a robot exported without a fleet file.
 ONE_WAVE = "all"
+#: What the export says of fleet.yaml's maintenance windows: Fleet and Argo CD have no counterpart in its files.
+NO_SAFE_MOMENT = ("not in the Kubernetes export: Fleet and Argo CD update each robot when its partition or step "
+                  "comes, whatever the time, and never ask the robot's update lock (/robocore/update_lock); only "
+                  "`fleet rollout` on Swarm keeps the windows and the lock")
 
 
 @dataclass(frozen=True)
@@ -90,15 +96,16 @@ def has_fleet_release(project: Project, tag: str) -> bool:
     return os.path.lexists(record_path(project, tag))
 
 
-def record_images(project: Project, tag: str) -> ImageSource | None:
+def record_images(project: Project, tag: str, registry: str | None) -> ImageSource | None:
     """The images of the fleet release ``tag`` by digest (``release --fleet --tag V`` recorded them in
     ``.robocore/releases/V.json``: component image plus its install tree and read-only project volumes, per arch),
-    None when that release has no record (the images are then named by tag)."""
+    None when that release has no record (the images are then named by tag). The record must name images of
+    ``registry`` (the fleet's) only, each its own repository (:func:`load_release_record`)."""
     from robocore.commands.fleet_release import load_release_record
 
     if not has_fleet_release(project, tag):
         return None
-    record = load_release_record(project, tag)
+    record = load_release_record(project, tag, registry)
     robot = project.robot
     base = naming.base_image(robot, project.name)
     components = {naming.component_image(robot, project.name, c.name): c.name for c in robot.components}
@@ -114,7 +121,7 @@ def record_images(project: Project, tag: str) -> ImageSource | None:
 def model_robots(model: Model, tag: str) -> list[RobotTarget]:
     """The robots of one model: its fleet file's, in wave order, or the project's one robot (no fleet file)."""
     robot = model.project.robot
-    recorded = record_images(model.project, tag)
+    recorded = record_images(model.project, tag, model.fleet.registry_for(robot) if model.fleet else robot.registry)
     if model.fleet is None:
         return [RobotTarget(name=model.name, model=model.name, wave=ONE_WAVE,
                             images=recorded or tag_images(model.project, tag, robot.registry))]
@@ -122,15 +129,28 @@ def model_robots(model: Model, tag: str) -> list[RobotTarget]:
 
     fleet = model.fleet
     images = recorded or tag_images(model.project, tag, fleet.registry_for(robot))
+    members = {member.name: member for member in fleet.robots}  # Fleet.robot scans: 10,000 robots, 10^8 steps
     targets = []
     for wave in plan_waves(fleet):
         for name in wave.robots:
-            member = fleet.robot(name)
+            member = members[name]
             domain = member.ros_domain_id
             targets.append(RobotTarget(name=name, model=model.name, wave=wave.name, images=images,
                                        labels=dict(member.labels),
                                        ros_domain_id=domain if domain != robot.ros_domain_id else None))
     return targets
+
+
+def bare_images(model: Model, tag: str) -> list[str]:
+    """The components of ``model`` whose image would be a bare name (no registry, no fleet release record): what
+    a node reads as a Docker Hub image, which no release pushed."""
+    fleet = model.fleet
+    registry = fleet.registry_for(model.project.robot) if fleet is not None else model.project.robot.registry
+    if registry or has_fleet_release(model.project, tag):
+        return []
+    from robocore.plan.fleet_release import baked_volumes
+
+    return [c.name for c in model.project.robot.components if not c.image or baked_volumes(c)]
 
 
 def load_models(options: Options, others: list[Path], tag: str) -> list[Model]:
@@ -178,9 +198,10 @@ def merged(groups: list[list[RobotTarget]]) -> list[RobotTarget]:
 def gitops_options(fleet: Fleet | None, git_repo: str | None, git_path: str | None) -> ExportOptions:
     """Where the controllers pull the export from: ``--git-repo``/``--git-path``, else the fleet file's ``gitops``
     (of the task's project); a bad option is a UsageError of one line."""
-    from robocore.config.values import git_folder, git_url
+    from robocore.config.sources import gitops_url
+    from robocore.config.values import git_folder
 
-    for option, value, check in (("--git-repo", git_repo, git_url), ("--git-path", git_path, git_folder)):
+    for option, value, check in (("--git-repo", git_repo, gitops_url), ("--git-path", git_path, git_folder)):
         if value is not None:
             try:
                 check(value)
@@ -203,9 +224,11 @@ def export_kubernetes(options: Options, folder: Path, *, tag: str | None, git_re
     gitops = gitops_options(loaded[0].fleet, git_repo, git_path)
     robots = merged([model_robots(model, tag) for model in loaded])
     projects = {model.name: model.project for model in loaded}
-    files = plan_export(projects, robots, loaded[0].name, gitops)
+    gates = {model.name: Gate.of(model.fleet) for model in loaded}
+    files = plan_export(projects, robots, loaded[0].name, gitops, gates)
     result = Exported(folder=str(folder), files=sorted(files), robots=[r.name for r in robots],
                       waves=list(dict.fromkeys(r.wave for r in robots)))
+    checked = check_folder(folder, files)  # a folder the export refuses is refused first, by a dry run too
     report = options.report
     for model in loaded:
         codeless = [c.name for c in model.project.robot.components if c.has_workspace]
@@ -213,17 +236,32 @@ def export_kubernetes(options: Options, folder: Path, *, tag: str | None, git_re
             report.warn(f"{model.name}: release {tag} has no fleet release record, so its images are named by tag: "
                         f"the code-less images of `release --tag`, without the install trees of {', '.join(codeless)}; "
                         f"run `release --fleet --tag {tag}` for self-contained images by digest")
+        bare = bare_images(model, tag)
+        if bare:
+            report.warn(f"{model.name}: no registry (registry: in robot.yaml or fleet.yaml), so the images of the "
+                        f"discovery servers and of {', '.join(bare)} are bare names ({model.name}-base:{tag}) that a "
+                        "node pulls from Docker Hub, where no release pushed them: set a registry and release again, "
+                        "or import the images on every node (k3s ctr images import) before applying")
+    for model in loaded:
+        if model.fleet is not None and model.fleet.rollout.windows:
+            for warning in located_warnings(model.project.fleet_file, [(("rollout", "windows"), NO_SAFE_MOMENT)]):
+                report.warn(warning.message, warning)
+    if fleet_bundle_bytes(files) > ETCD_REQUEST_LIMIT:
+        report.warn(f"{FLEET_FILE}: Rancher Fleet would hold these {len(robots)} robots in one Bundle object of more "
+                    f"than {ETCD_REQUEST_LIMIT / 2**20:.1f} MiB, etcd's default limit of one object, and fail to store "
+                    "it (etcdserver: request is too large): split the fleet (a fleet.yaml, export folder and GitRepo "
+                    "path for each part), or use Argo CD's ApplicationSet (an Application per robot)")
     if gitops.repository is None:
         report.warn(f"{APPLICATION_SET} names no git repository (a placeholder that never syncs): give "
                     "--git-repo URL, or gitops: {repo: URL} in fleet.yaml")
     if options.dry_run:
-        report.notice(f"would write {len(files)} files into {folder} (robots: {', '.join(result.robots)})")
+        report.notice(f"would write {len(files)} files into {path_text(folder)} (robots: {', '.join(result.robots)})")
         for name in files:
             report.info(f"  {name}")
         report.add(result)
         return result
-    write_tree(folder, files, mode=PRIVATE)
-    report.notice(f"wrote {len(files)} files into {folder}: {len(robots)} robot(s), waves "
-                  f"{', '.join(result.waves)}; check with: kubectl kustomize {folder}")
+    write_tree(folder, files, mode=PRIVATE, checked=checked)
+    report.notice(f"wrote {len(files)} files into {path_text(folder)}: {len(robots)} robot(s), waves "
+                  f"{', '.join(result.waves)}; check with: kubectl kustomize {path_text(folder)}")
     report.add(result)
     return result

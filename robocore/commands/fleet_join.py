@@ -12,9 +12,10 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from robocore.adapters import swarm
-from robocore.commands.fleet_swarm import FleetProject, load, manager_client, project_label
+from robocore.commands.fleet_swarm import FleetProject, load, manager_client, manager_line, project_label
 from robocore.commands.support.context import Options
 from robocore.commands.support.hosts import in_parallel, short_error
+from robocore.commands.support.registry_ca import Trust
 from robocore.config.model import Host
 from robocore.errors import GroupError, HostError, RobocoreError
 from robocore.plan import swarm_services as plan
@@ -34,12 +35,15 @@ class JoinResult:
     action: str  # joined | labelled | unchanged | drained
 
 
-def _join_host(host: Host, *, manager_ip: str, token: str, cluster: str) -> str:
-    """Join ``host``'s daemon to the swarm (unless it already is in it); return its node id."""
+def _join_host(host: Host, *, manager_ip: str, token: str, cluster: str, trust: Trust | None = None) -> str:
+    """Join ``host``'s daemon to the swarm (unless it already is in it), the registry's CA installed on it first
+    when ``trust`` gives one; return its node id."""
     from robocore.adapters.docker_hosts import client_for
 
     client = client_for(host, 120)
     try:
+        if trust is not None:
+            trust.install(client, host)
         state = swarm.swarm_state(client)
         if state.state == "active" and state.cluster_id and state.cluster_id != cluster:
             raise HostError(f"{host.ip} is already in another swarm (cluster {state.cluster_id[:12]})",
@@ -59,11 +63,16 @@ def join(options: Options) -> list[JoinResult]:
     assert fleet.fleet.manager is not None
     manager = fleet.fleet.manager
     targets = [(robot, host) for robot, instance in fleet.instances.items() for host in instance.hosts]
+    trust = Trust.of(fleet)
     if options.dry_run:
         report.plain(f"swarm manager {manager.ip}: init unless it is one")
+        report.plain(manager_line(fleet))
+        from robocore.adapters.docker_hosts import describe
+
         for robot, host in targets:
-            report.plain(f"join {robot}/{host.name} ({host.ip}) and label it {plan.NODE_ROBOT}={robot} "
-                         f"{plan.NODE_HOST}={host.name} {plan.NODE_ARCH}={host.arch.value}")
+            report.plain(f"join {robot}/{host.name} ({host.ip}, docker via {describe(host)}) and label it "
+                         f"{plan.NODE_ROBOT}={robot} {plan.NODE_HOST}={host.name} {plan.NODE_ARCH}={host.arch.value}"
+                         + (f"; {trust.dry_run()}" if trust else ""))
         return []
     client = manager_client(fleet)
     try:
@@ -76,7 +85,7 @@ def join(options: Options) -> list[JoinResult]:
             raise HostError(f"the manager {manager.ip} is a worker of another swarm, not a manager")
         token = swarm.worker_token(client)
         outcomes = in_parallel(targets, lambda item: _join_host(item[1], manager_ip=manager.ip, token=token,
-                                                                 cluster=state.cluster_id),
+                                                                 cluster=state.cluster_id, trust=trust),
                                limit=JOIN_PARALLEL, name="robocore-join")
         results, failures = _label(client, fleet, outcomes)
         results += _drain_removed(client, fleet)

@@ -15,6 +15,7 @@ reference from :meth:`~robocore.plan.fleet_release.ReleaseRecord.component_ref` 
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
@@ -22,10 +23,10 @@ from typing import TYPE_CHECKING, ClassVar
 from robocore.commands.release import default_tag, released_images
 from robocore.commands.support.arch_checks import refuse_foreign_install
 from robocore.commands.support.context import Options
-from robocore.commands.support.machine import native_arch
+from robocore.commands.support.fleet_layers import layers_line
 from robocore.config.model import Component, read_only_project_path
-from robocore.errors import ConfigError, UnsafePath, UsageError
-from robocore.files import PRIVATE, read_project_file, refuse_links_leaving, write_atomic
+from robocore.errors import ConfigError, Problem, UnsafePath, UsageError
+from robocore.files import NEVER, PRIVATE, is_private, refuse_links_leaving, write_atomic
 from robocore.plan import naming
 from robocore.plan.fleet import swarm_problems
 from robocore.plan.fleet_release import (
@@ -34,11 +35,10 @@ from robocore.plan.fleet_release import (
     FleetSource,
     ReleaseRecord,
     digest_ref,
-    layer_context,
-    layer_dockerfile,
     layer_files,
     parse_release_record,
     plan_fleet_release,
+    record_problems,
 )
 from robocore.project import Project
 
@@ -67,19 +67,24 @@ def record_path(project: Project, version: str) -> Path:
     return project.releases_dir / f"{version}.json"
 
 
-def load_release_record(project: Project, version: str) -> ReleaseRecord:
-    """The release record of ``version`` made by ``release --fleet --tag V``; UsageError naming the file when it is
-    missing, is not a regular file inside the project, or is not a record (it is never half-read)."""
+def load_release_record(project: Project, version: str, registry: str | None) -> ReleaseRecord:
+    """The release record of ``version`` made by ``release --fleet --tag V``, believed only when it is this user's
+    own and writable by no one else (as the no-op memo), in a ``releases`` folder likewise (one this user widened is
+    narrowed), and when every image it names is that image's repository in ``registry`` (the fleet's: fleet.yaml's,
+    else robot.yaml's). Anything else is refused in one line per problem naming the record (and its key), never
+    half-read: missing, a link, a folder, a FIFO, too big, not JSON, another registry or repository."""
+    from robocore.files import check_no_links
+
     path = record_path(project, version)
+    try:
+        check_no_links(path)
+    except UnsafePath as exc:
+        raise UsageError(exc.message, hint="remove it and run `release --fleet` again") from None
+    _trust_folder(project.releases_dir)
     if not os.path.lexists(path):
         raise UsageError(f"no fleet release {version}: {path} does not exist",
                          hint=f"run `release --fleet --tag {version}` first")
-    try:
-        raw = read_project_file(path, project.root, limit=MAX_RECORD_BYTES, what="release record")
-    except UnsafePath as exc:
-        raise UsageError(exc.message, hint="remove it and run `release --fleet` again") from None
-    if len(raw) > MAX_RECORD_BYTES:
-        raise UsageError(f"{path}: not a release record: larger than {MAX_RECORD_BYTES:,} bytes")
+    raw = _read_record(path)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError:
@@ -87,7 +92,61 @@ def load_release_record(project: Project, version: str) -> ReleaseRecord:
     record = parse_release_record(text, str(path))
     if record.version != version:
         raise UsageError(f"{path}: records release {record.version!r}, not {version!r}")
+    robot = project.robot
+    components = {c.name: naming.component_image(robot, project.name, c.name) for c in robot.components}
+    found = record_problems(record, registry or "", naming.base_image(robot, project.name), components)
+    if found:
+        raise ConfigError([Problem(str(path), None, key, message) for key, message in found])
     return record
+
+
+def _trust_folder(folder: Path) -> None:
+    """The ``releases`` folder: this user's (else refused); group- or world-writable bits this user left are
+    removed (another user could have put a record there, which the record's own check then refuses)."""
+    import stat
+
+    try:
+        info = os.lstat(folder)
+    except FileNotFoundError:
+        return
+    if not stat.S_ISDIR(info.st_mode):
+        raise UsageError(f"{folder}: is not a folder; robocore keeps its release records in it",
+                         hint=f"remove {folder} and run `release --fleet` again")
+    if info.st_uid != os.geteuid():
+        raise UsageError(f"{folder}: belongs to another user (uid {info.st_uid}); robocore believes only records "
+                         "of its own user", hint=f"remove {folder} and run `release --fleet` again")
+    if info.st_mode & NEVER:
+        os.chmod(folder, stat.S_IMODE(info.st_mode) & ~NEVER)
+
+
+def _read_record(path: Path) -> bytes:
+    """The bytes of the record at ``path``: a regular file of this user that no one else may write, at most
+    :data:`MAX_RECORD_BYTES`; a UsageError naming it otherwise (never followed, never blocking)."""
+    import stat
+
+    again = "remove it and run `release --fleet` again"
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_NOCTTY)
+    except OSError as exc:
+        raise UsageError(f"{path}: not a release record: cannot be read: {exc.strerror or exc}", hint=again) from None
+    info = os.fstat(fd)
+    why = None
+    if stat.S_ISDIR(info.st_mode):
+        why = "not a release record: a folder"
+    elif not stat.S_ISREG(info.st_mode):
+        why = "not a release record: not a regular file (a FIFO or a device?)"
+    elif not is_private(info):
+        whose = f"belongs to another user (uid {info.st_uid})" if info.st_uid != os.geteuid() else \
+            f"may be written by group or others (mode {stat.S_IMODE(info.st_mode):04o})"
+        why = f"not believed: it {whose}; robocore believes only a record of its own user that no one else may write"
+    if why is not None:
+        os.close(fd)
+        raise UsageError(f"{path}: {why}", hint=again)
+    with os.fdopen(fd, "rb") as handle:
+        raw = handle.read(MAX_RECORD_BYTES + 1)
+    if len(raw) > MAX_RECORD_BYTES:
+        raise UsageError(f"{path}: not a release record: larger than {MAX_RECORD_BYTES:,} bytes", hint=again)
+    return raw
 
 
 def plan_for(project: Project, version: str, registry: str) -> FleetReleasePlan:
@@ -165,8 +224,7 @@ def release_fleet(options: Options, *, tag: str | None) -> None:
     path = record_path(project, version)
     if options.dry_run:
         for image in plan.images:
-            what = f"{image.source} + one layer ({', '.join(str(f.target) for f in image.layer)})" \
-                if image.layer else image.source
+            what = f"{image.source} + {layers_line(image)}" if image.layer else image.source
             report.out(f"{image.ref} ({image.arch}): {what}")
         report.out(f"# then the digest of each in {path} (0600)")
         return
@@ -178,7 +236,7 @@ def release_fleet(options: Options, *, tag: str | None) -> None:
     bases: dict[str, str] = {}
     try:
         for image in plan.images:
-            ref = _build_and_push(client, image)
+            ref = _build_and_push(client, image, report.info)
             (bases if image.is_base else components.setdefault(image.component, {}))[image.arch] = ref
             report.info(f"pushed {ref} ({image.component or 'base'}, {image.arch})")
     finally:
@@ -189,14 +247,12 @@ def release_fleet(options: Options, *, tag: str | None) -> None:
     report.info(f"released {version} for the fleet: {path}")
 
 
-def _build_and_push(client: docker.DockerClient, image: FleetImage) -> str:
-    """The image of ``image`` (its source, plus its layer when it has one) tagged as ``image.ref``, pushed; its
-    digest reference."""
+def _build_and_push(client: docker.DockerClient, image: FleetImage, progress: Callable[[str], None]) -> str:
+    """The image of ``image`` (its source, plus its layers when it has files) tagged as ``image.ref``, pushed (its
+    progress said every few seconds through ``progress``); its digest reference."""
     from docker.errors import ImageNotFound
 
-    from robocore.adapters.image_builder import build_image, expand
     from robocore.adapters.image_delivery import push_digest
-    from robocore.plan.dockerfiles import ImagePlan
 
     try:
         local = client.images.get(image.source)
@@ -208,12 +264,10 @@ def _build_and_push(client: docker.DockerClient, image: FleetImage) -> str:
         raise UsageError(f"image {image.source} is of arch {found}, not {image.arch}",
                          hint="run `prepare-base` and `stage` again")
     if image.layer:
-        context = layer_context(image.layer)
-        plan = ImagePlan(role="component", name=image.target, tag=image.tag, arch=image.arch,
-                         dockerfile=layer_dockerfile(str(local.id), image.labels), parent=str(local.id),
-                         context=context, component=image.component)
-        build_image(client, plan, expand(context), labels={}, native_arch=native_arch())
+        from robocore.commands.support.fleet_layers import build_layered
+
+        build_layered(client, image, str(local.id))
     else:
         local.tag(image.target, image.tag)
-    return digest_ref(image.target, push_digest(client, image.target, image.tag))
+    return digest_ref(image.target, push_digest(client, image.target, image.tag, progress))
 

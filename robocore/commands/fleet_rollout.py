@@ -20,31 +20,41 @@ The target and previous release (and images) of every service are kept in its la
 
 from __future__ import annotations
 
+import os
 import time
-import uuid
 from collections.abc import Sequence
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar
+from dataclasses import dataclass
+from functools import partial
+from typing import TYPE_CHECKING, ClassVar
 
 from robocore.adapters import swarm
-from robocore.commands.fleet_swarm import FleetProject, load, manager_client, now, offline, project_label, robot_nodes
+from robocore.commands.fleet_gate import (
+    FAILED,
+    HEALTHY,
+    PENDING,
+    ROLLED_BACK,
+    Change,
+    Gate,
+    set_health,
+)
+from robocore.commands.fleet_swarm import (
+    FleetProject,
+    load,
+    manager_client,
+    manager_line,
+    now,
+    offline,
+    project_label,
+    recorded_release,
+    robot_nodes,
+)
 from robocore.commands.support.context import Options
 from robocore.errors import RobocoreError, UsageError
-from robocore.plan import naming
+from robocore.plan import fleet_lock
 from robocore.plan import swarm_services as plan
 
 if TYPE_CHECKING:
     import docker
-
-#: Seconds between two looks at the tasks while gating.
-POLL = 0.5
-#: Seconds the output of an ended probe is read again, when it has not reached the manager yet (a robot that has
-#: just reconnected sends it late): its verdict says why a robot failed, its exit code alone does not.
-PROBE_LOG_WAIT = 5.0
-#: Health verdicts kept in the services' labels.
-HEALTHY, FAILED, PENDING, ROLLED_BACK = "healthy", "failed", "pending", "rolled-back"
-#: States of a task that ended on its own (a crash, an exit, a refusal), not because robocore replaced it.
-CRASHED = frozenset({"failed", "complete", "rejected"})
 
 
 @dataclass(frozen=True)
@@ -55,29 +65,9 @@ class RobotOutcome:
     robot: str
     wave: str
     release: str
-    verdict: str  # healthy | failed | pending | rolled-back
+    verdict: str  # healthy | failed | pending | rolled-back | busy (fleet_lock.BUSY: held back past timeouts.busy)
     reason: str = ""
     seconds: float = 0.0
-
-
-@dataclass
-class Change:
-    """A robot being changed and gated (the gate's state)."""
-
-    robot: str
-    wave: str
-    release: str
-    specs: list[plan.ServiceSpec]
-    before: dict[str, set[str]]
-    started: float
-    deadline: float
-    running_since: float | None = None
-    task_ids: dict[str, str] = field(default_factory=dict)
-    probe: str | None = None
-    probe_ended: float | None = None  # when the probe's end was first seen with no verdict in its output
-    verdict: str | None = None
-    reason: str = ""
-    ended: float = 0.0
 
 
 def load_release(fleet: FleetProject, version: str) -> plan.Release:
@@ -85,7 +75,7 @@ def load_release(fleet: FleetProject, version: str) -> plan.Release:
     missing, linked-out or malformed record is refused in one line by ``load_release_record``)."""
     from robocore.commands.fleet_release import load_release_record
 
-    record = load_release_record(fleet.project, version)
+    record = load_release_record(fleet.project, version, fleet.fleet.registry_for(fleet.project.robot))
     return plan.Release(version=record.version, components=record.components, base=record.base)
 
 
@@ -117,146 +107,6 @@ def _apply(client: docker.DockerClient, specs: Sequence[plan.ServiceSpec]) -> di
     return before
 
 
-def _set_health(client: docker.DockerClient, specs: Sequence[plan.ServiceSpec], health: str) -> None:
-    """Record the gate's verdict in the services' labels (a label-only update restarts nothing)."""
-    for spec in specs:
-        swarm.set_labels(client, spec.name, {plan.LABEL_HEALTH: health})
-
-
-class Gate:
-    """The health gate of the robots being changed: drives every robot's check from one loop (one connection)."""
-
-    def __init__(self, client: docker.DockerClient, fleet: FleetProject, release: plan.Release | None,
-                 releases: dict[str, plan.Release], options: Options) -> None:
-        self.client = client
-        self.fleet = fleet
-        self.releases = releases
-        self.health = fleet.fleet.rollout.health
-        self.timeouts = fleet.fleet.rollout.timeouts
-        self.report = options.report
-        self.scripts: dict[str, str] = {}  # probe resource -> its text
-
-    def script(self, robot: str) -> str:
-        """The health probe script for ``robot``'s graph (its discovery kind's: rclpy for ROS 2, the master for
-        ROS 1)."""
-        from robocore import resources
-
-        name = plan.probe_resource(self.fleet.instances[robot])
-        if name not in self.scripts:
-            self.scripts[name] = resources.read(name).decode()
-        return self.scripts[name]
-
-    def run(self, changes: list[Change], deadline: float | None = None) -> None:
-        """Decide every change (healthy, failed or pending); a change still undecided at ``deadline`` (a
-        ``time.monotonic()`` value: the wave's ``timeouts.wave``) fails as a failed gate does."""
-        while any(c.verdict is None for c in changes):
-            by_robot = robot_nodes(swarm.nodes(self.client), self.fleet)
-            for change in changes:
-                if change.verdict is None:
-                    self._step(change, by_robot)
-            if deadline is not None and time.monotonic() > deadline:
-                for change in changes:
-                    if change.verdict is None:
-                        self._decide(change, FAILED, f"wave {change.wave} not decided within "
-                                                     f"{self.timeouts.wave:g} s (timeouts.wave)")
-            if any(c.verdict is None for c in changes):
-                time.sleep(POLL)
-
-    def _decide(self, change: Change, verdict: str, reason: str = "") -> None:
-        change.verdict, change.reason, change.ended = verdict, reason, time.monotonic()
-        if change.probe is not None:
-            swarm.remove_service(self.client, change.probe)
-            change.probe = None
-
-    def _step(self, change: Change, by_robot: dict[str, list[Any]]) -> None:
-        down = offline(change.robot, by_robot, self.fleet)
-        if down:
-            self._decide(change, PENDING, f"offline ({', '.join(down)}): Swarm starts it when it is back")
-            return
-        clock = time.monotonic()
-        current: dict[str, swarm.TaskInfo] = {}
-        for spec in change.specs:
-            found = swarm.tasks(self.client, spec.name)
-            fresh = [t for t in found if t.id not in change.before[spec.name] and t.image == spec.image]
-            crashed = [t for t in fresh if t.state in CRASHED]
-            if crashed:
-                task = crashed[0]
-                code = f" with code {task.exit_code}" if task.exit_code is not None else ""
-                self._decide(change, FAILED, f"{spec.component} {task.state}{code}"
-                             + (f": {task.error}" if task.error else "") + " (restarting)")
-                return
-            live = [t for t in found if t.desired == "running" and t.image == spec.image]
-            if live:
-                current[spec.name] = live[0]
-        # a service whose update Swarm is still rolling out may yet replace the task seen running
-        waiting = [s.component for s in change.specs if s.name not in current
-                   or current[s.name].state != "running" or swarm.updating(self.client, s.name)]
-        if waiting:
-            change.running_since = None
-            if clock > change.deadline:
-                states = ", ".join(f"{s.component} {current[s.name].state if s.name in current else 'no task'}"
-                                   for s in change.specs if s.component in waiting)
-                self._decide(change, FAILED, f"not running after {self.timeouts.robot} s ({states})")
-            return
-        ids = {name: task.id for name, task in current.items()}
-        if change.running_since is None or ids != change.task_ids:
-            change.running_since, change.task_ids = clock, ids
-            return
-        if clock - change.running_since < self.health.running:
-            return
-        if not self.health.nodes and not self.health.heard:
-            self._decide(change, HEALTHY)
-            return
-        self.probe(change, clock)
-
-    def probe(self, change: Change, clock: float) -> None:
-        """The first time, start the gate check's probe service on ``change``'s robot; after, once it has ended, decide
-        ``change`` healthy or failed by its verdict (its exit code when no verdict came)."""
-        if change.probe is None:
-            release = self.releases[change.release]
-            left = max(change.deadline - clock - 5, 5)
-            check = plan.GateCheck(nodes=tuple(self.health.nodes), heard=tuple(self.health.heard), timeout=left)
-            spec = plan.probe_service(self.fleet.project, change.robot, self.fleet.instances[change.robot], release,
-                                      check, self.script(change.robot), uuid.uuid4().hex[:8])
-            ids = swarm.ensure_configs(self.client, spec.configs)
-            swarm.apply_service(self.client, spec, ids)
-            change.probe = spec.name
-            return
-        found = swarm.tasks(self.client, change.probe)
-        ended = [t for t in found if t.state in swarm.ENDED]
-        if not ended:
-            if clock > change.deadline + 10:
-                self._decide(change, FAILED, f"the health probe did not end within {self.timeouts.robot} s")
-            return
-        verdict = plan.probe_verdict(swarm.service_logs(self.client, change.probe))
-        task = ended[0]
-        if verdict is None:
-            # its output can reach the manager later than its end (a robot that has just reconnected): read again
-            # for a while, then take the exit code as the verdict (it exits 0 only when every node was seen and
-            # every topic heard)
-            change.probe_ended = change.probe_ended or clock
-            if clock - change.probe_ended < PROBE_LOG_WAIT:
-                return
-            if task.state == "complete" and task.exit_code in (0, None):
-                self._decide(change, HEALTHY)
-            else:
-                self._decide(change, FAILED, f"the health probe printed no verdict ({task.state}"
-                             + (f": {task.error}" if task.error else "") + ")")
-        elif verdict.get("ok") is True:
-            self._decide(change, HEALTHY)
-        else:
-            missing = ", ".join(str(n) for n in _list(verdict.get("missing")))
-            silent = ", ".join(str(t) for t in _list(verdict.get("silent")))
-            error = str(verdict.get("error") or "")
-            parts = ([error] if error else []) + ([f"nodes missing: {missing}"] if missing else []) \
-                + ([f"not heard: {silent}"] if silent else [])
-            self._decide(change, FAILED, "; ".join(parts) or "unhealthy")
-
-
-def _list(value: object) -> list[object]:
-    return list(value) if isinstance(value, list) else []
-
-
 def _change(client: docker.DockerClient, fleet: FleetProject, robot: str, wave: str, release: plan.Release,
             live: dict[str, swarm.ServiceInfo], health: str) -> Change:
     """Update ``robot``'s services to ``release`` (stop-first) and return the gate's state for it."""
@@ -273,103 +123,102 @@ def _outcome(change: Change) -> RobotOutcome:
                         reason=change.reason, seconds=round((change.ended or time.monotonic()) - change.started, 1))
 
 
-def _recorded_release(fleet: FleetProject, robot: str, live: dict[str, swarm.ServiceInfo], *,
-                      previous: bool) -> plan.Release | None:
-    """From ``robot``'s services' labels: the release it runs (or, with ``previous``, the one it ran before), None
-    when there is none."""
-    mine = [s for s in live.values() if s.labels.get(plan.LABEL_ROBOT) == robot]
-    version_label = plan.LABEL_PREVIOUS if previous else plan.LABEL_RELEASE
-    image_label = plan.LABEL_PREVIOUS_IMAGE if previous else plan.LABEL_IMAGE
-    versions = {s.labels.get(version_label, "") for s in mine}
-    if not mine or versions == {""} or len(versions) != 1:
-        return None
-    components: dict[str, dict[str, str]] = {}
-    base: dict[str, str] = {}
-    instance = fleet.instances[robot]
-    for service in mine:
-        image = service.labels.get(image_label, "") or (service.image if not previous else "")
-        component = service.labels.get(naming.LABEL_COMPONENT, "")
-        if service.labels.get(naming.LABEL_ROLE) == naming.ROLE_DISCOVERY:
-            for host in instance.hosts:
-                base.setdefault(host.arch.value, image)
-        else:
-            try:
-                arch = instance.host(instance.component(component).runs_on).arch.value
-            except KeyError:
-                continue
-            components[component] = {arch: image}
-    for host in instance.hosts:  # a probe on a host without a discovery server
-        if base:
-            base.setdefault(host.arch.value, next(iter(base.values())))
-    return plan.Release(version=versions.pop(), components=components, base=base)
-
-
-def _roll_back(client: docker.DockerClient, fleet: FleetProject, changes: list[Change], gate: Gate,
+def roll_back(client: docker.DockerClient, fleet: FleetProject, changes: list[Change], gate: Gate,
                live: dict[str, swarm.ServiceInfo]) -> list[Change]:
     """Return the robots of ``changes`` to the release they ran before (from ``live``, read before the change)."""
     back: list[Change] = []
+    previous = {c.robot: recorded_release(fleet, c.robot, live, previous=False) for c in changes}
+    # made anew rather than updated: Swarm's restart of a crashing task, already scheduled, would race an update and
+    # start a second task that the orchestrator then stops again. Removed first, and made anew only once their old
+    # containers have stopped (stop-first, as an update is): never the failed and the previous node side by side.
+    # A robot that ran nothing of this project before runs nothing again.
+    left = swarm.remove_stopped(client, [spec.name for c in changes for spec in c.specs
+                                         if previous[c.robot] is None or (spec.name in live
+                                                                          and live[spec.name].image != spec.image)])
+    if left:  # said, not hidden: the previous release starts beside a container that would not stop
+        gate.report.warn(f"{len(left)} removed task(s) had not stopped after {swarm.STOPPED_WAIT:g} s: the previous "
+                         "release is started anyway")
     for change in changes:
-        previous = _recorded_release(fleet, change.robot, live, previous=False)
-        if previous is None:
-            for spec in change.specs:  # it ran nothing of this project before: it runs nothing again
-                swarm.remove_service(client, spec.name)
+        release = previous[change.robot]
+        if release is None:
             continue
-        gate.releases[previous.version] = previous
-        for spec in change.specs:
-            before = live.get(spec.name)
-            if before is not None and before.image != spec.image:
-                # made anew rather than updated: Swarm's restart of a crashing task, already scheduled, would race
-                # the update and start a second task that the orchestrator then stops again
-                swarm.remove_service(client, spec.name)
+        gate.releases[release.version] = release
         # the labels as they were before the change: the failed release is not recorded as the previous one
-        back.append(_change(client, fleet, change.robot, change.wave, previous, live, ROLLED_BACK))
+        back.append(_change(client, fleet, change.robot, change.wave, release, live, ROLLED_BACK))
     gate.run(back)
     return back
 
 
-def rollout(options: Options, *, version: str) -> list[RobotOutcome]:
-    """Roll ``version`` out wave by wave behind the health gate (see the module)."""
+def rollout(options: Options, *, version: str, force: bool = False) -> list[RobotOutcome]:
+    """Roll ``version`` out wave by wave behind the health gate, each robot asked first (:mod:`fleet_safe`; not
+    with ``force``); see the module."""
+    from robocore.commands.fleet_safe import Asker, busy_line
     from robocore.plan.fleet import plan_waves
 
     if not version:
         raise UsageError("fleet rollout needs the version of a release", hint="robocore fleet rollout v2")
+    from robocore.commands.fleet_release import record_path
+
     fleet = load(options)
-    release = load_release(fleet, version)
     waves = plan_waves(fleet.fleet)
     report = options.report
-    for robot, instance in fleet.instances.items():  # every image known before anything changes
+    if options.dry_run and not os.path.lexists(record_path(fleet.project, version)):  # the waves, before a release
+        report.plain(manager_line(fleet))
+        for wave in waves:
+            report.plain(f"wave {wave.name}: {', '.join(wave.robots)}")
+        report.plain(f"release {version} is not made yet (robocore release --fleet --tag {version}): its images are "
+                     "not checked")
+        return []
+    release = load_release(fleet, version)
+    # every image known before anything changes: a robot's images depend only on its hosts' arches (robot.yaml's
+    # components on robot.yaml's hosts), so one robot of each set of arches is planned, not 10,000 alike
+    alike: dict[tuple[str, ...], str] = {}
+    for robot, instance in fleet.instances.items():
+        alike.setdefault(tuple(host.arch.value for host in instance.hosts), robot)
+    for robot in alike.values():
         try:
-            plan.robot_services(fleet.project, robot, instance, release)
+            plan.robot_services(fleet.project, robot, fleet.instances[robot], release)
         except KeyError as missing:
             raise UsageError(f"release {version} has no image of {missing.args[0]}",
                              hint=f"robocore release --tag {version} --fleet") from None
     if options.dry_run:
+        report.plain(manager_line(fleet))
         for wave in waves:
             report.plain(f"wave {wave.name}: {', '.join(wave.robots)}")
         return []
     client = manager_client(fleet)
     outcomes: list[RobotOutcome] = []
     try:
+        from robocore.commands.fleet_bytes import report_bytes
+        from robocore.commands.fleet_manager import clear_probes, settle
+
+        settle(client, fleet, report)  # a manager that has just restarted: see fleet_manager
+        report.add(*report_bytes(client, fleet, release, list(fleet.instances), report))
         gate = Gate(client, fleet, release, {version: release}, options)
         for wave in waves:
             live = _live(client, fleet)
             by_robot = robot_nodes(swarm.nodes(client), fleet)
             report.info(f"wave {wave.name}: {', '.join(wave.robots)}")
             deadline = time.monotonic() + fleet.fleet.rollout.timeouts.wave
-            changes = []
-            for robot in wave.robots:
-                health = PENDING if offline(robot, by_robot, fleet) else ""
-                changes.append(_change(client, fleet, robot, wave.name, release, live, health))
-            gate.run(changes, deadline)
+            start = partial(_change, client, fleet, wave=wave.name, release=release, live=live)
+            with Asker(client, fleet, wave.name, release, start, report, force=force) as asker:
+                changes = asker.first(wave.robots, by_robot)
+                gate.run(changes, deadline, asker)
             for change in changes:
-                _set_health(client, change.specs, change.verdict or "")
+                set_health(client, change, change.verdict or "", change.reason)
                 report.info(f"  {change.robot}: {change.verdict}" + (f" ({change.reason})" if change.reason else ""))
-            outcomes += [_outcome(c) for c in changes]
+            outcomes += [_outcome(c) for c in changes] + asker.outcomes(RobotOutcome)
+            if asker.given_up and all(c.verdict != HEALTHY for c in changes):  # the release untried: stop
+                report.add(*outcomes)
+                raise RobocoreError(f"rollout of {version} stopped in wave {wave.name}: {busy_line(outcomes)}")
             failed = [c for c in changes if c.verdict == FAILED]
             if failed:
-                back = _roll_back(client, fleet, failed, gate, live)
-                for change in back:
-                    _set_health(client, change.specs, ROLLED_BACK if change.verdict == HEALTHY else FAILED)
+                back = roll_back(client, fleet, failed, gate, live)
+                why = {c.robot: c.reason for c in failed}
+                for change in back:  # the reason kept is the failure's, and the way back's when that failed too
+                    set_health(client, change, ROLLED_BACK if change.verdict == HEALTHY else FAILED,
+                                why[change.robot] + (f"; back on {change.release}: {change.reason}" if change.reason
+                                                     else ""))
                     report.info(f"  {change.robot}: back on {change.release}: {change.verdict}"
                                 + (f" ({change.reason})" if change.reason else ""))
                 outcomes += [_outcome(c) for c in back]
@@ -379,6 +228,7 @@ def rollout(options: Options, *, version: str) -> list[RobotOutcome]:
                 raise RobocoreError(f"rollout of {version} stopped in wave {wave.name}: {names} failed the health "
                                     "gate and went back to the previous release"
                                     + (f"; waves not started: {', '.join(later)}" if later else ""))
+        clear_probes(client, fleet)  # what a run that was cut off left, ended by now
     finally:
         client.close()
     report.add(*outcomes)
@@ -386,6 +236,8 @@ def rollout(options: Options, *, version: str) -> list[RobotOutcome]:
     report.notice(f"release {version}: {sum(o.verdict == HEALTHY for o in outcomes)} robot(s) healthy"
                   + (f", pending (offline, Swarm updates them when they are back): {', '.join(pending)}"
                      if pending else ""))
+    if any(o.verdict == fleet_lock.BUSY for o in outcomes):
+        raise RobocoreError(f"release {version}: {busy_line(outcomes)}")
     return outcomes
 
 
@@ -396,23 +248,20 @@ def rollback(options: Options, *, robots: Sequence[str]) -> list[RobotOutcome]:
     if unknown:
         raise UsageError(f"unknown robot(s): {', '.join(unknown)} (known: {', '.join(fleet.instances)})")
     chosen = list(robots) or list(fleet.instances)
+    if options.dry_run:  # the previous releases are in the manager's labels: a dry run contacts nothing
+        options.report.plain(manager_line(fleet))
+        options.report.plain(f"would return {', '.join(chosen)} to the release each ran before (read from the manager)")
+        return []
     client = manager_client(fleet)
     try:
+        from robocore.commands.fleet_manager import clear_probes, settle
+
+        settle(client, fleet, options.report)
         live = _live(client, fleet)
-        releases = {}
-        problems = []
-        for robot in chosen:
-            previous = _recorded_release(fleet, robot, live, previous=True)
-            if previous is None:
-                problems.append(f"{robot}: no previous release recorded")
-            else:
-                releases[robot] = previous
-        if problems:
+        found = {robot: recorded_release(fleet, robot, live, previous=True) for robot in chosen}
+        if problems := [f"{robot}: no previous release recorded" for robot, known in found.items() if known is None]:
             raise UsageError("; ".join(problems))
-        if options.dry_run:
-            for robot, previous in releases.items():
-                options.report.plain(f"{robot}: back to {previous.version}")
-            return []
+        releases = {robot: known for robot, known in found.items() if known is not None}
         gate = Gate(client, fleet, None, {r.version: r for r in releases.values()}, options)
         by_robot = robot_nodes(swarm.nodes(client), fleet)
         changes = [_change(client, fleet, robot, "rollback", previous, live,
@@ -420,9 +269,10 @@ def rollback(options: Options, *, robots: Sequence[str]) -> list[RobotOutcome]:
                    for robot, previous in releases.items()]
         gate.run(changes)
         for change in changes:
-            _set_health(client, change.specs, change.verdict or "")
+            set_health(client, change, change.verdict or "", change.reason)
             options.report.info(f"{change.robot}: {change.release}: {change.verdict}"
                                 + (f" ({change.reason})" if change.reason else ""))
+        clear_probes(client, fleet)
     finally:
         client.close()
     outcomes = [_outcome(c) for c in changes]

@@ -64,7 +64,7 @@ def logs(options: Options, *, component: str | None, follow: bool, tail: int) ->
     width = max((len(name) for _, name, _ in containers), default=0)
     if not follow:
         for host, name, container in containers:
-            for line in _lines(container.logs(tail=tail, stream=False)):
+            for line in split_lines(container.logs(tail=tail, stream=False)):
                 emit_line(report, LogLine(name, host, line), width, stream=False)
     else:
         follow_logs(report, containers, width, tail)
@@ -72,7 +72,8 @@ def logs(options: Options, *, component: str | None, follow: bool, tail: int) ->
         raise GroupError(failures, list(results))
 
 
-def _lines(data: bytes | Iterator[bytes]) -> Iterator[str]:
+def split_lines(data: bytes | Iterator[bytes]) -> Iterator[str]:
+    """The lines of a log, given whole or in chunks that need not end at a line's end."""
     chunks = [data] if isinstance(data, bytes) else data
     pending = b""
     for chunk in chunks:
@@ -108,7 +109,7 @@ def follow_logs(report: Reporter, containers: list[tuple[str, str, Any]], width:
 
     def pump(host: str, name: str, container: Any) -> None:
         try:
-            for line in _lines(container.logs(stream=True, follow=True, tail=tail)):
+            for line in split_lines(container.logs(stream=True, follow=True, tail=tail)):
                 lines.put(LogLine(name, host, line))
         except Exception as exc:  # a host going away ends its streams, not the others
             lines.put(LogLine(name, host, f"[log stream ended: {exc}]"))

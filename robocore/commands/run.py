@@ -264,6 +264,9 @@ def apply_action(client: docker.DockerClient, action: Action, spec: ContainerSpe
         text = short_error(exc)
         if "bind source path does not exist" in text:
             hint = "run `robocore sync` first" if not host.is_local else "run `robocore build` first"
+        elif spec is not None and spec.docker_kwargs().get("oom_score_adj", 0) < 0 and "child's PID" in text:
+            hint = (f"resources.priority: critical lowers the container's OOM score, which host {host.name}'s Docker "
+                    "may not do (it lacks CAP_SYS_RESOURCE, as in some sandboxes); remove the priority there")
         raise DockerError(f"host {host.name}: {action.verb} {action.name} failed: {text}", hint=hint) from None
 
 

@@ -101,6 +101,14 @@ def _validate_fleet(options: Options, project: Project) -> None:
     problems = swarm_problems(project.robot, fleet, project.robot_file)
     if problems:
         raise ConfigError(problems)
+    from robocore.config.loader import fleet_model_warnings, fleet_warnings
+
+    for warning in fleet_warnings(project.fleet_file, fleet.manager.as_host() if fleet.manager else None):
+        options.report.warn(warning.message, warning)
+    users = {host.name: all(r.hosts[host.name].user is not None for r in fleet.robots if host.name in r.hosts)
+             for host in project.robot.hosts}
+    for warning in fleet_model_warnings(project.robot_file, project.robot, users):
+        options.report.warn(warning.message, warning)
     waves = [WaveSummary(wave.name, list(wave.robots)) for wave in plan_waves(fleet)]
     summary = FleetSummary(file=str(project.fleet_file), engine=fleet.engine, robots=fleet.robot_names, waves=waves)
     options.report.add(summary)

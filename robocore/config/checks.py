@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import re
 import stat
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
@@ -33,6 +33,7 @@ from robocore.config.model import (
     Host,
     Robot,
 )
+from robocore.config.resources import over_limits
 from robocore.config.sources import checkout_folder_problem, protocol_problem
 from robocore.config.values import IMAGE_PATH, IMAGE_PREFIX, is_ipv6, shown
 from robocore.files import is_inside, path_kind
@@ -146,21 +147,14 @@ def check_robot(robot: Robot, project: Path | None) -> list[Found]:
 
 def check_parts(parts: Parts, project: Path | None) -> list[Found]:
     """Every cross-field problem of ``parts``; file-system checks only when ``project`` is given."""
-    found: list[Found] = []
-    found += _unique_names(parts)
-    found += _references(parts)
-    found += _discovery_reachable(parts)
-    found += _remote_project_volumes(parts)
-    found += _hosts(parts)
-    found += _ipv6_discovery(parts)
-    found += _components(parts)
-    found += _image_names(parts)
-    found += _git_sources(parts)
-    found += gui_problems(parts.components)
+    found: list[Found] = [*_unique_names(parts), *_references(parts), *_discovery_reachable(parts),
+                          *_remote_project_volumes(parts), *host_problems(parts.hosts), *_ipv6_discovery(parts),
+                          *_components(parts), *_image_names(parts), *_git_sources(parts),
+                          *gui_problems(parts.components)]
     if project is not None:
         root = project.resolve()
         found += _folders(parts, root)
-        found += _tls_files(parts, root)
+        found += tls_file_problems(parts.hosts, root)
         found += _project_volumes(parts, root)
     return found
 
@@ -235,8 +229,9 @@ def _discovery_reachable(parts: Parts) -> Iterator[Found]:
                "first, or set discovery.servers")
 
 
-def _hosts(parts: Parts) -> Iterator[Found]:
-    for index, host in parts.hosts:
+def host_problems(hosts: Iterable[tuple[int, Host]]) -> Iterator[Found]:
+    """How each host's Docker daemon is reached, checked (robot.yaml's hosts, fleet.yaml's manager and robots)."""
+    for index, host in hosts:
         access = host.access
         if access is DockerAccess.tcp and not host.insecure:
             yield (("hosts", index, "docker"),
@@ -288,6 +283,8 @@ def _components(parts: Parts) -> Iterator[Found]:
                 yield (*base, "ports", i), problem
         if comp.ports and comp.network == "host":
             yield (*base, "ports"), "ports are ignored with network: host; remove them or use network: bridge"
+        for problem in over_limits(comp.resources) if comp.resources is not None else ():
+            yield (*base, "resources"), problem
     for index, pkg in parts.common_packages:
         if pkg.folder is None and pkg.repo is None:
             yield ("common_packages", index), "needs a folder or a repo"
@@ -333,8 +330,9 @@ def _folders(parts: Parts, project: Path) -> Iterator[Found]:
                 yield path, f"{rel!r} is a file, not a folder"
 
 
-def _tls_files(parts: Parts, project: Path) -> Iterator[Found]:
-    for index, host in parts.hosts:
+def tls_file_problems(hosts: Iterable[tuple[int, Host]], project: Path) -> Iterator[Found]:
+    """Each host's TLS files: regular files, a relative path inside ``project`` (the project folder, resolved)."""
+    for index, host in hosts:
         if host.tls is None:
             continue
         for key in ("ca_cert", "client_cert", "client_key"):

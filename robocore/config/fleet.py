@@ -18,18 +18,27 @@ Swarm node label, part of service names and a Kubernetes namespace (``robot-<nam
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, get_args
 
-from pydantic import AfterValidator, Field, ValidationError, model_validator
+from pydantic import (
+    AfterValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 from robocore.config.fleet_checks import FleetParts
 from robocore.config.model import DockerAccess, Host, Robot, Strict, TlsFiles
+from robocore.config.sources import GitUrl
 from robocore.config.values import (
     GitFolder,
-    GitUrl,
     HostAddress,
     Name,
     Number,
+    OneLine,
     Registry,
     UserName,
     pattern_field,
@@ -108,6 +117,18 @@ class FleetHost(Strict):
                                         "robot.yaml's host's when that is not local).")
     docker_port: Number | None = Field(default=None, ge=1, le=65535)
 
+    def on(self, host: Host) -> Host:
+        """robot.yaml's ``host`` as this robot has it: this address, and this user, ports and Docker access when
+        given. A host robot.yaml reaches locally (the dev machine) is reached over ssh on a robot."""
+        docker = self.docker
+        if docker is None and host.docker is not DockerAccess.local:
+            docker = host.docker
+        update: dict[str, object] = {"ip": self.ip, "docker": docker}
+        for key in ("user", "ssh_port", "docker_port"):
+            if getattr(self, key) is not None:
+                update[key] = getattr(self, key)
+        return host.model_copy(update=update)
+
 
 class Manager(Strict):
     """The Swarm manager robocore talks to (a machine whose daemon robocore reaches like a robot.yaml host)."""
@@ -174,7 +195,60 @@ class Timeouts(Strict):
     """How long robocore waits, in seconds."""
 
     robot: Number = Field(default=120, ge=1, le=86_400, description="For one robot to change and pass the gate.")
+    heard: Number = Field(default=30, ge=1, le=86_400, description="For a robot's graph, from the moment every "
+                          "container of it runs: its nodes seen and its topics heard (health.nodes, health.heard). "
+                          "Shorter than robot, which must also cover a first pull: a robot that runs but is not "
+                          "heard is decided on it.")
     wave: Number = Field(default=600, ge=1, le=86_400, description="For a whole wave.")
+    busy: Number = Field(default=600, ge=1, le=86_400, description="For a robot that holds its update lock or is "
+                         "outside its maintenance window to become free; past it the robot is left as it is.")
+
+
+#: A week day as fleet.yaml writes it; :data:`DAYS` has them Monday first (``datetime.weekday()`` order).
+Day = Literal["mon", "tue", "wed", "thu", "fri", "sat", "sun"]
+DAYS: tuple[Day, ...] = get_args(Day)
+#: A time of day, ``HH:MM`` on a 24-hour clock (``to`` may also be ``24:00``, the end of the day).
+TIME_OF_DAY = r"(?:[01][0-9]|2[0-3]):[0-5][0-9]"
+
+
+def _zone(value: str) -> str:
+    from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
+
+    try:
+        ZoneInfo(value)
+    except (ZoneInfoNotFoundError, ValueError):
+        raise ValueError(f"{shown(value)} is not a time zone this machine knows (an IANA name such as "
+                         "Europe/Berlin, or UTC)") from None
+    return value
+
+
+class Window(Strict):
+    """A maintenance window: the robots it selects (by name, by label, or all) are updated only inside it, on
+    ``days``, from ``from`` to ``to`` in ``timezone`` (a window whose ``to`` is not after ``from`` ends the next
+    day)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+
+    robots: list[RobotName] | None = Field(default=None, description="These robots (by name).")
+    labels: Labels | None = Field(default=None, description="Robots carrying all these labels.",
+                                  json_schema_extra=lambda schema: _keyed_optional(schema))
+    days: list[Day] = Field(
+        default_factory=lambda: list(DAYS), min_length=1, max_length=7, description="The days it opens on "
+        "(default: every day).")
+    start: Annotated[str, _grammar(TIME_OF_DAY, "a time of day HH:MM, 00:00 to 23:59"), pattern_field(TIME_OF_DAY)] \
+        = Field(alias="from", description="When it opens, HH:MM.")
+    end: Annotated[str, _grammar(f"{TIME_OF_DAY}|24:00", "a time of day HH:MM, 00:00 to 24:00"),
+                   pattern_field(f"{TIME_OF_DAY}|24:00")] = Field(alias="to", description="When it closes, HH:MM.")
+    timezone: Annotated[str, AfterValidator(_zone)] = Field(default="UTC", max_length=64, description="The "
+                                                            "robot's IANA time zone (Europe/Berlin).")
+
+    @model_validator(mode="after")
+    def _one_selector(self) -> Window:
+        if self.robots is not None and self.labels is not None:
+            raise ValueError("a window takes one selector, not robots and labels")
+        if self.start == self.end:
+            raise ValueError(f"from and to are both {self.start}: an empty window (for all day: from 00:00 to 24:00)")
+        return self
 
 
 class Rollout(Strict):
@@ -184,15 +258,27 @@ class Rollout(Strict):
                               f"selects it; robots no wave selects go in a last wave {REST_WAVE!r}.")
     health: HealthGate = Field(default_factory=HealthGate)
     timeouts: Timeouts = Field(default_factory=Timeouts)
+    windows: list[Window] = Field(default_factory=list, description="Maintenance windows: a robot that some window "
+                                  "selects is updated only inside one of them (docs/fleets.md).")
 
 
 class GitOps(Strict):
     """Where the GitOps controllers pull the folder of `robocore export kubernetes` from (the kubernetes engine)."""
 
+    allow_protocol: Literal["http"] | None = Field(default=None, description="http: let repo be an http:// URL "
+                                                   "(neither encrypted nor authenticated).")
     repo: GitUrl = Field(description="The git repository the export is committed to (Argo CD's repoURL), without "
                          "credentials: the controllers keep those. `export kubernetes --git-repo` overrides it.")
     path: GitFolder = Field(default="", description="The export folder's path inside that repository (default: its "
                             "top). `export kubernetes --git-path` overrides it.")
+
+    @field_validator("repo")
+    @classmethod
+    def _protocol(cls, repo: str, info: ValidationInfo) -> str:
+        """https, ssh or scp-like; http only with allow_protocol: http (robot.yaml's repositories' rule)."""
+        from robocore.config.sources import gitops_url
+
+        return gitops_url(repo, info.data.get("allow_protocol"))
 
 
 class Fleet(Strict):
@@ -203,6 +289,9 @@ class Fleet(Strict):
     manager: Manager | None = Field(default=None, description="The Swarm manager (required by the swarm engine).")
     registry: Registry | None = Field(default=None, description="Where release images live (default: robot.yaml's "
                                       "registry).")
+    registry_ca: OneLine | None = Field(default=None, description="The CA certificate (PEM, a file of the project) "
+                                        "that signed the registry's TLS certificate; `fleet join` installs it on "
+                                        "every robot host (/etc/docker/certs.d/<registry>/ca.crt).")
     robots: list[FleetRobot] = Field(min_length=1, max_length=MAX_ROBOTS)
     rollout: Rollout = Field(default_factory=Rollout)
     gitops: GitOps | None = Field(default=None, description="kubernetes engine: the git repository (and folder) the "
@@ -236,18 +325,24 @@ def fleet_parts(data: dict[str, object], fleet: Fleet | None) -> FleetParts:
 
     if fleet is not None:
         return FleetParts(robots=list(enumerate(fleet.robots)), waves=list(enumerate(fleet.rollout.waves)),
-                          engine=fleet.engine, has_manager=fleet.manager is not None, registry=fleet.registry)
+                          engine=fleet.engine, has_manager=fleet.manager is not None, registry=fleet.registry,
+                          manager=fleet.manager, registry_ca=fleet.registry_ca,
+                          windows=list(enumerate(fleet.rollout.windows)))
     rollout = data.get("rollout")
     waves = rollout.get("waves") if isinstance(rollout, dict) else None
     engine = data.get("engine", "swarm")
     registry = data.get("registry")
     return FleetParts(robots=salvage_list(data.get("robots"), FleetRobot), waves=salvage_list(waves, Wave),
                       engine=engine if isinstance(engine, str) else None, has_manager="manager" in data,
-                      registry=registry if isinstance(registry, str) else None)
+                      registry=registry if isinstance(registry, str) else None,
+                      registry_ca=ca if isinstance(ca := data.get("registry_ca"), str) else None,
+                      manager=next((m for _, m in salvage_list([data.get("manager")], Manager)), None),
+                      windows=salvage_list(rollout.get("windows") if isinstance(rollout, dict) else None, Window))
 
 
-def parse_fleet_text(text: str, robot: Robot, *, file: str = FLEET_FILE) -> Fleet:
-    """Parse and validate fleet.yaml text against ``robot`` (the project's robot.yaml).
+def parse_fleet_text(text: str, robot: Robot, *, file: str = FLEET_FILE, project: Path | None = None) -> Fleet:
+    """Parse and validate fleet.yaml text against ``robot`` (the project's robot.yaml); ``project`` (its folder) adds
+    the checks that look at files (the manager's TLS files).
 
     Raises :class:`ConfigError` with every problem found, one per line, sorted by line.
     """
@@ -257,7 +352,7 @@ def parse_fleet_text(text: str, robot: Robot, *, file: str = FLEET_FILE) -> Flee
 
     data, lines = read_yaml(text, file, kind=FLEET_FILE, schema_hint=FLEET_SCHEMA_COMMAND)
     if not isinstance(data, dict):
-        raise not_a_mapping(data, lines, file, "engine, gitops, manager, registry, robots, rollout")
+        raise not_a_mapping(data, lines, file, "engine, gitops, manager, registry, registry_ca, robots, rollout")
     problems = [problem(file, line, format_path(path), "this key appears twice") for path, line in lines.duplicates]
     fleet: Fleet | None = None
     try:
@@ -266,7 +361,7 @@ def parse_fleet_text(text: str, robot: Robot, *, file: str = FLEET_FILE) -> Flee
         problems += field_problems(exc, file, lines, Fleet)
     except RecursionError:
         raise ConfigError([problem(file, None, "", "YAML is nested too deeply")]) from None
-    found = check_fleet(fleet_parts(data, fleet), robot)
+    found = check_fleet(fleet_parts(data, fleet), robot, project)
     problems += [problem(file, lines.line_of(path), format_path(path), message) for path, message in found]
     if problems:
         raise ConfigError(ordered(problems))
@@ -280,4 +375,4 @@ def load_fleet(project: Path, robot: Robot, *, file_name: str = FLEET_FILE) -> F
     from robocore.config.loader import read_config_file
 
     text, shown_path = read_config_file(project, file_name, schema_hint=FLEET_SCHEMA_COMMAND)
-    return parse_fleet_text(text, robot, file=shown_path)
+    return parse_fleet_text(text, robot, file=shown_path, project=project)

@@ -8,22 +8,27 @@ The rules: every robot gives an address for every host of robot.yaml and for no 
 names are unique; no address (of any host of any robot) is used twice, and none is a loopback address
 (a fleet's nodes are reached from the manager); wave names are unique, a wave's ``robots`` name robots
 of the fleet, each robot named by one wave at most; a wave without a selector takes every robot left,
-so it is the last one (and ``rest``, the name of the implicit last wave, takes no selector); the swarm
-engine needs its manager; a fleet runs images from a registry, its own or robot.yaml's.
+so it is the last one (and ``rest``, the name of the implicit last wave, takes no selector); a maintenance
+window's ``robots`` name robots of the fleet; the swarm
+engine needs its manager; a fleet runs images from a registry, its own or robot.yaml's; the manager, and each
+robot's hosts as merged with robot.yaml's, pass robot.yaml's host checks (how each daemon is reached).
 """
 
 from __future__ import annotations
 
-import ipaddress
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from robocore.config.hints import Unknown, known_list
+from robocore.config.host_addresses import address_key
 from robocore.config.model import is_loopback_address
+from robocore.config.registry_ca import registry_ca_problems
 
 if TYPE_CHECKING:
-    from robocore.config.fleet import FleetRobot, Wave
+    from pathlib import Path
+
+    from robocore.config.fleet import FleetRobot, Manager, Wave, Window
     from robocore.config.model import Robot
 
 KeyPath = tuple[str | int, ...]
@@ -43,11 +48,50 @@ class FleetParts:
     engine: str | None = "swarm"
     has_manager: bool = False
     registry: str | None = None
+    manager: Manager | None = None
+    #: ``registry_ca`` as written (None when not set or not text).
+    registry_ca: str | None = None
+    windows: list[tuple[int, Window]] = field(default_factory=list)
 
 
-def check_fleet(parts: FleetParts, robot: Robot) -> list[Found]:
-    """Every cross-field problem of the fleet ``parts`` with the project's ``robot``."""
-    return [*_unique_robots(parts), *_hosts(parts, robot), *_addresses(parts), *_waves(parts), *_engine(parts, robot)]
+def check_fleet(parts: FleetParts, robot: Robot, project: Path | None = None) -> list[Found]:
+    """Every cross-field problem of the fleet ``parts`` with the project's ``robot``; ``project`` (its folder) adds
+    the checks that look at files."""
+    return [*_unique_robots(parts), *_hosts(parts, robot), *_addresses(parts), *_waves(parts), *_engine(parts, robot),
+            *_docker_access(parts, robot, project),
+            *registry_ca_problems(parts.registry_ca, project.resolve() if project else None,
+                                  has_registry=parts.registry is not None or robot.registry is not None),
+            *_windows(parts)]
+
+
+def _windows(parts: FleetParts) -> Iterator[Found]:
+    """A maintenance window's ``robots`` name robots of the fleet."""
+    names = Unknown("robot", [fleet_robot.name for _, fleet_robot in parts.robots])
+    for index, window in parts.windows:
+        for position, name in enumerate(window.robots or []):
+            if name not in names:
+                yield ("rollout", "windows", index, "robots", position), names.message(name)
+
+
+def _docker_access(parts: FleetParts, robot: Robot, project: Path | None) -> Iterator[Found]:
+    """The manager, and each robot's hosts as merged with robot.yaml's, through robot.yaml's host checks: a daemon
+    reached by plain TCP without ``insecure``, ``tls`` without files, TLS files outside the project, ports and flags
+    that do not apply."""
+    from robocore.config.checks import host_problems, tls_file_problems
+
+    if parts.manager is not None:
+        manager = [(0, parts.manager.as_host())]
+        found = [*host_problems(manager), *(tls_file_problems(manager, project.resolve()) if project else [])]
+        for key, message in found:
+            yield ("manager", *key[2:]), message.replace("on this host", "on the manager")
+    hosts = {host.name: host for host in robot.hosts}
+    for index, fleet_robot in parts.robots:
+        for name, given in fleet_robot.hosts.items():
+            if name not in hosts or (given.docker is None and given.docker_port is None):
+                continue  # an unknown host is said by _hosts; robot.yaml's own settings are checked there
+            for key, message in host_problems([(0, given.on(hosts[name]))]):
+                yield (("robots", index, "hosts", name, *key[2:]),
+                       f"{message} (robot.yaml's host {name} as robot {fleet_robot.name} has it)")
 
 
 def _unique_robots(parts: FleetParts) -> Iterator[Found]:
@@ -74,24 +118,16 @@ def _hosts(parts: FleetParts, robot: Robot) -> Iterator[Found]:
                    "every robot gives one for each host")
 
 
-def _address_key(address: str) -> str:
-    """An address as compared for duplicates: IP addresses in their canonical form, host names in lower case."""
-    try:
-        return str(ipaddress.ip_address(address))
-    except ValueError:
-        return address.lower().rstrip(".")
-
-
 def _addresses(parts: FleetParts) -> Iterator[Found]:
     seen: dict[str, str] = {}
     for index, fleet_robot in parts.robots:
         for name, host in fleet_robot.hosts.items():
             where: KeyPath = ("robots", index, "hosts", name, "ip")
-            if is_loopback_address(host.ip):
+            key = address_key(host.ip)
+            if is_loopback_address(key):
                 yield where, (f"{host.ip!r} is a loopback address; a fleet's hosts are reached from the manager and "
                               "from each other, so each needs its network address")
                 continue
-            key = _address_key(host.ip)
             if key in seen:
                 yield where, f"address {host.ip!r} is also {seen[key]}; each host of each robot is one machine"
             else:

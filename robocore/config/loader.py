@@ -20,7 +20,7 @@ from pydantic import BaseModel, ValidationError
 
 from robocore.config.checks import check_parts, check_robot, salvage
 from robocore.config.hints import MAX_SUGGESTIONS, did_you_mean
-from robocore.config.model import Robot
+from robocore.config.model import Host, Robot
 from robocore.config.risks import risky_settings
 from robocore.config.values import shown as shown
 from robocore.config.yamltext import MAX_FILE_BYTES as MAX_FILE_BYTES
@@ -135,7 +135,7 @@ def _allowed_keys(model: type[BaseModel], loc: Sequence[str | int]) -> list[str]
         if part not in fields:
             return []
         current = _model_in(fields[part].annotation)
-    return sorted(current.model_fields) if current is not None else []
+    return sorted(f.alias or name for name, f in current.model_fields.items()) if current is not None else []
 
 
 def _model_in(annotation: Any) -> type[BaseModel] | None:
@@ -289,3 +289,44 @@ def robot_warnings(path: Path, robot: Robot, project: Path | None = None) -> lis
     lines = _lines_of(path, shown_path)
     warnings = [problem(shown_path, lines.line_of(p), format_path(p), m, severity="warning") for p, m in found]
     return sorted(dict.fromkeys(warnings), key=lambda p: p.line if p.line is not None else 0)
+
+
+def fleet_warnings(path: Path, manager: Host | None) -> list[Problem]:
+    """One warning per dangerous but allowed setting of fleet.yaml (its ``manager`` reached by plain TCP), each with
+    its line in ``path``, as :func:`robot_warnings` gives robot.yaml's."""
+    from robocore.config.risks import host_risks
+
+    found = [(("manager", *key), message) for key, message in host_risks(manager)] if manager is not None else []
+    return located_warnings(path, found)
+
+
+def located_warnings(path: Path, found: Sequence[tuple[KeyPath, str]]) -> list[Problem]:
+    """Warnings found after loading (``(key path, message)`` pairs), each with its line in ``path``, as
+    :func:`located` gives errors."""
+    if not found:
+        return []
+    shown_path = display_path(path)
+    lines = _lines_of(path, shown_path)
+    return [problem(shown_path, lines.line_of(p), format_path(p), m, severity="warning") for p, m in found]
+
+
+def fleet_model_warnings(path: Path, robot: Robot, fleet_users: dict[str, bool]) -> list[Problem]:
+    """One warning per host of robot.yaml (at ``path``) that is this machine (a loopback address: the template's dev
+    host) while a fleet file makes robot.yaml the model of many robots: each robot then gets a host of that name at
+    its own address, running what ``runs_on`` it, and reached as robot.yaml's user there unless the fleet file
+    gives one (``fleet_users``: host name -> every robot of the fleet names its user)."""
+    found = []
+    for index, host in enumerate(robot.hosts):
+        if not host.is_loopback:
+            continue
+        user = "" if fleet_users.get(host.name) else f", reached as robot.yaml's user {host.user} there"
+        found.append((("hosts", index, "ip"), f"{host.name} is this machine ({host.ip}), a dev host, while fleet.yaml "
+                      f"makes robot.yaml the model of every robot: each robot gets a host {host.name} at its own "
+                      f"address{user}; name the hosts after the robot's computers (main) and keep dev-only "
+                      "components out of the model"))
+    if not found:
+        return []
+    shown_path = display_path(path)
+    lines = _lines_of(path, shown_path)
+    return [problem(shown_path, lines.line_of(p), format_path(p), m, severity="warning") for p, m in found]
+

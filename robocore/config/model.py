@@ -16,6 +16,7 @@ from robocore.config.desktop import Desktop
 from robocore.config.mappings import is_project_path as is_project_path
 from robocore.config.mappings import port_pattern as port_pattern
 from robocore.config.mappings import read_only_project_path as read_only_project_path
+from robocore.config.resources import Resources
 from robocore.config.sources import (
     ALLOW_PROTOCOL_HELP,
     CheckoutFolder,
@@ -300,6 +301,8 @@ class Component(Strict):
     )
     privileged: bool = Field(default=False, description="Full access to the host's devices and kernel "
                              "(validate warns).")
+    resources: Resources | None = Field(default=None, description="CPU and memory: requests (guaranteed), limits "
+                                        "(at most), priority (critical: killed last when memory runs out).")
 
     @field_validator("gui", mode="before")
     @classmethod
@@ -415,11 +418,20 @@ class Robot(Strict):
         return FASTDDS_LINE[self.ros_distro.value]
 
 
+#: Host names that name this machine: Debian's and Red Hat's ``/etc/hosts`` entries for 127.0.0.1 and ::1.
+LOOPBACK_NAMES = frozenset({"localhost", "localhost.localdomain", "ip6-localhost", "ip6-loopback", "localhost6",
+                            "localhost6.localdomain6"})
+
+
 def is_loopback_address(address: str) -> bool:
-    """True for loopback addresses and for ``localhost``."""
-    if address.lower() in {"localhost", "localhost.localdomain", "ip6-localhost"}:
+    """True for loopback addresses, the names of :data:`LOOPBACK_NAMES` and every name under ``localhost``
+    (``robot.localhost``: RFC 6761 reserves them for loopback, and systemd-resolved answers them so)."""
+    name = address.lower().rstrip(".")
+    if name in LOOPBACK_NAMES or name.endswith(".localhost"):
         return True
     try:
-        return ipaddress.ip_address(address.strip("[]")).is_loopback
+        found = ipaddress.ip_address(address.strip("[]"))
     except ValueError:
         return False
+    mapped = found.ipv4_mapped if isinstance(found, ipaddress.IPv6Address) else None
+    return (mapped or found).is_loopback

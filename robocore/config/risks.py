@@ -21,10 +21,12 @@ from robocore.config.mappings import (
     is_host_device,
     owns_host_folder,
 )
-from robocore.config.model import Component, Robot
+from robocore.config.model import Component, Host, Robot
 from robocore.config.values import shown
 
 KeyPath = tuple[str | int, ...]
+EPHEMERAL_SAFE_DOMAIN = 101
+"""The highest ROS 2 domain whose DDS ports (7400 + 250 D + up to ~250) stay below Linux's ephemeral ports."""
 Found = tuple[KeyPath, str]
 
 
@@ -41,21 +43,31 @@ def risky_settings(robot: Robot, project: Path | None = None) -> list[Found]:
             message = _git_warning(repo.protocol, repo.url)
             if message:
                 found.append(((*base, "repositories", i, "url"), message))
+    if robot.ros_version == 2 and robot.ros_domain_id > EPHEMERAL_SAFE_DOMAIN:
+        found.append((("ros_domain_id",), f"ROS domain {robot.ros_domain_id} binds its DDS ports from "
+                       f"{7400 + 250 * robot.ros_domain_id}, in Linux's ephemeral range (32768 and up), where any "
+                       f"program's outgoing socket may take a port first and a node or discovery server then fails "
+                       f"to start: use a domain of 0-{EPHEMERAL_SAFE_DOMAIN}"))
     for index, host in enumerate(robot.hosts):
-        if host.insecure:
-            found.append((("hosts", index, "insecure"),
-                          f"host {host.name}: its Docker daemon is reached by plain TCP without authentication: "
-                          "whoever reaches its port owns the host (use docker: ssh or tls)"))
-        root = host.mount_root.rstrip("/") or "/" if host.mount_root else None
-        if root is not None and (root == "/" or owns_host_folder(root, SYSTEM_FOLDERS) is not None):
-            found.append((("hosts", index, "mount_root"),
-                          f"host {host.name}: mount_root {shown(root)} is a system folder: sync writes releases there"))
+        found += [(("hosts", index, *key), message) for key, message in host_risks(host)]
     for index, pkg in enumerate(robot.common_packages):
         protocol = pkg.repo_protocol
         message = _git_warning(protocol, pkg.repo) if protocol and pkg.repo else None
         if message:
             found.append((("common_packages", index, "repo"), message))
     return found
+
+
+def host_risks(host: Host) -> Iterator[Found]:
+    """The dangerous but allowed settings of one host (of robot.yaml, or fleet.yaml's manager): its daemon reached
+    by plain TCP (``insecure``), a system folder as its ``mount_root``."""
+    if host.insecure:
+        yield (("insecure",), f"host {host.name}: its Docker daemon is reached by plain TCP without authentication: "
+               "whoever reaches its port owns the host (use docker: ssh or tls)")
+    root = host.mount_root.rstrip("/") or "/" if host.mount_root else None
+    if root is not None and (root == "/" or owns_host_folder(root, SYSTEM_FOLDERS) is not None):
+        yield ("mount_root",), (f"host {host.name}: mount_root {shown(root)} is a system folder: sync writes releases "
+                                "there")
 
 
 def _component(comp: Component) -> Iterator[Found]:

@@ -73,29 +73,61 @@ _SCHEME = re.compile(r"([A-Za-z][A-Za-z0-9+.-]*)://")
 _KNOWN = "https://host/path, ssh://[user@]host/path or user@host:path"
 
 
+def without_userinfo(url: str) -> str:
+    """``url`` with its userinfo (``user:token@`` of a URL, ``user@`` of an scp-like address) replaced by ``***@``:
+    what robocore prints of a URL it refuses, so that a token in it never reaches a terminal or a CI log."""
+    scheme = re.match(r"[A-Za-z][A-Za-z0-9+.-]*://", url)
+    start = scheme.end() if scheme else 0
+    # the authority ends at the path (or a URL's query or fragment); its userinfo ends at its last "@", so that a
+    # token holding "@", a space or a control character is hidden whole
+    stops = ("/", "?", "#") if scheme else ("/",)
+    ends = [found for found in (url.find(stop, start) for stop in stops) if found != -1]
+    at = url.rfind("@", start, min(ends, default=len(url)))
+    return url if at == -1 else f"{url[:start]}***{url[at:]}"
+
+
+def gitops_url(value: str, allow: str | None = None) -> str:
+    """``value`` if it is a git URL a GitOps controller may clone: robot.yaml's https, ssh and scp-like forms, and
+    http only when ``allow`` is ``http`` (never git://, file:// or ext::, which the controller cannot or must not
+    use); ValueError that never shows the URL's userinfo."""
+    protocol = git_protocol(value)
+    if protocol in DEFAULT_PROTOCOLS or (protocol == "http" and allow == "http"):
+        return value
+    shown_url = shown(without_userinfo(value))
+    if protocol == "http":
+        return _refuse(f"{shown_url} uses http://, which is neither encrypted nor authenticated; use https:// or "
+                       "ssh://, or say allow_protocol: http in fleet.yaml's gitops")
+    return _refuse(f"{shown_url} is a {protocol} URL; a GitOps controller clones {_KNOWN}")
+
+
+def _refuse(message: str) -> str:
+    raise ValueError(message)
+
+
 def _why_not_a_url(url: str) -> str:
     what = f"must be a git URL ({_KNOWN})"
+    seen = without_userinfo(url)
     if not url:
         return f"{what}, not empty"
     if url.startswith("-"):
-        return f"{what}, not an option (got {shown(url)})"
+        return f"{what}, not an option (got {shown(seen)})"
     if has_control(url):
-        return f"{what} without control characters (got {shown(url)})"
+        return f"{what} without control characters (got {shown(seen)})"
     if len(url) > 2048:
         return f"{what} of at most 2048 characters (got {len(url)} characters)"
     helper = _HELPER.match(url)
     if helper and helper.group(1) != "ext":
-        return (f"{shown(url)} asks git for the remote helper {helper.group(1)!r}, which runs a program on this "
+        return (f"{shown(seen)} asks git for the remote helper {helper.group(1)!r}, which runs a program on this "
                 f"machine; robocore fetches {_KNOWN}")
     if not helper and any(ch.isspace() for ch in url):
-        return f"{what} without spaces (got {shown(url)})"
+        return f"{what} without spaces (got {shown(seen)})"
     scheme = _SCHEME.match(url)
     if scheme and scheme.group(1).lower() not in {"https", "ssh", "http", "git", "file"}:
-        return f"{what}; the scheme {scheme.group(1)!r} is not one robocore fetches (got {shown(url)})"
+        return f"{what}; the scheme {scheme.group(1)!r} is not one robocore fetches (got {shown(seen)})"
     if re.match(rf"[a-z]+://{_USER}:[^@/]*@", url):
         return f"must not hold a password (got {shown(url.split(':', 1)[0] + '://...')}); use ssh keys or a git " \
                "credential helper"
-    return f"{what} (got {shown(url)})"
+    return f"{what} (got {shown(seen)})"
 
 
 def git_url(value: str) -> str:
@@ -112,15 +144,16 @@ def allowed_protocols(allow: str | None) -> tuple[str, ...]:
 def protocol_problem(url: str, allow: str | None) -> str | None:
     """Why ``url`` may not be fetched with ``allow_protocol: allow`` (None when it may)."""
     protocol = git_protocol(url)
+    seen = shown(without_userinfo(url))
     if protocol in DEFAULT_PROTOCOLS or protocol == allow:
         return None
     if protocol == "ext":
-        return (f"{shown(url)} is an ext:: URL, which runs a command on this machine; robocore fetches it only "
+        return (f"{seen} is an ext:: URL, which runs a command on this machine; robocore fetches it only "
                 "when this entry says allow_protocol: ext")
     if protocol == "file":
-        return (f"{shown(url)} is a local path or file:// URL (this machine's files); robocore fetches it only "
+        return (f"{seen} is a local path or file:// URL (this machine's files); robocore fetches it only "
                 "when this entry says allow_protocol: file")
-    return (f"{shown(url)} uses {protocol}://, which is neither encrypted nor authenticated; use https:// or "
+    return (f"{seen} uses {protocol}://, which is neither encrypted nor authenticated; use https:// or "
             f"ssh://, or say allow_protocol: {protocol} in this entry")
 
 

@@ -20,6 +20,7 @@ from typing import Annotated, Any
 
 from pydantic import AfterValidator, Field, Strict
 
+from robocore.config.host_addresses import refuse_no_machine
 from robocore.ui import MAX_SHOWN as MAX_SHOWN
 from robocore.ui import shown as shown
 
@@ -118,9 +119,15 @@ IPV6 = "(?:" + "|".join([
     rf"(?:(?:{_H16}:){{0,6}}{_H16})?::",
 ]) + ")"
 _LABEL = r"[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?"
+#: One to four numbers in C's ``inet_aton`` forms (decimal, ``0``-octal, ``0x``-hex) joined by dots: what ssh,
+#: Docker and every resolver read as an IPv4 address (``0x7f000001`` and ``0x7f.1`` are 127.0.0.1), never a name.
+IPV4_NUMBERS = r"(?:(?:0[xX][0-9A-Fa-f]*|[0-9]+)\.){0,3}(?:0[xX][0-9A-Fa-f]*|[0-9]+)(?![A-Za-z0-9.-])"
 #: An RFC 1123 host name of at most 253 characters whose last label is not all digits (so that it
-#: cannot be mistaken for a short IPv4 address such as ``10.1``). Usable inside a URL too.
-HOSTNAME = rf"(?=[A-Za-z0-9.-]{{1,253}}(?![A-Za-z0-9.-]))(?:{_LABEL}\.)*(?=[0-9]*[A-Za-z-]){_LABEL}(?![A-Za-z0-9.-])"
+#: cannot be mistaken for a short IPv4 address such as ``10.1``) and that is not an IPv4 address written as numbers
+#: (:data:`IPV4_NUMBERS`: the loopback and "any" rules, and the comparison of addresses, would not see it). Usable
+#: inside a URL too.
+HOSTNAME = (rf"(?=[A-Za-z0-9.-]{{1,253}}(?![A-Za-z0-9.-]))(?!{IPV4_NUMBERS})"
+            rf"(?:{_LABEL}\.)*(?=[0-9]*[A-Za-z-]){_LABEL}(?![A-Za-z0-9.-])")
 HOST_ADDRESS = f"{IPV4}|{IPV6}|{HOSTNAME}"
 
 
@@ -129,14 +136,31 @@ def host_address(value: str) -> str:
     what = "an IP address or a host name"
     _refuse_common(value, what)
     if re.fullmatch(HOST_ADDRESS, value):
+        refuse_no_machine(value)
         return value
     if "%" in value and _is_ip(value.split("%", 1)[0]):
         raise ValueError(f"must be {what}; zone indexes (%eth0) are not supported (got {shown(value)})")
     if "@" in value:
         raise ValueError(f"must be {what}; the user goes in 'user:' (got {shown(value)})")
+    if re.fullmatch(IPV4_NUMBERS, value):
+        address = _numbers_as_ipv4(value)
+        raise ValueError(f"must be {what}; {shown(value)} is an IPv4 address written as numbers, which ssh and Docker "
+                         f"read as {address}: write {address}" if address else
+                         f"must be {what}; {shown(value)} is numbers like an IPv4 address, but out of range")
     if len(value) > 253:
         raise ValueError(f"must be {what} of at most 253 characters (got {len(value)} characters)")
     raise ValueError(f"must be {what} (got {shown(value)})")
+
+
+def _numbers_as_ipv4(text: str) -> str | None:
+    """The IPv4 address C's ``inet_aton`` reads ``text`` (:data:`IPV4_NUMBERS`) as; None when a number is out of
+    range."""
+    import socket
+
+    try:
+        return socket.inet_ntoa(socket.inet_aton(text))
+    except OSError:
+        return None
 
 
 def _is_ip(text: str) -> bool:
@@ -273,30 +297,9 @@ ImagePrefix = Annotated[str, AfterValidator(image_prefix), pattern_field(
 
 # --- git repositories (GitOps) ---------------------------------------------------------------------------
 
-_GIT_HOSTNAME = r"[A-Za-z0-9](?:[A-Za-z0-9.-]{0,251}[A-Za-z0-9])?"
-_GIT_HOST = rf"{_GIT_HOSTNAME}(?::[0-9]{{1,5}})?"
-_GIT_PATH = r"[A-Za-z0-9._~%+-]+(?:/[A-Za-z0-9._~%+-]+)*/?"
-#: A git repository URL a GitOps controller clones: ``https://host[:port]/path``, ``ssh://[user@]host[:port]/path``
-#: or scp-like ``user@host:path``. No credentials in it: the export is committed to git, and the controllers keep
-#: a repository's credentials in their own secrets.
-GIT_URL = (rf"(?=.{{1,2048}}$)(?:https?://{_GIT_HOST}/{_GIT_PATH}|ssh://(?:[A-Za-z0-9._-]+@)?{_GIT_HOST}/{_GIT_PATH}"
-           rf"|[A-Za-z0-9._-]+@{_GIT_HOSTNAME}:/?{_GIT_PATH})")
 #: A folder inside a git repository: relative, '/'-separated, no '.' or '..' part (empty: the top).
 _GIT_PART = r"(?!\.\.?(?:/|$))[A-Za-z0-9._~+-]+"
 GIT_FOLDER = rf"(?=.{{0,1024}}$)(?:{_GIT_PART}(?:/{_GIT_PART})*)?"
-
-
-def git_url(value: str) -> str:
-    """``value`` if it is a git repository URL a GitOps controller can clone (:data:`GIT_URL`), without
-    credentials."""
-    what = "a git repository URL such as https://git.example.com/team/fleet.git or git@git.example.com:team/fleet.git"
-    _refuse_common(value, what)
-    if re.match(r"[a-z+]+://[^/@]*:[^/@]*@", value):
-        raise ValueError(f"holds a password or token ({shown(value.split('@', 1)[1])}): give the controllers "
-                         "the repository's credentials, never the exported files (they are committed to git)")
-    if re.fullmatch(GIT_URL, value):
-        return value
-    raise ValueError(f"must be {what} (got {shown(value)})")
 
 
 def git_folder(value: str) -> str:
@@ -308,9 +311,6 @@ def git_folder(value: str) -> str:
                      f"(got {shown(value)})")
 
 
-GitUrl = Annotated[str, AfterValidator(git_url), pattern_field(
-    GIT_URL, "A git repository URL (https://host/path, ssh://[user@]host/path or user@host:path), without "
-             "credentials.")]
 GitFolder = Annotated[str, AfterValidator(git_folder), pattern_field(
     r"/*" + GIT_FOLDER + r"/*", "A folder inside the repository (relative, no '.' or '..' part; empty: its top).")]
 

@@ -18,9 +18,10 @@ from pathlib import PurePosixPath
 from typing import Any
 
 from robocore.config.model import Component, Host, Robot, is_project_path, port_pattern, read_only_project_path
-from robocore.plan import arches, discovery, gui, layout, naming
+from robocore.plan import arches, discovery, gui, layout, naming, resources
 from robocore.plan.addresses import extra_hosts, reachable_from_container
 from robocore.plan.layout import component_root, host_paths
+from robocore.plan.resources import Limits
 from robocore.project import Project
 
 DEFAULT_TAG = "latest"
@@ -76,6 +77,7 @@ class ContainerSpec:
     depends_on: tuple[str, ...] = ()  # services started first (same host)
     extra_labels: tuple[tuple[str, str], ...] = field(default=())
     extra_hosts: tuple[tuple[str, str], ...] = ()  # (name, address or "host-gateway") in /etc/hosts
+    limits: Limits | None = None  # robot.yaml's resources (plan/resources.py)
 
     @property
     def env(self) -> dict[str, str]:
@@ -91,6 +93,10 @@ class ContainerSpec:
         data["mounts"] = [{name: getattr(m, name) for name in _MOUNT_FIELDS} for m in self.mounts]
         if not data["extra_hosts"]:  # absent, as before the field existed: unchanged specs keep their hash
             del data["extra_hosts"]
+        if self.limits is None:
+            del data["limits"]
+        else:
+            data["limits"] = self.limits.as_dict()
         payload = json.dumps(data, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(payload.encode()).hexdigest()[:16]
 
@@ -139,6 +145,8 @@ class ContainerSpec:
             kwargs["ports"] = docker_ports(self.ports)
         if self.extra_hosts:
             kwargs["extra_hosts"] = dict(self.extra_hosts)
+        if self.limits is not None:
+            kwargs.update(resources.docker_kwargs(self.limits))
         if self.gpus:
             from docker.types import DeviceRequest
 
@@ -180,6 +188,8 @@ class ContainerSpec:
                     "reservations": {"devices": [{"driver": "nvidia", "count": "all", "capabilities": ["gpu"]}]}
                 }
             }
+        if self.limits is not None:
+            service.update(resources.compose_keys(self.limits))
         service["restart"] = self.restart
         service["labels"] = self.labels
         return service
@@ -346,6 +356,7 @@ def _component_spec(project: Project, component: Component, tag: str | None,
         mounts=tuple(mounts),
         gpus=component.nvidia,
         privileged=component.privileged,
+        limits=Limits.of(component.resources),
         restart=component.restart,
         depends_on=client.depends_on + display.depends_on,
         extra_hosts=extra_hosts(network),

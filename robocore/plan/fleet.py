@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from robocore.config.fleet import REST_WAVE, Fleet, FleetRobot
-from robocore.config.model import Component, DockerAccess, Host, Robot
+from robocore.config.model import Component, Host, Robot
 from robocore.errors import Problem
 
 KeyPath = tuple[str | int, ...]
@@ -30,20 +30,9 @@ Found = tuple[KeyPath, str]
 
 
 def instance_host(host: Host, fleet_robot: FleetRobot) -> Host:
-    """robot.yaml's ``host`` as ``fleet_robot`` has it: its address, and its user, ports and Docker access when the
-    fleet file gives them. A host robot.yaml reaches locally (the dev machine) is reached over ssh on a robot."""
-    given = fleet_robot.hosts[host.name]
-    docker = given.docker
-    if docker is None and host.docker is not DockerAccess.local:
-        docker = host.docker
-    update: dict[str, object] = {"ip": given.ip, "docker": docker}
-    if given.user is not None:
-        update["user"] = given.user
-    if given.ssh_port is not None:
-        update["ssh_port"] = given.ssh_port
-    if given.docker_port is not None:
-        update["docker_port"] = given.docker_port
-    return host.model_copy(update=update)
+    """robot.yaml's ``host`` as ``fleet_robot`` has it (:meth:`~robocore.config.fleet.FleetHost.on`): its address,
+    and its user, ports and Docker access when the fleet file gives them."""
+    return fleet_robot.hosts[host.name].on(host)
 
 
 def robot_instance(robot: Robot, fleet_robot: FleetRobot, *, registry: str | None = None) -> Robot:

@@ -2,7 +2,8 @@
 
 A single robot gets its code by ``sync`` (install trees beside code-less images). A fleet engine runs
 images only, so ``release --fleet --tag V`` pushes, per component (and its host's arch), the
-component's staged image plus **one** layer holding what ``sync`` would ship for it:
+component's staged image plus layers holding what ``sync`` would ship for it (one per ROS package of the install
+tree, then one per project volume: :mod:`robocore.plan.fleet_layers`):
 
 - its colcon install tree, at ``/robocore/install`` (where ``run`` mounts the synced tree), and
 - its read-only project volumes (``./config:/params:ro``), at their container paths, so a fleet
@@ -28,23 +29,23 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
-from robocore.config.model import Component, read_only_project_path
-from robocore.config.values import IMAGE_REF
+from robocore.config.model import Arch, Component, read_only_project_path
+from robocore.config.values import IMAGE_REF, NAME
 from robocore.errors import UsageError
 from robocore.plan import naming
-from robocore.plan.dockerfiles import ContextEntry
 
 #: Suffix of a fleet image's tag (``V-<arch>-fleet``): the code-less release of the same version is ``V-<arch>``.
 FLEET_TAG_SUFFIX = "fleet"
-#: The build context folder that holds the layer's files, copied to ``/`` by the layer's one instruction.
-LAYER_ROOT = "rootfs"
 #: Version of the release record's format.
 RECORD_FORMAT = 1
-#: Labels the layer carries (what it is a release of).
-LABEL_VERSION = "dev.robocore.release"
+#: The label the layer carries: the component it is of. Not the release: a label is part of the image's
+#: configuration, so a release label would give a component whose code did not change a new digest in every
+#: release, and every robot would replace it ("no churn" would never apply). The record and the tags say the release.
 LABEL_COMPONENT = "dev.robocore.component"
 
 _SHA256 = re.compile(r"@sha256:[0-9a-f]{64}")
+#: The arches a record names images for (robot.yaml's hosts' ``arch``).
+_ARCHES = tuple(arch.value for arch in Arch)
 
 
 @dataclass(frozen=True)
@@ -117,20 +118,6 @@ def baked_volumes(component: Component) -> tuple[str, ...]:
     return tuple(v for v in component.volumes if read_only_project_path(v) is not None)
 
 
-def layer_dockerfile(parent: str, labels: Mapping[str, str]) -> str:
-    """The Dockerfile of a component's layer: its image (``parent``, by image ID), one ``COPY`` of the layer's
-    files (so exactly one layer is added) and labels (configuration only, no layer)."""
-    lines = [f"FROM {parent}", f"COPY {LAYER_ROOT}/ /"]
-    if labels:
-        lines.append("LABEL " + " ".join(f"{key}={json.dumps(value)}" for key, value in sorted(labels.items())))
-    return "\n".join(lines) + "\n"
-
-
-def layer_context(files: Sequence[LayerFile]) -> tuple[ContextEntry, ...]:
-    """The build context entries of a layer: each file or folder under :data:`LAYER_ROOT` at its image path."""
-    return tuple(ContextEntry(dest=f"{LAYER_ROOT}{file.target}", source=file.source) for file in files)
-
-
 @dataclass(frozen=True)
 class FleetSource:
     """A local image a fleet release starts from: a component's (with its layer's files) or the base of an arch."""
@@ -144,11 +131,12 @@ class FleetSource:
 
 def plan_fleet_release(registry: str, version: str, sources: Sequence[FleetSource]) -> FleetReleasePlan:
     """The images of a fleet release of ``version`` to ``registry``, in the order of ``sources``; a source with
-    layer files gets one layer and labels naming the release and the component."""
+    layer files gets its layers and a label naming its component: the same content gives the same image (robocore
+    writes the layers byte for byte the same) and so the same digest in every release."""
     prefix = registry.rstrip("/")
     images = []
     for item in sources:
-        labels = {LABEL_VERSION: version, LABEL_COMPONENT: item.component} if item.layer else {}
+        labels = {LABEL_COMPONENT: item.component} if item.layer else {}
         images.append(FleetImage(item.component, item.arch, item.source, f"{prefix}/{item.repo}",
                                  fleet_tag(version, item.arch), item.layer, labels))
     return FleetReleasePlan(version=version, registry=registry, images=tuple(images))
@@ -218,6 +206,8 @@ def parse_release_record(text: str, file: str) -> ReleaseRecord:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise bad(f"not JSON ({exc.msg} at line {exc.lineno})") from None
+    except ValueError:  # a number of more digits than Python converts (4,300)
+        raise bad("a number too long to read") from None
     except RecursionError:
         raise bad("nested too deeply") from None
     if not isinstance(data, dict) or data.get("format") != RECORD_FORMAT:
@@ -230,6 +220,9 @@ def parse_release_record(text: str, file: str) -> ReleaseRecord:
     components, base = data.get("components"), data.get("base")
     if not isinstance(components, dict) or not isinstance(base, dict):
         raise bad("components and base must be mappings")
+    arch_keys = [a for arches in components.values() if isinstance(arches, dict) for a in arches] + list(base)
+    if not all(re.fullmatch(NAME, c) for c in components) or not all(a in _ARCHES for a in arch_keys):
+        raise bad(f"components are named as in robot.yaml and images by arch ({', '.join(_ARCHES)})")
     refs = [ref for arches in components.values() if isinstance(arches, dict) for ref in arches.values()]
     if any(not isinstance(arches, dict) for arches in components.values()) or not all(
             isinstance(ref, str) and is_digest_ref(ref) for ref in [*refs, *base.values()]):
@@ -238,3 +231,29 @@ def parse_release_record(text: str, file: str) -> ReleaseRecord:
                          components={str(c): {str(a): str(r) for a, r in arches.items()}
                                      for c, arches in components.items()},
                          base={str(a): str(r) for a, r in base.items()})
+
+
+def record_problems(record: ReleaseRecord, registry: str, base: str, components: Mapping[str, str]) -> list[
+        tuple[str, str]]:
+    """Why ``record`` may not be believed for a fleet whose images live in ``registry`` (fleet.yaml's, else
+    robot.yaml's): ``(key, problem)`` for the record's registry when it is another, and for each image outside
+    ``registry`` or whose repository is not that image's (``base``, the base image's repository; ``components``,
+    each component's name -> its image's repository). A record names exactly the images a release pushed, so any
+    other reference (another registry, Docker Hub, another component's image) is refused, never run."""
+    prefix = registry.rstrip("/")
+    found: list[tuple[str, str]] = []
+    if record.registry.rstrip("/") != prefix:
+        found.append(("registry", f"{record.registry!r} is not the fleet's registry {registry!r}"))
+    wanted = [(f"base.{arch}", ref, base) for arch, ref in sorted(record.base.items())]
+    for component, arches in sorted(record.components.items()):
+        if component not in components:
+            found.append((f"components.{component}", f"{component!r} is not a component of robot.yaml"))
+            continue
+        wanted += [(f"components.{component}.{arch}", ref, components[component])
+                   for arch, ref in sorted(arches.items())]
+    for key, ref, repository in wanted:
+        name = ref.split("@", 1)[0]
+        if name != f"{prefix}/{repository}":
+            where = "not that image's repository" if name.startswith(prefix + "/") else "outside the fleet's registry"
+            found.append((key, f"{name!r} is {where} (expected {prefix}/{repository}@sha256:...)"))
+    return found

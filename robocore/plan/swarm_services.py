@@ -32,6 +32,7 @@ from robocore.config.model import Component, Robot
 from robocore.plan import discovery, naming
 from robocore.plan.containers import ContainerSpec, Mount, component_spec, discovery_spec
 from robocore.plan.discovery.base import in_folder
+from robocore.plan.resources import Limits
 from robocore.project import Project
 
 #: robocore's node labels: which project, robot and host of robot.yaml a node is, and the arch robocore runs on it.
@@ -48,6 +49,7 @@ LABEL_PREVIOUS = "dev.robocore.fleet.previous"  # the release before it ("" when
 LABEL_PREVIOUS_IMAGE = "dev.robocore.fleet.previous-image"
 LABEL_CHANGED = "dev.robocore.fleet.changed"  # when the target last changed (UTC, ISO 8601)
 LABEL_HEALTH = "dev.robocore.fleet.health"  # the last gate's verdict: healthy, failed, pending, rolled-back
+LABEL_REASON = "dev.robocore.fleet.reason"  # the last gate's reason, in words ("" when it passed)
 LABEL_PROBE = "dev.robocore.fleet.probe"  # a one-shot health probe service
 
 #: Longest Swarm service name (a DNS label).
@@ -89,6 +91,7 @@ class ServiceSpec:
     constraints: tuple[str, ...]
     restart: str  # Swarm restart condition: any | on-failure | none
     labels: tuple[tuple[str, str], ...] = field(default=())
+    limits: Limits | None = None  # robot.yaml's resources: the service's limits and reservations
 
     @property
     def label_map(self) -> dict[str, str]:
@@ -182,6 +185,7 @@ def _service(spec: ContainerSpec, *, project: str, robot: str, arch: str, image:
         restart=RESTART_CONDITIONS.get(spec.restart, "any"),
         labels=((naming.LABEL_PROJECT, project), (LABEL_ROBOT, robot), (naming.LABEL_ROLE, role),
                 (naming.LABEL_COMPONENT, spec.service)),
+        limits=spec.limits,
     )
 
 
@@ -239,11 +243,17 @@ class GateCheck:
 def probe_resource(instance: Robot) -> str:
     """The probe script (a resource name) that can read the graph of ``instance``: its discovery kind's; KeyError
     for a kind that has none."""
+    return resource_for(instance, PROBE_RESOURCES, "a health probe")
+
+
+def resource_for(instance: Robot, scripts: Mapping[str, str], what: str) -> str:
+    """The script of ``scripts`` (discovery kind -> resource name) for ``instance``'s discovery kind; KeyError
+    naming ``what`` and the kind when it has none."""
     kind = discovery.for_robot(instance).kind
     try:
-        return PROBE_RESOURCES[kind]
+        return scripts[kind]
     except KeyError:
-        raise KeyError(f"a health probe for discovery kind {kind}") from None
+        raise KeyError(f"{what} for discovery kind {kind}") from None
 
 
 def probe_service(project: Project, robot: str, instance: Robot, release: Release, check: GateCheck,
@@ -285,12 +295,36 @@ def probe_service(project: Project, robot: str, instance: Robot, release: Releas
 
 
 def probe_verdict(output: str) -> dict[str, object] | None:
-    """The probe's verdict: the last line of its output that is a JSON object, else None."""
+    """The probe's verdict: the last line of its output that is a JSON object and no progress line, else None."""
+    for value in reversed(_json_lines(output)):
+        if PROGRESS_KEY not in value:
+            return value
+    return None
+
+
+#: The key of the probe's progress lines (``{"waiting": true, "missing": [...], "silent": [...]}``), printed every
+#: few seconds while it waits: what it has not seen or heard yet.
+PROGRESS_KEY = "waiting"
+
+
+def probe_progress(output: str) -> dict[str, list[str]] | None:
+    """The probe's last progress line (nodes ``missing`` and topics ``silent`` so far), None when it printed none."""
+    for value in reversed(_json_lines(output)):
+        if PROGRESS_KEY in value:
+            lists = {key: value.get(key) for key in ("missing", "silent")}
+            return {key: [str(item) for item in found] if isinstance(found, list) else []
+                    for key, found in lists.items()}
+    return None
+
+
+def _json_lines(output: str) -> list[dict[str, object]]:
+    """The JSON objects of ``output``, one a line (``docker service logs``' ``task@node |`` prefixes taken off)."""
     import json
 
-    for line in reversed(output.splitlines()):
+    found = []
+    for line in output.splitlines():
         text = line.strip()
-        if "|" in text and not text.startswith("{"):  # `docker service logs` prefixes: task@node | line
+        if "|" in text and not text.startswith("{"):
             text = text.split("|", 1)[1].strip()
         if text.startswith("{"):
             try:
@@ -298,8 +332,20 @@ def probe_verdict(output: str) -> dict[str, object] | None:
             except ValueError:
                 continue
             if isinstance(value, dict):
-                return value
-    return None
+                found.append(value)
+    return found
+
+
+def verdict_reason(verdict: dict[str, object]) -> str:
+    """A failed probe verdict's reason in words: its error, the nodes missing, the topics not heard."""
+    def listed(key: str) -> str:
+        value = verdict.get(key)
+        return ", ".join(str(item) for item in value) if isinstance(value, list) else ""
+
+    missing, silent, error = listed("missing"), listed("silent"), str(verdict.get("error") or "")
+    parts = ([error] if error else []) + ([f"nodes missing: {missing}"] if missing else []) \
+        + ([f"not heard: {silent}"] if silent else [])
+    return "; ".join(parts) or "unhealthy"
 
 
 def robots_of(services: Sequence[ServiceSpec]) -> list[str]:

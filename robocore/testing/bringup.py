@@ -140,8 +140,8 @@ def reserve_domain() -> tuple[int, socket.socket]:
 @contextlib.contextmanager
 def build_lock(project: Project) -> Iterator[None]:
     """Hold the project's build lock: runs of one project build one at a time (the others find the caches warm)."""
-    project.state_dir.mkdir(parents=True, exist_ok=True)
-    with open(project.build_lock, "a+") as handle:
+    make_folder(project.state_dir)  # 0700 whatever the umask; a link there is refused
+    with open(os.open(project.build_lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600), "a+") as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
         try:
             yield

@@ -38,6 +38,15 @@ BASE = [
 ]
 FOLDERS = ("components/talker",)
 MEGABYTE = 1_000_000
+#: The robot.yaml of the fleet corpus: one host, one component of a pre-built image, a registry.
+FLEET_ROBOT_YAML = """\
+ros_distro: jazzy
+registry: 10.0.0.2:5000
+hosts:
+  - {name: main, ip: 192.168.1.10}
+components:
+  - {name: talker, image: "ros:jazzy", runs_on: main}
+"""
 
 
 @dataclass(frozen=True)

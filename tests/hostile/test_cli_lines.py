@@ -84,6 +84,9 @@ CASES = [
     refused("connect", "--component", TITLE, says="unknown component '\\x1b]0;pwned\\x07'"),
     # empty values: refused in one line, never read as "not given" (down --host "" once removed every host's)
     refused("connect", "--component", "", says="--component was given an empty value"),
+    refused("export", "kubernetes", "", "--tag", "v1", "--dry-run", says="DIR was given an empty value"),
+    refused("export", "kubernetes", " ", "--tag", "v1", says="DIR was given an empty value"),
+    refused("export", "kubernetes", "out", "--model", "", "--tag", "v1", says="--model was given an empty value"),
     refused("down", "--host", "", "--dry-run", says="--host was given an empty value"),
     refused("down", "--host=", says="--host was given an empty value"),
     refused("run", "--host", " ", "--dry-run", says="--host was given an empty value"),

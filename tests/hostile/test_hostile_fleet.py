@@ -14,18 +14,12 @@ import sys
 from pathlib import Path
 
 import pytest
+from corpus import FLEET_ROBOT_YAML
 
 from robocore.cli import main
 from robocore.config import yamltext
 
-ROBOT_YAML = """\
-ros_distro: jazzy
-registry: 10.0.0.2:5000
-hosts:
-  - {name: main, ip: 192.168.1.10}
-components:
-  - {name: talker, image: "ros:jazzy", runs_on: main}
-"""
+ROBOT_YAML = FLEET_ROBOT_YAML
 GOOD = """\
 manager: {ip: 10.0.0.2}
 robots:

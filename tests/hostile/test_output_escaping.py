@@ -62,3 +62,11 @@ def test_the_consoles_escape_every_string_they_render(capsys: pytest.CaptureFixt
     out, err = capsys.readouterr()
     assert "\x1b" not in out + err and "\x07" not in out + err
     assert "cell\\x1b]0;pwned\\x07" in out and "message \\x1b]0;pwned\\x07" in err
+
+
+def test_a_key_path_from_a_files_own_keys_forges_no_line() -> None:
+    from robocore.errors import Problem
+
+    forged = Problem("v1.json", None, "components.talker.amd64\nerror: forged", "outside the fleet's registry")
+    assert str(forged) == "v1.json: components.talker.amd64\\nerror: forged: outside the fleet's registry"
+    assert str(Problem("robot.yaml", 3, "hosts[0].ip", "bad")) == "robot.yaml:3: hosts[0].ip: bad"  # control

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from robocore.config.model import Host
-from robocore.files import read_own_file, write_atomic
+from robocore.files import MAX_STATE_RECORD_BYTES, read_own_file, write_atomic
 from robocore.plan.containers import ContainerSpec
 from robocore.plan.naming import ROLE_COMPONENT
 from robocore.project import Project
@@ -37,7 +37,7 @@ HISTORY_KEEP = 20
 
 def _read_json(path: Path) -> dict[str, Any]:
     try:
-        data = json.loads(read_own_file(path) or b"{}")  # a link or a FIFO here is no record
+        data = json.loads(read_own_file(path, limit=MAX_STATE_RECORD_BYTES) or b"{}")  # nor a link, a FIFO, a huge file
     except (OSError, ValueError):
         return {}
     return data if isinstance(data, dict) else {}
@@ -68,10 +68,8 @@ def with_local_build(project: Project, host: Host, specs: Sequence[ContainerSpec
     out = []
     for spec in specs:
         if spec.role == ROLE_COMPONENT:
-            try:
-                state = project.build_state_file(spec.service).read_bytes()
-            except OSError:
-                state = b""
+            # never followed through a link, never blocking on a FIFO, bounded
+            state = read_own_file(project.build_state_file(spec.service), limit=MAX_STATE_RECORD_BYTES) or b""
             if state:
                 digest = hashlib.sha256(state).hexdigest()[:16]
                 spec = dataclasses.replace(spec, extra_labels=(*spec.extra_labels, (LABEL_BUILD, digest)))

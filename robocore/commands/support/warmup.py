@@ -88,11 +88,12 @@ def warm_recorded(argv: Sequence[str], cwd: Path | None = None) -> None:
     project folder that is wrong) warms nothing; nothing here raises."""
     if not wants_remote(argv):
         return
-    from robocore.files import read_own_file
+    from robocore.files import MAX_STATE_RECORD_BYTES, read_own_file
 
     try:
         root = _guess_project(argv, cwd or Path.cwd())
-        data = json.loads(read_own_file(ProjectFolder(root).ssh_hosts_record) or b"{}")  # never a link or FIFO
+        record = ProjectFolder(root).ssh_hosts_record
+        data = json.loads(read_own_file(record, limit=MAX_STATE_RECORD_BYTES) or b"{}")  # never a link, FIFO, huge file
         if data.get("robot_yaml") != _fingerprint(root):
             return
         endpoints = [Endpoint(str(e["name"]), str(e["user"]), str(e["ip"]), int(e["ssh_port"]))

@@ -12,6 +12,7 @@ that each robot's overlay maps to the release it runs.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,6 +20,7 @@ from robocore.config.model import DockerAccess, Robot
 from robocore.plan import discovery, naming
 from robocore.plan.containers import component_spec, discovery_spec
 from robocore.plan.fleet_release import baked_volumes
+from robocore.plan.kubernetes import health
 from robocore.plan.kubernetes.names import discovery_service, discovery_workload, dump, k8s_name, logical_image
 from robocore.plan.kubernetes.pods import PodContext, daemon_set, headless_service
 from robocore.project import Project
@@ -53,8 +55,11 @@ def kustomization(**fields: Any) -> dict[str, Any]:
     return {"apiVersion": "kustomize.config.k8s.io/v1beta1", "kind": "Kustomization", **fields}
 
 
-def plan_base(project: Project, model: str) -> Base:
-    """The base of ``project``'s robot under the name ``model`` (a DNS label; refusals checked before)."""
+def plan_base(project: Project, model: str, gate: health.Gate | None = None, release: Sequence[str] = ()) -> Base:
+    """The base of ``project``'s robot under the name ``model`` (a DNS label; refusals checked before), with the health
+    gate ``gate`` (:mod:`~robocore.plan.kubernetes.health`). ``release``: every text the robots' overlays add to
+    the pods (the release's images, the robots' own settings), so that the health Job's name changes with them."""
+    gate = gate or health.Gate()
     view = cluster_view(project)
     robot: Robot = view.robot
     kind = discovery.for_robot(robot)
@@ -74,7 +79,8 @@ def plan_base(project: Project, model: str) -> Base:
         images.add((base_repo, arch))
         return PodContext(model=model, arch=arch, image=image, wait_image=logical_image(base_repo, arch),
                           dds_config_map=DDS_CONFIG_MAP if files else None, discovery_names=names,
-                          advertised_names=advertised, user_mounts=user_mounts, deploy_roots=roots, baked=baked)
+                          advertised_names=advertised, user_mounts=user_mounts, deploy_roots=roots, baked=baked,
+                          min_ready=gate.min_ready_seconds)
 
     for server in servers:
         spec = discovery_spec(view, server.index)
@@ -101,12 +107,23 @@ def plan_base(project: Project, model: str) -> Base:
         ctx = context(component.runs_on, image, user_mounts=len(component.volumes), baked=baked)
         out[f"{name}.yaml"] = dump([daemon_set(name, spec, ctx)])
         resources.append(f"{name}.yaml")
-    fields: dict[str, Any] = {"resources": resources}
+    generators = []
     if files:
         for file_name, text in sorted(files.items()):
             out[f"dds/{file_name}"] = text
-        fields["configMapGenerator"] = [{"name": DDS_CONFIG_MAP, "files": [f"dds/{n}" for n in sorted(files)]}]
-    out[KUSTOMIZATION] = dump([kustomization(**fields)])
+        generators.append({"name": DDS_CONFIG_MAP, "files": [f"dds/{n}" for n in sorted(files)]})
+    scripts = health.scripts(robot)
+    for file_name, text in sorted(scripts.items()):
+        out[f"health/{file_name}"] = text
+    generators.append({"name": health.HEALTH, "files": [f"health/{n}" for n in sorted(scripts)]})
+    gate_host = server_hosts[0] if server_hosts else robot.components[0].runs_on
+    key = [*(f"{n}\n{t}" for n, t in sorted(out.items())), repr(gate), *release]
+    job = health.job(health.job_name(key), robot, gate_host, gate,
+                     context(gate_host, logical_image(base_repo, robot.host(gate_host).arch.value)),
+                     host_ipc=kind.transport.shared_memory)
+    out["health.yaml"] = dump([*health.access(), job])
+    resources.append("health.yaml")
+    out[KUSTOMIZATION] = dump([kustomization(resources=resources, configMapGenerator=generators)])
     used = [h for h in robot.hosts_in_use()]
     return Base(model=model, files=out, images=tuple(sorted(images)),
                 hosts=tuple((h.name, h.arch.value) for h in used))

@@ -3,7 +3,10 @@
 ``robots/<robot>/`` changes nothing of the base but these, so that checking one base checks every robot of it
 (bench/k8s_export.py proves it on 1000 robots):
 
-* ``namespace: robot-<robot>`` and the Namespace itself;
+* ``namespace: robot-<robot>`` and the Namespace itself, labelled with the Pod Security level its pods need
+  (:data:`POD_SECURITY`): ``privileged``, as host network, host IPC and hostPath volumes are refused by both
+  ``baseline`` and ``restricted``, which hardened clusters (RKE2, k3s with a Pod Security admission config)
+  enforce by default;
 * the label :data:`~robocore.plan.kubernetes.names.LABEL_ROBOT` (and the fleet file's labels of the robot)
   on every object and pod;
 * ``images``: each logical image name of the base mapped to the release's image, by tag or by digest;
@@ -21,6 +24,10 @@ from typing import Any
 
 from robocore.plan.kubernetes.base import KUSTOMIZATION, Base, kustomization
 from robocore.plan.kubernetes.names import LABEL_ROBOT, dump, logical_image, namespace
+
+#: The Pod Security Standards labels of a robot's namespace: every pod of a robot uses the host's network (DDS), most
+#: its IPC (shared memory) and hostPath volumes (devices, state), which only the ``privileged`` level admits.
+POD_SECURITY = {f"pod-security.kubernetes.io/{mode}": "privileged" for mode in ("enforce", "audit", "warn")}
 
 
 @dataclass(frozen=True)
@@ -74,16 +81,18 @@ def plan_overlay(target: RobotTarget, base: Base, *, ros2: bool) -> dict[str, st
     labels = {LABEL_ROBOT: target.name, **dict(sorted(target.labels.items()))}
     images = [target.images(repo, arch).kustomize(logical_image(repo, arch)) for repo, arch in base.images]
     pin = {"pairs": {LABEL_ROBOT: target.name},
-           "fields": [{"path": "spec/template/spec/nodeSelector", "kind": "DaemonSet", "create": True}]}
+           "fields": [{"path": "spec/template/spec/nodeSelector", "kind": kind, "create": True}
+                      for kind in ("DaemonSet", "Job")]}
     patches: list[dict[str, Any]] = []
-    files = {"namespace.yaml": dump([{"apiVersion": "v1", "kind": "Namespace", "metadata": {"name": ns}}])}
+    files = {"namespace.yaml": dump([{"apiVersion": "v1", "kind": "Namespace",
+                                      "metadata": {"name": ns, "labels": dict(POD_SECURITY)}}])}
     if ros2 and target.ros_domain_id is not None:
         files["domain.yaml"] = dump([{
             "apiVersion": "apps/v1", "kind": "DaemonSet", "metadata": {"name": "any"},
             "spec": {"template": {"spec": {"containers": [
                 {"name": "main", "env": [{"name": "ROS_DOMAIN_ID", "value": str(target.ros_domain_id)}]}]}}},
         }])
-        patches.append({"path": "domain.yaml", "target": {"kind": "DaemonSet"}})
+        patches.append({"path": "domain.yaml", "target": {"kind": "DaemonSet|Job"}})
     document = kustomization(
         namespace=ns,
         resources=["namespace.yaml", f"../../bases/{base.model}"],

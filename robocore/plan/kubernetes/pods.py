@@ -21,6 +21,12 @@ The container itself (image, command, environment, IPC, devices, GPUs, privilege
 * **Volumes**: the install tree and the read-only project volumes are in the fleet release's image, so the pod
   mounts neither; a writable project volume is a folder under the host's mount root (made when missing), an
   absolute one the host's own path.
+* **Waiting for discovery**: an init container waits until the discovery Services' names resolve (Fast DDS ignores
+  ``ROS_DISCOVERY_SERVER`` when a name does not), and a component in robocore's image waits again at each start
+  (:data:`START_SCRIPT`), as a container the kubelet restarts after a crash runs no init container. A component
+  of a robot.yaml ``image:`` keeps that image's own entrypoint, so only the init container waits for it.
+* **Resources**: robot.yaml's ``resources`` as the container's requests and limits; ``priority: critical`` as
+  ``priorityClassName: system-node-critical`` (evicted last; :mod:`robocore.plan.resources`).
 * **Devices**: ``privileged`` and a ``hostPath`` per device (a device cgroup rule has no pod form);
   GPUs: ``runtimeClassName: nvidia`` and every GPU visible, like ``--gpus all``.
 
@@ -30,7 +36,7 @@ container gets exactly what ``run`` gives it.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -45,6 +51,7 @@ from robocore.plan.kubernetes.names import (
     LABEL_WORKLOAD,
     STATE_ROOT,
 )
+from robocore.plan.resources import CRITICAL_PRIORITY_CLASS, pod_resources
 
 #: Node conditions a robot's pods ride out, however long they last.
 OFFLINE_TAINTS = ("node.kubernetes.io/not-ready", "node.kubernetes.io/unreachable")
@@ -52,6 +59,11 @@ OFFLINE_TAINTS = ("node.kubernetes.io/not-ready", "node.kubernetes.io/unreachabl
 #: never starts without its servers (Fast DDS ignores ``ROS_DISCOVERY_SERVER`` when a name does not resolve).
 #: Fixed text; the names come as arguments.
 WAIT_SCRIPT = 'for name in "$@"; do until getent hosts "$name" >/dev/null; do sleep 1; done; done'
+#: The start of a component in robocore's image: wait for the discovery Service names (the arguments before ``--``),
+#: then exec the component (the arguments after). The init container waits at pod start; this wait also holds when
+#: the kubelet restarts the container after a crash, which runs no init container again. Fixed text.
+START_SCRIPT = ('while [ "$#" -gt 0 ] && [ "$1" != -- ]; do until getent hosts "$1" >/dev/null; do sleep 1; done; '
+                'shift; done; shift; exec "$@"')
 #: The environment keys a ROS 1 node advertises its address with; on Kubernetes, the node's address.
 ADVERTISED = ("ROS_HOSTNAME", "ROS_IP", "ROS_IPV6")
 
@@ -72,6 +84,8 @@ class PodContext:
     deploy_roots: tuple[str, ...] = ()
     #: Container paths of the read-only project volumes, which the fleet release's image carries: not mounted.
     baked: frozenset[str] = frozenset()
+    #: Seconds a pod must run without a restart before it counts as available (the gate's ``health.running``).
+    min_ready: int = 0
 
 
 def escape(text: str) -> str:
@@ -79,14 +93,16 @@ def escape(text: str) -> str:
     return text.replace("$", "$$")
 
 
-def _environment(spec: ContainerSpec, context: PodContext) -> list[dict[str, Any]]:
-    env = dict(spec.environment)
+def environment(variables: Mapping[str, str], context: PodContext, *, gpus: bool = False) -> list[dict[str, Any]]:
+    """A container's ``env`` list from robocore's environment of it: ``$`` escaped, Docker's init variable left out,
+    a ROS 1 node's advertised address replaced by the node's (``status.hostIP``), every GPU visible with ``gpus``."""
+    env = dict(variables)
     env.pop(naming.INIT_SIGNALS_GROUP, None)  # no such init in a pod (module docstring)
     ros1_address = env.get("ROS_HOSTNAME") in context.advertised_names
     if ros1_address:
         for key in ADVERTISED:
             env.pop(key, None)
-    if spec.gpus:
+    if gpus:
         env.setdefault("NVIDIA_VISIBLE_DEVICES", "all")
     out: list[dict[str, Any]] = [{"name": k, "value": escape(v)} for k, v in sorted(env.items())]
     if ros1_address:
@@ -133,11 +149,16 @@ def _volumes(spec: ContainerSpec, context: PodContext) -> tuple[list[dict[str, A
 def _container(spec: ContainerSpec, context: PodContext) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     volumes, mounts = _volumes(spec, context)
     container: dict[str, Any] = {"name": "main", "image": context.image, "imagePullPolicy": "IfNotPresent"}
-    if spec.entrypoint is not None:
+    if spec.entrypoint is not None and spec.role == naming.ROLE_COMPONENT and context.discovery_names:
+        container["command"] = ["sh", "-c", escape(START_SCRIPT), "robocore-start", *context.discovery_names, "--",
+                                *(escape(a) for a in spec.entrypoint)]
+    elif spec.entrypoint is not None:
         container["command"] = [escape(a) for a in spec.entrypoint]
     if spec.command is not None:
         container["args"] = [escape(a) for a in spec.command]
-    container["env"] = _environment(spec, context)
+    container["env"] = environment(dict(spec.environment), context, gpus=bool(spec.gpus))
+    if spec.limits is not None and pod_resources(spec.limits):
+        container["resources"] = pod_resources(spec.limits)
     if spec.privileged or spec.devices:
         container["securityContext"] = {"privileged": True}
     if mounts:
@@ -161,6 +182,8 @@ def daemon_set(name: str, spec: ContainerSpec, context: PodContext) -> dict[str,
         pod["shareProcessNamespace"] = True
     if spec.gpus:
         pod["runtimeClassName"] = "nvidia"
+    if spec.limits is not None and spec.limits.critical:
+        pod["priorityClassName"] = CRITICAL_PRIORITY_CLASS
     pod["nodeSelector"] = {LABEL_HOST: spec.host, LABEL_ARCH: context.arch}
     pod["tolerations"] = [{"key": key, "operator": "Exists", "effect": "NoExecute"} for key in OFFLINE_TAINTS]
     if spec.role == naming.ROLE_COMPONENT and context.discovery_names:
@@ -177,6 +200,7 @@ def daemon_set(name: str, spec: ContainerSpec, context: PodContext) -> dict[str,
         "metadata": {"name": name, "labels": dict(labels)},
         "spec": {
             "selector": {"matchLabels": {LABEL_WORKLOAD: name}},
+            **({"minReadySeconds": context.min_ready} if context.min_ready else {}),
             "updateStrategy": {"type": "RollingUpdate", "rollingUpdate": {"maxUnavailable": 1, "maxSurge": 0}},
             "template": {"metadata": {"labels": labels}, "spec": pod},
         },

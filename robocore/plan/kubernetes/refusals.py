@@ -31,6 +31,11 @@ DEVICE_PERMISSIONS = ("a pod reaches devices only as privileged (read, write and
                       "cannot be expressed: drop them")
 
 
+#: Names a component's file (``<name>.yaml`` in its model's base folder) cannot take: the base's own files (its
+#: kustomization, the health gate's Job); the discovery servers' files start with :data:`DISCOVERY_PREFIX`.
+RESERVED_NAMES = ("kustomization", "health")
+
+
 def _name_problems(robot: Robot) -> Found:
     found: Found = []
     seen: dict[str, str] = {}
@@ -52,6 +57,10 @@ def _name_problems(robot: Robot) -> Found:
         elif name in seen:
             found.append((("components", index, "name"), f"{component.name!r} and {seen[name]!r} are one "
                           "Kubernetes name; rename one"))
+        elif name in RESERVED_NAMES:  # its file, <name>.yaml, would be the base folder's own
+            found.append((("components", index, "name"), f"{component.name!r}: its file {name}.yaml would be the "
+                          "base folder's own (kustomization.yaml lists the base's files, health.yaml holds the health "
+                          "gate's Job); rename it"))
         seen.setdefault(name, component.name)
     return found
 

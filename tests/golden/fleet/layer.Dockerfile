@@ -1,3 +1,0 @@
-FROM sha256:1111111111111111111111111111111111111111111111111111111111111111
-COPY rootfs/ /
-LABEL dev.robocore.component="talker" dev.robocore.release="v1"
