@@ -93,7 +93,7 @@ def copy_project(source: Path, parent: Path, name: str, *, transport: str = "shm
         for state in install.parent.glob(".robocore-*.json"):  # the build's state (what run labels)
             shutil.copy2(state, target / state.name)
     data = yaml.safe_load((source / "robot.yaml").read_text())
-    data["ros_domain_id"] = random.choice(lanes.domain_ids())
+    data["ros_domain_id"] = lanes.new_domain()
     data["discovery"] = {"servers": [{"host": data["hosts"][0]["name"], "port": free_udp_port()}],
                          "transport": transport}
     if edit is not None:

@@ -19,14 +19,16 @@ and the other lane works meanwhile.
   stretches it does not time (:func:`untimed`: a bring-up, a talker left running 10 s before its next crash), so
   the other lanes stand still only while something is timed.
 - Each lane draws ROS domain IDs and ports from a range of its own (:func:`domain_ids`, :func:`ports`), so that two
-  lanes never pick the same one at the same moment.
+  lanes never pick the same one at the same moment; within a lane, domains are handed out in turn (:func:`new_domain`).
 """
 
 from __future__ import annotations
 
 import contextlib
 import fcntl
+import itertools
 import os
+import random
 import tempfile
 import time
 from collections.abc import Iterator
@@ -100,6 +102,19 @@ def domain_ids() -> range:
     socket may hold the port first and the discovery server fails to start; 50-101 would bind among
     :func:`ports`."""
     return share(1, 49)
+
+
+#: This lane's next domain ID, as a count from a random start (so that two sessions on one machine seldom begin alike).
+_domain_turn = itertools.count(random.randrange(1000))
+
+
+def new_domain() -> int:
+    """A ROS domain ID of :func:`domain_ids` for one deployment: the IDs are handed out in turn, so two deployments
+    alive at once in one lane (a module's robot and a test's own copy) never share one. Robots on host networking and
+    host IPC that share a domain share Fast DDS's shared-memory ports in /dev/shm and its UDP ports, and a restart
+    on one may then be timed against the other's traffic."""
+    ids = domain_ids()
+    return ids[next(_domain_turn) % len(ids)]
 
 
 def ports() -> range:

@@ -10,7 +10,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import random
 import re
 import shlex
 import socket
@@ -84,11 +83,11 @@ def test_talker_and_listener_exchange_messages(docker_client: Any, demo_project:
     project = _project(demo_project)
     talker, listener = _role(project, "talker"), _role(project, "listener")
     assert talker.entrypoint and listener.entrypoint
-    domain = random.choice(lanes.domain_ids()[:-1])  # this one and the next are ours: suites share the host network
+    domain, other = lanes.new_domain(), lanes.new_domain()  # suites share the host network: domains of our own
     containers.append(_start(docker_client, project, talker, shlex.split(talker.entrypoint), domain))
     containers.append(_start(docker_client, project, listener, shlex.split(listener.entrypoint), domain))
     # negative control: the same listener on another domain must hear nothing
-    containers.append(_start(docker_client, project, listener, shlex.split(listener.entrypoint), domain + 1))
+    containers.append(_start(docker_client, project, listener, shlex.split(listener.entrypoint), other))
     graph = None
     deadline = time.monotonic() + 60
     heard: set[str] = set()
@@ -187,7 +186,7 @@ def _talker_says(client: Any, project: Project, comp: Component, needle: str, st
     """Start the talker from its install tree (its container goes into ``started``, tracked_containers); return
     its output once it prints ``needle`` or exits (or after ``timeout`` seconds)."""
     assert comp.entrypoint
-    container = _start(client, project, comp, shlex.split(comp.entrypoint), random.choice(lanes.domain_ids()))
+    container = _start(client, project, comp, shlex.split(comp.entrypoint), lanes.new_domain())
     started.append(container)
 
     def said() -> str | None:

@@ -18,7 +18,6 @@ its install tree holds an aarch64 ELF.
 
 from __future__ import annotations
 
-import random
 import shutil
 import tempfile
 import time
@@ -51,7 +50,7 @@ def arm64_official(arm64_images: None, docker_client: Any, run_robocore: Robocor
     parent = Path(tempfile.mkdtemp(prefix="robocore-it-"))
     root = parent / NAME
     run_robocore(None, "init", str(root), "--defaults", "--distro", "noetic")
-    official_standins.arm64_project(root, domain=random.choice(lanes.domain_ids()), port=free_tcp_port())
+    official_standins.arm64_project(root, domain=lanes.new_domain(), port=free_tcp_port())
     timings = {}
     for step, extra in (("prepare-base", ()), ("stage", ("--component", "talker")),
                         ("build", ("--component", "talker"))):

@@ -24,7 +24,6 @@ docs/official-base.md.
 
 from __future__ import annotations
 
-import random
 import shutil
 import tempfile
 import time
@@ -95,7 +94,7 @@ def official(request: pytest.FixtureRequest, docker_client: Any, run_robocore: R
     run_robocore(None, "init", str(root), "--defaults", "--distro", distro)
     data = yaml.safe_load((root / "robot.yaml").read_text())
     assert data["base"] == {"kind": "official"}, data["base"]
-    data["ros_domain_id"] = random.choice(lanes.domain_ids())
+    data["ros_domain_id"] = lanes.new_domain()
     port = free_tcp_port() if distro == "noetic" else free_udp_port()
     data["discovery"] = {"servers": [{"host": data["hosts"][0]["name"], "port": port}]}
     (root / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))

@@ -103,6 +103,7 @@ def test_a_wrong_expectation_fails_and_its_report_shows_the_logs(graph_project: 
         from std_msgs.msg import String
 
         def test_expects_a_wrong_greeting(robot):
+            robot.wait_for_log("listener", "I heard: hello from talker #", timeout=30)  # so the report has it
             msg = robot.graph.wait_for_message("/chatter", String)
             assert msg.data == "goodbye from talker"
     ''')

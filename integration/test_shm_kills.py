@@ -10,7 +10,7 @@ cycle; Fast DDS 2.14 removes a dead process's files later, so robocore cleans no
 negative control: while the talker is dead the listener's count does not rise, so "heard again" is a
 real change, not old log lines.
 
-Each way of coming back in place is also timed, five rounds each (three for ``run``'s), from the new talker
+Each way of coming back in place is also timed, five rounds each, from the new talker
 process's start as Docker records it (``State.StartedAt``) to the listener's first greeting of it as Docker's log
 timestamps record it: both clocks are the daemon's, so the test process's own scheduling on a busy machine adds
 nothing. Each way's median must be within 2 s (``run``'s replace, the reference, is 0.75 s median on a quiet
@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from deploy_helpers import copy_project, remove_project_containers, remove_test_runs
+from deploy_helpers import copy_project, project_containers, remove_project_containers, remove_test_runs
 from ways_back import HEARD, POLICY_SPACING, Pair
 
 pytestmark = pytest.mark.docker
@@ -171,14 +171,17 @@ def test_a_talker_sigkilled_then_started_by_run_in_place_is_heard_within_2_s(dep
     again, its own way back in place (neither replaced nor re-created)."""
     pair = deployed.pair
     container_id = pair.talker().id
+    others = {c.name: c.id for c in project_containers(pair.client, deployed.root.name) if c.id != container_id}
 
     def kill_then_run() -> None:
         pair.talker().kill()
         time.sleep(0.3)
         assert pair.talker().status == "exited", "its restart policy started it: run would have nothing to do"
         run_robocore(deployed.root, "run", "--quiet")
+        now = {c.name: c.id for c in project_containers(pair.client, deployed.root.name) if c.id != container_id}
+        assert now == others, f"run replaced what was running (before, after): {others}, {now}"
 
-    seconds = pair.timed_rounds(kill_then_run, "SIGKILL, then run", 3)
+    seconds = pair.timed_rounds(kill_then_run, "SIGKILL, then run", ROUNDS)
     assert pair.talker().id == container_id, "run replaced the talker instead of starting it in place"
     assert statistics.median(seconds) < BOUND, seconds
 
