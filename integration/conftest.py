@@ -80,6 +80,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     groups are put in :mod:`lanes`' queue order (a stable sort: the tests of a module keep their order). The arm64
     suites go last, so that their images are made in the background while the others run."""
     ranks = {}
+    _TIMED_MODULES.update(item.path.name for item in items if item.get_closest_marker("quiet") is not None)
     for item in items:
         rank, group = lanes.group_of(item.path.name)
         ranks[item.nodeid] = rank
@@ -87,18 +88,32 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     items.sort(key=lambda item: ranks[item.nodeid])
 
 
-#: The lock of the arm64 project this lane holds while one of :data:`lanes.ARM64_PROJECT` runs (its descriptor).
-_PROJECT_HELD: list[int] = []
+#: The modules with quiet tests (:func:`lanes.hold_module`).
+_TIMED_MODULES: set[str] = set()
+#: What this lane holds for the module under way, taken at its first test's set-up, let go of after its last
+#: teardown, last taken first: the arm64 project's lock while one of :data:`lanes.ARM64_PROJECT` runs, then
+#: :func:`lanes.hold_module`'s (descriptors).
+_MODULE_HOLDS: list[int] = []
+#: The module :data:`_MODULE_HOLDS` is for.
+_HELD_FOR: list[Path] = []
 
 
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_setup(item: pytest.Item) -> Iterator[None]:
     """Every test's set-up holds the machine shared: it waits while another lane runs a quiet test's body. The first
-    test of a module of :data:`lanes.ARM64_PROJECT` first waits for that project (before the machine's lock). The
-    seconds each phase waited go to the time table (:func:`ci_times.held_back`): pytest counts them in the phase."""
+    test of a module first takes what the module holds to its end (before the machine's lock): the arm64 project
+    for a module of :data:`lanes.ARM64_PROJECT`, then :func:`lanes.hold_module`'s lock (a module with quiet tests
+    and the Swarm suite never run side by side). The seconds each phase waited go to the time table
+    (:func:`ci_times.held_back`): pytest counts them in the phase."""
     asked = time.monotonic()
-    if item.path.name in lanes.ARM64_PROJECT and not _PROJECT_HELD:
-        _PROJECT_HELD.append(lanes.hold_project("robocore-it-arm64"))
+    if [item.path] != _HELD_FOR:
+        _let_go_of_module()
+        _HELD_FOR.append(item.path)
+        if item.path.name in lanes.ARM64_PROJECT:
+            _MODULE_HOLDS.append(lanes.hold_project("robocore-it-arm64"))
+        held = lanes.hold_module(item.path.name, item.path.name in _TIMED_MODULES)
+        if held is not None:
+            _MODULE_HOLDS.append(held)
     with lanes.working():
         ci_times.held_back(item, "setup", time.monotonic() - asked)
         return (yield)
@@ -122,15 +137,22 @@ def pytest_runtest_call(item: pytest.Item) -> Iterator[None]:
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
     """Every test's teardown holds the machine shared, as its set-up does; after a module's last test (its module
-    fixtures torn down), the arm64 project's lock goes, when this lane held it."""
+    fixtures torn down), what the module held to its end goes."""
     asked = time.monotonic()
     try:
         with lanes.working():
             ci_times.held_back(item, "teardown", time.monotonic() - asked)
             return (yield)
     finally:
-        if _PROJECT_HELD and (nextitem is None or nextitem.path != item.path):
-            lanes.let_go(_PROJECT_HELD.pop())
+        if nextitem is None or nextitem.path != item.path:
+            _let_go_of_module()
+
+
+def _let_go_of_module() -> None:
+    """Let go of what this lane holds for the module it ran last, last taken first."""
+    while _MODULE_HOLDS:
+        lanes.let_go(_MODULE_HOLDS.pop())
+    _HELD_FOR.clear()
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:

@@ -18,6 +18,8 @@ and the other lane works meanwhile.
   so that a quiet test is never starved by lanes that take turns. A quiet body gives the machine back for the
   stretches it does not time (:func:`untimed`: a bring-up, a talker left running 10 s before its next crash), so
   the other lanes stand still only while something is timed.
+- A module with quiet tests never runs beside a module of :data:`BUSY`, whose work goes on outside its tests'
+  phases (:func:`hold_module`): the one waits for the other to end.
 - Each lane draws ROS domain IDs and ports from a range of its own (:func:`domain_ids`, :func:`ports`), so that two
   lanes never pick the same one at the same moment; within a lane, domains are handed out in turn (:func:`new_domain`).
 """
@@ -65,6 +67,16 @@ ARM64_IMAGES = frozenset({"test_arm64.py", "test_host_build.py", "test_fleet_swa
 #: teardown, taken before the machine's lock (a lane waiting for it holds nothing another lane waits for). Seen
 #: in CI: the Swarm suite's arm64 release refused "image robocore-it-arm64-listener:latest is of arch amd64".
 ARM64_PROJECT = frozenset({"test_arm64.py", "test_host_build.py", "test_fleet_swarm.py"})
+#: The modules whose own work goes on beside their tests' phases, between them and across them: the Swarm suite's
+#: fixture builds, pushes and pulls its releases in threads (the arm64 ones under emulation) while ten
+#: Docker-in-Docker hosts boot, and its fleets then run, under emulation too. A quiet test holds the machine alone
+#: only from the other lanes' *phases*, so a module with quiet tests never runs beside one of these
+#: (:func:`hold_module`). Seen in CI: the shm suite's graceful restart heard 1.6, 12.3, 16.8, 6.0 and 2.2 s after
+#: its starts while the Swarm suite's fixture was at that work in the other lane (1.0 s rounds alone).
+BUSY = frozenset({"test_fleet_swarm.py"})
+#: Held shared by a module with quiet tests and exclusively by a module of :data:`BUSY`, each from its first test's
+#: set-up to its last test's teardown (:func:`hold_module`).
+MODULES_LOCK = Path(tempfile.gettempdir()) / f"robocore-it-timed-modules-{os.getuid()}.lock"
 #: Held exclusively by a quiet test's body, shared by every other phase of a test (a build's included).
 LOCK = Path(tempfile.gettempdir()) / f"robocore-it-quiet-{os.getuid()}.lock"
 #: Passed (held exclusively) by a quiet test on its way to :data:`LOCK`, and by every other lane, shared, on its
@@ -226,6 +238,16 @@ def hold_project(name: str) -> int:
     """Take the lock of project ``name`` (every lane's, one at a time) and return its descriptor, for
     :func:`let_go`: held across tests, from a module's first set-up to its last teardown."""
     return _locked(LOCK.with_name(f"robocore-it-project-{name}-{os.getuid()}.lock"), fcntl.LOCK_EX)
+
+
+def hold_module(module: str, timed: bool) -> int | None:
+    """What module ``module`` (a file name) holds from its first test's set-up to its last teardown, for
+    :func:`let_go`: :data:`MODULES_LOCK` shared when it has quiet tests (``timed``), exclusively when it is of
+    :data:`BUSY`, else nothing (None). Taken before the machine's lock, as :func:`hold_project` is, so a lane waiting
+    here holds nothing another lane waits for."""
+    if module in BUSY:
+        return _locked(MODULES_LOCK, fcntl.LOCK_EX)
+    return _locked(MODULES_LOCK, fcntl.LOCK_SH) if timed else None
 
 
 def let_go(fd: int) -> None:

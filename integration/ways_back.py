@@ -15,6 +15,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import ci_times
 import lanes
 
 from robocore.plan.starts import docker_epoch
@@ -84,7 +85,7 @@ class Pair:
         """``rounds`` times: the talker brought back ``way``, then seconds from its start to heard. ``spacing``:
         seconds the talker runs from its start before the next round (or longer: in a quiet test the other lanes
         work meanwhile, :func:`lanes.untimed`, and the round waits for their phases under way to end)."""
-        seconds = []
+        seconds, busy = [], []
         for _ in range(rounds):
             previous = self.talker().attrs["State"]["StartedAt"]
             left = spacing - (time.time() - docker_epoch(previous))
@@ -92,11 +93,22 @@ class Pair:
                 with lanes.untimed():  # the talker running times nothing: the other lanes may work meanwhile
                     time.sleep(left)
             mark = len(self.greetings())
+            before = ci_times.busy_jiffies()
             way()
             seconds.append(self.start_to_heard(mark, previous))
+            busy.append(busy_share(before, ci_times.busy_jiffies()))
+        # the machine's busy CPU over each round (all cores, every process): what to look at when a round is slow
         print(f"FIGURE {name}: start to heard s: median {statistics.median(seconds):.2f}, "
-              f"rounds {' '.join(f'{t:.2f}' for t in seconds)}")
+              f"rounds {' '.join(f'{t:.2f}' for t in seconds)}; machine busy % {' '.join(busy)}")
         return seconds
+
+
+def busy_share(before: tuple[int, int] | None, after: tuple[int, int] | None) -> str:
+    """The machine's busy share of its CPU time between two :func:`ci_times.busy_jiffies` readings, in per cent
+    ("?" where there is no /proc/stat)."""
+    if before is None or after is None or after[1] <= before[1]:
+        return "?"
+    return f"{100 * (after[0] - before[0]) / (after[1] - before[1]):.0f}"
 
 
 def in_place_ways(pair: Pair, label: str, rounds: int) -> tuple[list[float], list[float]]:

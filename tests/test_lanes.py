@@ -21,6 +21,7 @@ FORK = multiprocessing.get_context("fork")
 def private_locks(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(lanes, "LOCK", tmp_path / "quiet.lock")
     monkeypatch.setattr(lanes, "TURNSTILE", tmp_path / "turnstile.lock")
+    monkeypatch.setattr(lanes, "MODULES_LOCK", tmp_path / "modules.lock")
 
 
 def _phases(log: Path, until: float, delay: float) -> None:
@@ -182,3 +183,36 @@ def test_an_untimed_stretch_outside_a_quiet_body_changes_nothing(tmp_path: Path)
     quiet.join(10)
     assert inside, "a quiet test ran during an untimed stretch of a shared phase"
     assert float(done.read_text()) >= let_go
+
+
+def _module(module: str, timed: bool, log: Path, seconds: float) -> None:
+    """A lane running ``module`` for ``seconds`` under :func:`lanes.hold_module`, logging when it ran."""
+    fd = lanes.hold_module(module, timed)
+    start = time.monotonic()
+    time.sleep(seconds)
+    with log.open("a") as out:
+        out.write(f"{start} {time.monotonic()}\n")
+    if fd is not None:
+        lanes.let_go(fd)
+
+
+def test_a_busy_module_and_modules_with_quiet_tests_never_run_side_by_side(tmp_path: Path) -> None:
+    busy = next(iter(lanes.BUSY))
+    timed = [FORK.Process(target=_module, args=(f"test_t{n}.py", True, tmp_path / f"t{n}.log", 0.6)) for n in (0, 1)]
+    for proc in timed:
+        proc.start()
+    time.sleep(0.2)  # both timed modules are under way
+    swarm = FORK.Process(target=_module, args=(busy, False, tmp_path / "busy.log", 0.6))
+    plain = FORK.Process(target=_module, args=("test_plain.py", False, tmp_path / "plain.log", 0.3))
+    swarm.start()
+    plain.start()
+    for proc in (*timed, swarm, plain):
+        proc.join(10)
+    (b_start, b_end), = _spans(tmp_path / "busy.log")
+    both = _spans(tmp_path / "t0.log") + _spans(tmp_path / "t1.log")
+    # the two timed modules ran side by side; the busy one waited for both to end
+    assert max(start for start, _ in both) < min(end for _, end in both), both
+    assert all(end <= b_start or start >= b_end for start, end in both), (both, (b_start, b_end))
+    # a module with no quiet tests waited for nothing
+    (p_start, _), = _spans(tmp_path / "plain.log")
+    assert p_start < b_start, "a module with no quiet tests waited for the timed ones"
