@@ -291,7 +291,17 @@ def fleet_task(rest: list[str]) -> list[str]:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    """Entry point of the ``robocore`` console script."""
+    """Entry point of the ``robocore`` console script. Output piped into a reader that stopped early
+    (``robocore fleet --help | head``) ends the command quietly with status 1, whichever path printed it."""
+    try:
+        _main(argv)
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # Python's own flush at exit would fail on the closed pipe again
+        sys.exit(1)
+
+
+def _main(argv: Sequence[str] | None) -> None:
     args = list(sys.argv[1:] if argv is None else argv)
     memo = None
     if argv is None and MEMO_TASKS & set(args[:3]):  # an unchanged project's no-op answers from its memo
@@ -337,13 +347,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     if project is not None:
         settings["project"] = os.path.abspath(project)
         rest = init_in_project(rest, project)
-    try:
-        _program(cli_namespace, settings).run(["robocore", *rest])
-    except BrokenPipeError:
-        # output piped into a reader that stopped early (robocore --help | head)
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        sys.exit(1)
+    _program(cli_namespace, settings).run(["robocore", *rest])
 
 
 if __name__ == "__main__":

@@ -179,6 +179,20 @@ def test_fleet_help_shows_the_commands_as_typed(args: tuple[str, ...]) -> None:
     assert "--verb" not in done.stdout and "--version" not in done.stdout
 
 
+@pytest.mark.parametrize("args", [("--help",), ("fleet", "--help"), ("fleet", "rollout", "-h")])
+def test_help_into_a_reader_that_stopped_early_ends_without_a_traceback(args: tuple[str, ...]) -> None:
+    """``robocore fleet --help | head -0``: the pipe is closed before robocore writes; status 1, nothing on stderr."""
+    read, write = os.pipe()
+    os.close(read)  # the reader is gone before robocore starts
+    try:
+        done = subprocess.run([sys.executable, "-m", "robocore", *args], stdout=write, stderr=subprocess.PIPE,
+                              text=True, timeout=60)
+    finally:
+        os.close(write)
+    assert done.returncode == 1
+    assert done.stderr == ""
+
+
 def test_version() -> None:
     from robocore import __version__
 
