@@ -238,6 +238,20 @@ def test_gitops_names_the_repository_and_a_bad_url_is_one_line(robot: Robot) -> 
         "fleet.yaml:22: gitops.repo: must be a git URL")
 
 
+@pytest.mark.parametrize("repo", ["https://ghp_Tok3n@github.com/team/fleet.git",
+                                  "http://glpat-Tok3n@git.example.org/fleet.git"])
+def test_a_user_in_an_https_gitops_url_is_refused_unshown(repo: str, robot: Robot) -> None:
+    """A token can be an https URL's user, and export commits the URL: refused, the user never printed. ssh's
+    ``git@`` (scp-like or ssh://) is a plain login name and stays."""
+    lines = refusal(FLEET + f"gitops: {{repo: '{repo}', allow_protocol: http}}\n", robot)
+    assert len(lines) == 1 and lines[0].startswith("fleet.yaml:22: gitops.repo: "), lines
+    assert "Tok3n" not in lines[0] and "names a user" in lines[0] and "Secret" in lines[0]
+    for fine in ("ssh://git@git.example.org/team/fleet.git", "git@git.example.org:team/fleet.git",
+                 "https://git.example.org/team/fleet.git"):
+        fleet = parse_fleet_text(FLEET + f"gitops: {{repo: '{fine}'}}\n", robot)
+        assert fleet.gitops is not None and fleet.gitops.repo == fine
+
+
 def test_a_dev_host_kept_in_a_fleet_model_is_a_warning_naming_its_line(tmp_path: Path) -> None:
     """The template's robot.yaml names this machine (127.0.0.1) as its host: in a fleet model each robot would get
     a host of that name, reached as the developer's user. validate warns, on robot.yaml's line; a robot's own

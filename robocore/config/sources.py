@@ -91,9 +91,15 @@ def gitops_url(value: str, allow: str | None = None) -> str:
     http only when ``allow`` is ``http`` (never git://, file:// or ext::, which the controller cannot or must not
     use); ValueError that never shows the URL's userinfo."""
     protocol = git_protocol(value)
+    shown_url = shown(without_userinfo(value))
+    if protocol in ("https", "http") and without_userinfo(value) != value:
+        # a user in an https URL is often a token (GitHub, GitLab take one there), and this URL is written into the
+        # files export commits; the controllers take https credentials from a Secret of their own
+        return _refuse(f"{shown_url} names a user: the URL goes into the exported files, which are committed; "
+                       "give the controller its credentials in its own Secret (Argo CD's repository Secret, Fleet's "
+                       "clientSecretName) and name no user here")
     if protocol in DEFAULT_PROTOCOLS or (protocol == "http" and allow == "http"):
         return value
-    shown_url = shown(without_userinfo(value))
     if protocol == "http":
         return _refuse(f"{shown_url} uses http://, which is neither encrypted nor authenticated; use https:// or "
                        "ssh://, or say allow_protocol: http in fleet.yaml's gitops")
