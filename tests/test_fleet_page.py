@@ -7,6 +7,7 @@ from __future__ import annotations
 import http.client
 import json
 import os
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -172,13 +173,30 @@ def test_release_records_are_listed_and_a_broken_one_says_why(fleet_project: Fle
     (folder / "v2.json").write_text(json.dumps(record))
     (folder / "v3.json").write_text("{not json")
     os.utime(folder / "v2.json", (1_700_000_000, 1_700_000_000))
-    releases = fleet_page.release_views(fleet_project.project, "10.9.9.2:5000")
+    releases, older = fleet_page.release_views(fleet_project.project, "10.9.9.2:5000")
+    assert older == 0
     assert [(r.version, bool(r.problem)) for r in releases] == [("v3", True), ("v2", False)]
     assert releases[1].recorded == "2023-11-14T22:13:20Z"
     assert releases[1].images == (("talker", "amd64", "10.9.9.2:5000/p-talker" + DIGEST),
                                   ("base", "amd64", "10.9.9.2:5000/p-base" + DIGEST))
     html = render_page(view(robot(), releases=releases))
     assert "p-talker" + DIGEST in html and "not readable:" in html
+
+
+def test_a_look_reads_the_newest_records_and_those_the_robots_run(fleet_project: FleetProject,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """The page takes a look every few seconds and ``.robocore/releases/`` keeps every release: a look reads the
+    newest records and those a robot runs or targets, and the page says how many older ones it left."""
+    monkeypatch.setattr(fleet_page, "MAX_RELEASES", 3)
+    folder = fleet_project.project.releases_dir
+    folder.mkdir(parents=True)
+    for n in range(1, 9):
+        (folder / f"v{n}.json").write_text("{not json")  # unreadable: listed with why, and cheap to write here
+        os.utime(folder / f"v{n}.json", (1_700_000_000 + n, 1_700_000_000 + n))
+    releases, older = fleet_page.release_views(fleet_project.project, None, frozenset({"v2", "-"}))
+    assert [r.version for r in releases] == ["v8", "v7", "v6", "v2"] and older == 4
+    html = render_page(replace(view(robot()), releases=releases, older_releases=older))
+    assert "4 older release records not shown" in html
 
 
 # --------------------------------------------------------------------------- the snapshot, the flags, the server

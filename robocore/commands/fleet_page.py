@@ -18,6 +18,7 @@ release records of ``.robocore/releases/``, and hands the pure :mod:`robocore.pl
 
 from __future__ import annotations
 
+import contextlib
 import ipaddress
 import os
 import threading
@@ -99,36 +100,51 @@ def fleet_view(fleet: FleetProject, rows: list[FleetRobotRow], observed: Observe
                      releases=releases)
 
 
-def release_views(project: Project, registry: str | None) -> tuple[ReleaseView, ...]:
+#: The release records a look reads at most: the newest, and those a robot runs or is moving to (a look is taken
+#: every few seconds while the page is open, and ``.robocore/releases/`` keeps every release ever recorded).
+MAX_RELEASES = 50
+
+
+def release_views(project: Project, registry: str | None,
+                  named: frozenset[str] = frozenset()) -> tuple[tuple[ReleaseView, ...], int]:
     """The fleet release records of ``project``, newest first, believed as rollout believes them (images in the
-    fleet's ``registry``); a record that cannot be believed is listed with why (the page still shows the fleet)."""
+    fleet's ``registry``); a record that cannot be believed is listed with why (the page still shows the fleet).
+    At most :data:`MAX_RELEASES` newest are read, and every one of the versions ``named`` (what the robots run or
+    target); returns them and how many older records were left unread."""
     from robocore.commands.fleet_release import load_release_record
 
     folder = project.releases_dir
     if not folder.is_dir() or folder.is_symlink():
-        return ()
-    found = []
+        return (), 0
+    paths = []
     for path in folder.glob("*.json"):
-        info = os.lstat(path)
-        recorded = datetime.fromtimestamp(info.st_mtime, timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        with contextlib.suppress(OSError):
+            paths.append((os.lstat(path).st_mtime, path))
+    paths.sort(key=lambda item: (-item[0], item[1].name))
+    chosen = [item for n, item in enumerate(paths) if n < MAX_RELEASES or item[1].name[: -len(".json")] in named]
+    found = []
+    for mtime, path in chosen:
+        recorded = datetime.fromtimestamp(mtime, timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
         version = path.name[: -len(".json")]
         try:
             record = load_release_record(project, version, registry)
         except RobocoreError as error:
-            found.append((info.st_mtime, ReleaseView(version, recorded, problem=error.message)))
+            found.append(ReleaseView(version, recorded, problem=error.message))
             continue
         images = [(c, a, ref) for c, arches in sorted(record.components.items()) for a, ref in sorted(arches.items())]
         images += [("base", a, ref) for a, ref in sorted(record.base.items())]
-        found.append((info.st_mtime, ReleaseView(record.version, recorded, tuple(images))))
-    return tuple(view for _, view in sorted(found, key=lambda item: (-item[0], item[1].version)))
+        found.append(ReleaseView(record.version, recorded, tuple(images)))
+    return tuple(found), len(paths) - len(chosen)
 
 
 def look(fleet: FleetProject) -> FleetView:
     """One look at ``fleet``: the manager read once, the release records read again."""
     observed = observe(fleet)
     taken = now()
-    releases = release_views(fleet.project, fleet.fleet.registry_for(fleet.project.robot))
-    return fleet_view(fleet, status_rows(fleet, observed), observed, releases, taken)
+    rows = status_rows(fleet, observed)
+    named = frozenset(version for row in rows for version in (row.running, row.target))
+    releases, older = release_views(fleet.project, fleet.fleet.registry_for(fleet.project.robot), named)
+    return replace(fleet_view(fleet, rows, observed, releases, taken), older_releases=older)
 
 
 class Looks:

@@ -84,6 +84,7 @@ class FleetView:
     robots: tuple[RobotView, ...]
     waves: tuple[str, ...] = ()  # the waves' names in rollout order
     releases: tuple[ReleaseView, ...] = ()
+    older_releases: int = 0  # older release records the look did not read
     problem: str = ""  # why this look is an old one (the live page when the manager cannot be read)
 
 
