@@ -103,7 +103,8 @@ def _validate_fleet(options: Options, project: Project) -> None:
         raise ConfigError(problems)
     from robocore.config.loader import fleet_model_warnings, fleet_warnings
 
-    for warning in fleet_warnings(project.fleet_file, fleet.manager.as_host() if fleet.manager else None):
+    for warning in fleet_warnings(project.fleet_file, fleet.manager.as_host() if fleet.manager else None,
+                                  [robot.ros_domain_id for robot in fleet.robots], project.robot.ros_version):
         options.report.warn(warning.message, warning)
     users = {host.name: all(r.hosts[host.name].user is not None for r in fleet.robots if host.name in r.hosts)
              for host in project.robot.hosts}

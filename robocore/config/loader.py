@@ -291,12 +291,17 @@ def robot_warnings(path: Path, robot: Robot, project: Path | None = None) -> lis
     return sorted(dict.fromkeys(warnings), key=lambda p: p.line if p.line is not None else 0)
 
 
-def fleet_warnings(path: Path, manager: Host | None) -> list[Problem]:
-    """One warning per dangerous but allowed setting of fleet.yaml (its ``manager`` reached by plain TCP), each with
-    its line in ``path``, as :func:`robot_warnings` gives robot.yaml's."""
-    from robocore.config.risks import host_risks
+def fleet_warnings(path: Path, manager: Host | None, domains: Sequence[int | None] = (),
+                   ros_version: int = 2) -> list[Problem]:
+    """One warning per dangerous but allowed setting of fleet.yaml (its ``manager`` reached by plain TCP, a robot's
+    own ROS 2 domain in the ephemeral port range: ``domains`` are the robots' ``ros_domain_id`` in file order), each
+    with its line in ``path``, as :func:`robot_warnings` gives robot.yaml's."""
+    from robocore.config.risks import EPHEMERAL_SAFE_DOMAIN, ephemeral_domain, host_risks
 
     found = [(("manager", *key), message) for key, message in host_risks(manager)] if manager is not None else []
+    if ros_version == 2:
+        found += [(("robots", index, "ros_domain_id"), ephemeral_domain(domain)) for index, domain in enumerate(domains)
+                  if domain is not None and domain > EPHEMERAL_SAFE_DOMAIN]
     return located_warnings(path, found)
 
 

@@ -44,10 +44,7 @@ def risky_settings(robot: Robot, project: Path | None = None) -> list[Found]:
             if message:
                 found.append(((*base, "repositories", i, "url"), message))
     if robot.ros_version == 2 and robot.ros_domain_id > EPHEMERAL_SAFE_DOMAIN:
-        found.append((("ros_domain_id",), f"ROS domain {robot.ros_domain_id} binds its DDS ports from "
-                       f"{7400 + 250 * robot.ros_domain_id}, in Linux's ephemeral range (32768 and up), where any "
-                       f"program's outgoing socket may take a port first and a node or discovery server then fails "
-                       f"to start: use a domain of 0-{EPHEMERAL_SAFE_DOMAIN}"))
+        found.append((("ros_domain_id",), ephemeral_domain(robot.ros_domain_id)))
     for index, host in enumerate(robot.hosts):
         found += [(("hosts", index, *key), message) for key, message in host_risks(host)]
     for index, pkg in enumerate(robot.common_packages):
@@ -56,6 +53,13 @@ def risky_settings(robot: Robot, project: Path | None = None) -> list[Found]:
         if message:
             found.append((("common_packages", index, "repo"), message))
     return found
+
+
+def ephemeral_domain(domain: int) -> str:
+    """The warning for a ROS 2 domain above :data:`EPHEMERAL_SAFE_DOMAIN` (robot.yaml's, or a fleet robot's own)."""
+    return (f"ROS domain {domain} binds its DDS ports from {7400 + 250 * domain}, in Linux's ephemeral range (32768 "
+            f"and up), where any program's outgoing socket may take a port first and a node or discovery server then "
+            f"fails to start: use a domain of 0-{EPHEMERAL_SAFE_DOMAIN}")
 
 
 def host_risks(host: Host) -> Iterator[Found]:

@@ -211,3 +211,21 @@ def test_negative_control_a_real_fleet_status_asks_the_manager(tmp_path: Path, c
     monkeypatch.chdir(root)
     code, _, _ = run_main(["-p", str(root), "fleet", "status"], capsys)
     assert contacted and code != 0
+
+
+def test_a_robots_own_domain_in_the_ephemeral_range_is_one_warning_line(tmp_path: Path,
+                                                                         capsys: pytest.CaptureFixture[str],
+                                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """robot.yaml's ros_domain_id above 101 is a warning (its DDS ports fall among Linux's ephemeral ports); a
+    fleet robot's own ``ros_domain_id`` is the same risk and gets the same line, on fleet.yaml's line."""
+    text = fleet().replace("  - name: r2\n", "  - name: r2\n    ros_domain_id: 150\n")
+    assert "ros_domain_id: 150" in text
+    code, _, said = validate(tmp_path, text, capsys, monkeypatch)
+    assert code == 0, said
+    warnings = [line for line in said.splitlines() if "warning:" in line]
+    assert len(warnings) == 1, warnings
+    assert "robots[1].ros_domain_id: warning: ROS domain 150 binds its DDS ports from 44900" in warnings[0]
+    assert warnings[0].startswith("fleet.yaml:")
+    # negative control: a domain of 0-101 warns nothing
+    code, _, said = validate(tmp_path, text.replace("150", "101"), capsys, monkeypatch)
+    assert code == 0 and "warning:" not in said, said

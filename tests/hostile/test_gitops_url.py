@@ -26,7 +26,9 @@ def refusal(gitops: str) -> list[str]:
     ("http://git.example.org/team/fleet.git", "http://"),  # the cases
     ("-oProxyCommand=x@git.example.org:team/fleet.git", "option"),
     ("git@git.example.org:-oProxyCommand=x", "must be a git URL"),
-    ("https://ghp_SECRETTOKEN@git.example.org/fleet.git", None),  # a token as the user: refused? no: printed? no
+    ("https://ghp_SECRETTOKEN@git.example.org/fleet.git", "names a user"),  # a token as the user: export would
+    # commit it
+    ("ssh://git@git.example.org/team/fleet.git", None),  # ssh's login name stays (keys authenticate)
     ("git://git.example.org/fleet.git", "git URL; a GitOps controller clones"),  # variants
     ("file:///srv/fleet.git", "file URL"),
     ("ext::sh -c touch% /tmp/x", "ext URL"),
@@ -34,12 +36,12 @@ def refusal(gitops: str) -> list[str]:
 ])
 def test_gitops_repo_takes_robot_yamls_grammar(url: str, says: str | None) -> None:
     text = f"gitops: {{repo: {url!r}}}\n"
-    if says is None:  # a user name alone is allowed (ssh keys, a credential helper), and printed nowhere
+    if says is None:  # ssh's user name is allowed (ssh keys authenticate)
         assert parse_fleet_text(FLEET + text, ROBOT).gitops is not None
         return
     lines = refusal(text)
     assert len(lines) == 1 and lines[0].startswith("fleet.yaml:4: gitops.repo: "), lines
-    assert says in lines[0], lines
+    assert says in lines[0] and "SECRETTOKEN" not in lines[0], lines
 
 
 def test_http_only_when_opted_in() -> None:
