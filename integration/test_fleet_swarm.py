@@ -614,8 +614,8 @@ def test_registry_down_during_a_wave_sends_its_robots_back_and_touches_no_later_
     assert (rows["r1"]["running"], rows["r1"]["target"], rows["r1"]["health"]) == ("v2", "v2", "rolled-back"), rows
     assert {r: rows[r] for r in later} == {r: rows_before[r] for r in later}, (rows_before, rows)  # as they were
     assert service_specs(fleets, SOLO, later) == before  # no later wave touched
-    # without a healthy release: not running its target, or its last gate failed (r4's verdict may still be the
-    # "pending" of the v2 rollout it missed while cut off: a reconnected robot is not gated again yet)
+    # without a healthy release: not running its target, or its last gate failed (r4, cut off during v2's rollout,
+    # was gated by the first `fleet status` that found it back)
     left = [r for r, row in rows.items() if row["running"] != row["target"] or row["health"] == "failed"]
     assert left == [], rows
     pull_with_login(canary, fleets.hosts, v4, fleets.registry)  # the control: with the registry back, v4 pulls

@@ -14,7 +14,7 @@ from fleet_world import TWO_ROBOTS, Clock
 
 from robocore.adapters import swarm
 from robocore.commands import fleet_gate_record, fleet_page, fleet_rollout
-from robocore.commands.fleet_rollout import FAILED, HEALTHY, Change, Gate
+from robocore.commands.fleet_gate import FAILED, HEALTHY, Change, Gate
 from robocore.commands.fleet_status import Observed, status_rows
 from robocore.commands.fleet_swarm import FleetProject
 from robocore.commands.support.context import Options
