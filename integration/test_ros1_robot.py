@@ -4,6 +4,8 @@
   ``demo_msgs/Greeting`` through the ROS master, ``status`` lists both nodes through the master;
   a probe pointed at a port with no master hears nothing (negative control) while the same probe
   pointed at the robot's master hears the talker;
+- the fleet's update-lock probe for ROS 1, run as its Swarm task runs it, hears a node's latched ``true`` on
+  ``/robocore/update_lock`` through the master (locked), a latched ``false`` (free), and no publisher (free, at once);
 - the master stopped: ``status`` says so, connected nodes keep talking, a new node hears nothing;
   ``run`` starts the master and restarts the nodes (they register only at start), and the graph is
   whole again; the master restarted behind robocore's back (``docker restart``): ``status`` names the
@@ -28,6 +30,7 @@ import shutil
 import statistics
 import tempfile
 import time
+import xmlrpc.client
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -143,6 +146,53 @@ def test_cpp_talker_heard_by_rospy_listener_through_the_master(noetic: Path, run
     # the live container's shell has ROS 1 sourced
     topics = run_robocore(noetic, "connect", "--component", "talker", "--cmd", "rostopic list")
     assert "/chatter" in topics.stdout, topics.stdout
+
+
+def _lock_probe(docker_client: Any, tracked: list[Any], master_uri: str) -> tuple[int, dict[str, Any]]:
+    """robocore's ROS 1 update-lock probe (:mod:`robocore.plan.fleet_lock`), run in the base image as its Swarm task
+    runs it, against ``master_uri``: its exit code and its answer."""
+    from robocore import resources
+    from robocore.plan import fleet_lock
+
+    script = resources.read("fleet-lock-probe-ros1").decode()
+    container = docker_client.containers.run(
+        f"{NAME}-base:latest", ["python3", "-c", script, "--topic", fleet_lock.LOCK_TOPIC, "--wait", "5"],
+        environment={"ROS_MASTER_URI": master_uri, "ROS_IP": "127.0.0.1"}, network_mode="host", detach=True)
+    tracked.append(container)
+    code = container.wait(timeout=60)["StatusCode"]
+    lines = container.logs(stderr=False).decode(errors="replace").strip().splitlines()
+    assert lines, container.logs().decode(errors="replace")
+    return code, dict(json.loads(lines[-1]))
+
+
+def test_the_update_lock_probe_hears_a_latched_lock_through_the_master(noetic: Path, run_robocore: RobocoreCli,
+                                                                      docker_client: Any,
+                                                                      tracked_containers: list[Any]) -> None:
+    """A node of the robot holds its update lock (``/robocore/update_lock``, std_msgs/Bool, latched): the probe
+    ``fleet rollout`` runs on the robot before it touches it asks the master for the topic's publishers, subscribes
+    with rospy and hears ``true`` (locked, exit 1); a latched ``false`` is no lock (exit 0); with no publisher it
+    answers at once (the control: "locked" comes from what it heard)."""
+    from robocore.plan import fleet_lock
+
+    run_robocore(noetic, "run", "--quiet")
+    master = _master_uri(noetic)
+    assert _lock_probe(docker_client, tracked_containers, master) == (
+        0, {"locked": False, "publishers": 0, "heard": 0, "error": ""})
+    for value, code in (("true", 1), ("false", 0)):
+        publisher = docker_client.containers.run(
+            f"{NAME}-base:latest", ["rostopic", "pub", "-l", fleet_lock.LOCK_TOPIC, "std_msgs/Bool", f"data: {value}"],
+            environment={"ROS_MASTER_URI": master, "ROS_IP": "127.0.0.1"}, network_mode="host", detach=True)
+        tracked_containers.append(publisher)
+        try:
+            def registered() -> bool:
+                answer, _, state = xmlrpc.client.ServerProxy(master).getSystemState("/it")
+                return answer == 1 and any(topic == fleet_lock.LOCK_TOPIC for topic, _ in state[0])
+
+            assert wait_for(registered, 30, 0.2), publisher.logs().decode(errors="replace")
+            answer = _lock_probe(docker_client, tracked_containers, master)
+            assert answer == (code, {"locked": value == "true", "publishers": 1, "heard": 1, "error": ""}), answer
+        finally:
+            publisher.stop(timeout=10)  # SIGTERM: rostopic unregisters from the master
 
 
 def test_stopped_master_keeps_connections_and_run_brings_the_graph_back(noetic: Path, run_robocore: RobocoreCli,
