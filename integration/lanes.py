@@ -31,6 +31,7 @@ import fcntl
 import itertools
 import os
 import random
+import socket
 import tempfile
 import time
 from collections.abc import Iterator
@@ -118,15 +119,31 @@ def domain_ids() -> range:
 
 #: This lane's next domain ID, as a count from a random start (so that two sessions on one machine seldom begin alike).
 _domain_turn = itertools.count(random.randrange(1000))
+#: The domains this lane handed out, held as the pytest plugin's runs hold theirs (its loopback ports): held until
+#: the lane hands the same domain out again, a whole turn of its IDs later.
+_domain_holds: dict[int, socket.socket] = {}
 
 
 def new_domain() -> int:
     """A ROS domain ID of :func:`domain_ids` for one deployment: the IDs are handed out in turn, so two deployments
-    alive at once in one lane (a module's robot and a test's own copy) never share one. Robots on host networking and
-    host IPC that share a domain share Fast DDS's shared-memory ports in /dev/shm and its UDP ports, and a restart
-    on one may then be timed against the other's traffic."""
+    alive at once in one lane (a module's robot and a test's own copy) never share one, and each is held the way
+    the pytest plugin's runs hold theirs (:func:`robocore.testing.bringup.hold_domain`), so that no run of the
+    plugin, in this lane or another, is handed it meanwhile (seen: a module's robot of the plugin and a test's own
+    copy both in domain 32). Robots on host networking and host IPC that share a domain share Fast DDS's UDP ports
+    and its shared-memory ports in /dev/shm, and a restart on one may then be timed against the other's traffic."""
+    from robocore.testing.bringup import hold_domain
+
     ids = domain_ids()
-    return ids[next(_domain_turn) % len(ids)]
+    for _ in range(len(ids)):
+        domain = ids[next(_domain_turn) % len(ids)]
+        previous = _domain_holds.pop(domain, None)
+        if previous is not None:
+            previous.close()
+        holder = hold_domain(domain)
+        if holder is not None:
+            _domain_holds[domain] = holder
+            return domain
+    raise RuntimeError(f"every ROS domain of this lane ({ids.start}-{ids.stop - 1}) is held by a test run here")
 
 
 def ports() -> range:

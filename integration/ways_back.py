@@ -18,6 +18,7 @@ from typing import Any
 import ci_times
 import lanes
 
+from robocore.plan import naming
 from robocore.plan.starts import docker_epoch
 
 #: What the template's listeners log for each greeting (rclpy and rospy alike), before the talker's number.
@@ -79,7 +80,17 @@ class Pair:
                 if new:
                     return new[0] - start
             time.sleep(0.1)
-        raise AssertionError(f"the talker was not heard again within {timeout} s: {self.greetings()[-5:]}")
+        raise AssertionError(f"the talker was not heard again within {timeout} s: {self.greetings()[-5:]}; "
+                             f"{self.talker_state()}; {others_running(self.client, self.talker_name)}")
+
+    def talker_state(self) -> str:
+        """What Docker says of the talker now, and the end of its log: when a way back is not heard, whether the
+        talker runs (and since when) or failed at its start."""
+        talker = self.talker()
+        state = talker.attrs["State"]
+        tail = talker.logs(tail=5).decode(errors="replace").strip().replace("\n", " | ")
+        return (f"talker {state.get('Status')} since {state.get('StartedAt')} (restarts "
+                f"{talker.attrs.get('RestartCount')}, last exit {state.get('ExitCode')}), its log ends {tail[-600:]!r}")
 
     def timed_rounds(self, way: Callable[[], None], name: str, rounds: int, spacing: float = 0.0) -> list[float]:
         """``rounds`` times: the talker brought back ``way``, then seconds from its start to heard. ``spacing``:
@@ -95,12 +106,30 @@ class Pair:
             mark = len(self.greetings())
             before = ci_times.busy_jiffies()
             way()
-            seconds.append(self.start_to_heard(mark, previous))
+            try:
+                seconds.append(self.start_to_heard(mark, previous))
+            except AssertionError as failed:
+                done = " ".join(f"{t:.2f} (busy {b} %)" for t, b in zip(seconds, busy, strict=True)) or "none"
+                raise AssertionError(f"{name}, round {len(seconds) + 1} of {rounds} (rounds before: {done}; machine "
+                                     f"busy {busy_share(before, ci_times.busy_jiffies())} % since): {failed}") from None
             busy.append(busy_share(before, ci_times.busy_jiffies()))
         # the machine's busy CPU over each round (all cores, every process): what to look at when a round is slow
         print(f"FIGURE {name}: start to heard s: median {statistics.median(seconds):.2f}, "
               f"rounds {' '.join(f'{t:.2f}' for t in seconds)}; machine busy % {' '.join(busy)}")
         return seconds
+
+
+def others_running(client: Any, talker: str) -> str:
+    """The other robocore containers running on this machine's daemon (another lane's robots, this module's other
+    copy) with their ROS domains: robots of one domain on one host share its ports."""
+    project = talker.rsplit("-", 1)[0]
+    seen = []
+    for container in client.containers.list(filters={"label": naming.LABEL_ROLE}, ignore_removed=True):
+        if container.name.startswith(project + "-"):
+            continue
+        env = dict(str(item).partition("=")[::2] for item in (container.attrs.get("Config") or {}).get("Env") or [])
+        seen.append(f"{container.name} (domain {env.get('ROS_DOMAIN_ID', '-')})")
+    return f"also running here: {', '.join(sorted(seen)) or 'nothing of robocore'}"
 
 
 def busy_share(before: tuple[int, int] | None, after: tuple[int, int] | None) -> str:

@@ -79,6 +79,37 @@ def test_domains_are_reserved_once_per_machine() -> None:
         holder.close()
 
 
+class _Running:
+    """The local daemon's robocore containers, as ``domains_in_use`` reads them."""
+
+    def __init__(self, envs: list[list[str]]) -> None:
+        self.containers = self
+        self._envs = envs
+
+    def list(self, **_: object) -> list[object]:
+        return [type("C", (), {"attrs": {"Config": {"Env": env}}})() for env in self._envs]
+
+
+def test_a_domain_a_robot_runs_here_in_is_never_handed_out(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A robot deployed here (a developer's, another suite's) holds no reservation: its containers' ROS_DOMAIN_ID
+    keeps the domain from every run (two robots of one domain on one host share its ports)."""
+    monkeypatch.setattr(bringup, "DOMAINS", range(1, 4))
+    running = _Running([["ROS_DOMAIN_ID=1", "PATH=/usr/bin"], ["ROS_DOMAIN_ID=3"], ["ROS_DOMAIN_ID=x"], []])
+    assert bringup.domains_in_use(running) == {1, 3}
+    for _ in range(5):
+        domain, holder = bringup.reserve_domain(running)
+        holder.close()
+        assert domain == 2
+    with pytest.raises(bringup.BringUpError, match="used by a robot running here"):
+        held = bringup.hold_domain(2)
+        try:
+            bringup.reserve_domain(running)
+        finally:
+            assert held is not None
+            held.close()
+    assert bringup.reserve_domain()[0] in {1, 2, 3}  # the control: without the daemon's word, any domain
+
+
 def test_install_trees_of_another_python_are_named(tmp_path: Path) -> None:
     site = tmp_path / "my_msgs" / "lib" / "python3.99" / "site-packages"
     site.mkdir(parents=True)
