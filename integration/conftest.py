@@ -91,8 +91,8 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 #: The modules with quiet tests (:func:`lanes.hold_module`).
 _TIMED_MODULES: set[str] = set()
 #: What this lane holds for the module under way, taken at its first test's set-up, let go of after its last
-#: teardown, last taken first: the arm64 project's lock while one of :data:`lanes.ARM64_PROJECT` runs, then
-#: :func:`lanes.hold_module`'s (descriptors).
+#: teardown, last taken first: :func:`lanes.hold_alone`'s, the arm64 project's lock while one of
+#: :data:`lanes.ARM64_PROJECT` runs, then :func:`lanes.hold_module`'s (descriptors).
 _MODULE_HOLDS: list[int] = []
 #: The module :data:`_MODULE_HOLDS` is for.
 _HELD_FOR: list[Path] = []
@@ -101,14 +101,16 @@ _HELD_FOR: list[Path] = []
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_setup(item: pytest.Item) -> Iterator[None]:
     """Every test's set-up holds the machine shared: it waits while another lane runs a quiet test's body. The first
-    test of a module first takes what the module holds to its end (before the machine's lock): the arm64 project
-    for a module of :data:`lanes.ARM64_PROJECT`, then :func:`lanes.hold_module`'s lock (a module with quiet tests
-    and the Swarm suite never run side by side). The seconds each phase waited go to the time table
+    test of a module first takes what the module holds to its end (before the machine's lock): its share of the
+    machine (:func:`lanes.hold_alone`: a module of :data:`lanes.ALONE` runs with no other), the arm64 project for a
+    module of :data:`lanes.ARM64_PROJECT`, then :func:`lanes.hold_module`'s lock (a module with quiet tests and the
+    Swarm suite never run side by side). The seconds each phase waited go to the time table
     (:func:`ci_times.held_back`): pytest counts them in the phase."""
     asked = time.monotonic()
     if [item.path] != _HELD_FOR:
         _let_go_of_module()
         _HELD_FOR.append(item.path)
+        _MODULE_HOLDS.append(lanes.hold_alone(item.path.name))
         if item.path.name in lanes.ARM64_PROJECT:
             _MODULE_HOLDS.append(lanes.hold_project("robocore-it-arm64"))
         held = lanes.hold_module(item.path.name, item.path.name in _TIMED_MODULES)

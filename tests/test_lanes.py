@@ -22,6 +22,7 @@ def private_locks(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(lanes, "LOCK", tmp_path / "quiet.lock")
     monkeypatch.setattr(lanes, "TURNSTILE", tmp_path / "turnstile.lock")
     monkeypatch.setattr(lanes, "MODULES_LOCK", tmp_path / "modules.lock")
+    monkeypatch.setattr(lanes, "MACHINE_LOCK", tmp_path / "machine.lock")
 
 
 def _phases(log: Path, until: float, delay: float) -> None:
@@ -240,3 +241,39 @@ def test_a_lanes_domain_is_held_as_the_plugins_runs_hold_theirs(monkeypatch: pyt
         elsewhere.close()
         for holder in lanes._domain_holds.values():
             holder.close()
+
+
+def _alone_module(module: str, log: Path, seconds: float) -> None:
+    fd = lanes.hold_alone(module)
+    start = time.monotonic()
+    time.sleep(seconds)
+    with log.open("a") as out:
+        out.write(f"{start} {time.monotonic()}\n")
+    lanes.let_go(fd)
+
+
+def test_a_module_that_runs_alone_waits_for_every_other_and_holds_them_off(tmp_path: Path) -> None:
+    alone = next(iter(lanes.ALONE))
+    first = FORK.Process(target=_alone_module, args=("test_plain.py", tmp_path / "a.log", 0.5))
+    first.start()
+    time.sleep(0.15)
+    solo = FORK.Process(target=_alone_module, args=(alone, tmp_path / "solo.log", 0.5))
+    solo.start()
+    time.sleep(0.15)
+    later = FORK.Process(target=_alone_module, args=("test_other.py", tmp_path / "b.log", 0.3))
+    later.start()
+    for proc in (first, solo, later):
+        proc.join(10)
+    (s_start, s_end), = _spans(tmp_path / "solo.log")
+    others = _spans(tmp_path / "a.log") + _spans(tmp_path / "b.log")
+    assert all(end <= s_start or start >= s_end for start, end in others), (others, (s_start, s_end))
+    # negative control: two ordinary modules run side by side
+    a = FORK.Process(target=_alone_module, args=("test_x.py", tmp_path / "x.log", 0.4))
+    b = FORK.Process(target=_alone_module, args=("test_y.py", tmp_path / "y.log", 0.4))
+    a.start()
+    b.start()
+    a.join(10)
+    b.join(10)
+    (x_start, x_end), = _spans(tmp_path / "x.log")
+    (y_start, y_end), = _spans(tmp_path / "y.log")
+    assert x_start < y_end and y_start < x_end
