@@ -135,11 +135,11 @@ _domain_holds: dict[int, socket.socket] = {}
 def new_domain() -> int:
     """A ROS domain ID of :func:`domain_ids` for one deployment: the IDs are handed out in turn, so two deployments
     alive at once in one lane (a module's robot and a test's own copy) never share one, and each is held the way
-    the pytest plugin's runs hold theirs (:func:`robocore.testing.bringup.hold_domain`), so that no run of the
+    the pytest plugin's runs hold theirs (:func:`robocore.testing.domains.hold_domain`), so that no run of the
     plugin, in this lane or another, is handed it meanwhile (seen: a module's robot of the plugin and a test's own
     copy both in domain 32). Robots on host networking and host IPC that share a domain share Fast DDS's UDP ports
     and its shared-memory ports in /dev/shm, and a restart on one may then be timed against the other's traffic."""
-    from robocore.testing.bringup import hold_domain
+    from robocore.testing.domains import hold_domain
 
     ids = domain_ids()
     for _ in range(len(ids)):

@@ -222,20 +222,20 @@ def test_a_busy_module_and_modules_with_quiet_tests_never_run_side_by_side(tmp_p
 def test_a_lanes_domain_is_held_as_the_plugins_runs_hold_theirs(monkeypatch: pytest.MonkeyPatch) -> None:
     """A domain a lane hands out is held machine-wide, so that no pytest-plugin run (this lane's or another's) is
     handed it; a domain held elsewhere is skipped; a turn later the lane lets its own hold go and takes it again."""
-    from robocore.testing import bringup
+    from robocore.testing import bringup, domains
 
     monkeypatch.setattr(lanes, "domain_ids", lambda: range(40, 43))
     monkeypatch.setattr(lanes, "_domain_holds", {})
     monkeypatch.setattr(lanes, "_domain_turn", iter([0, 1, 2, 3]))
-    elsewhere = bringup.hold_domain(41)
+    elsewhere = domains.hold_domain(41)
     assert elsewhere is not None
     try:
         first, second = lanes.new_domain(), lanes.new_domain()
         assert (first, second) == (40, 42)  # 41 is held by another run
-        assert bringup.hold_domain(40) is None and bringup.hold_domain(42) is None
-        monkeypatch.setattr(bringup, "DOMAINS", range(40, 43))
+        assert domains.hold_domain(40) is None and domains.hold_domain(42) is None
+        monkeypatch.setattr(domains, "DOMAINS", range(40, 43))
         with pytest.raises(bringup.BringUpError):
-            bringup.reserve_domain()
+            domains.reserve_domain()
         assert lanes.new_domain() == 40  # a turn later: its own hold let go of and taken again
     finally:
         elsewhere.close()

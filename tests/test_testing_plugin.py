@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from robocore.testing import bringup, ros_env
+from robocore.testing import bringup, domains, ros_env
 
 
 def test_the_plugin_is_registered_and_documents_its_option(pytester: pytest.Pytester) -> None:
@@ -68,11 +68,11 @@ def test_a_live_owner_is_never_reaped_and_a_dead_one_is() -> None:
 
 
 def test_domains_are_reserved_once_per_machine() -> None:
-    first, holder = bringup.reserve_domain()
+    first, holder = domains.reserve_domain()
     try:
         with socket.socket() as probe, pytest.raises(OSError):
-            probe.bind(("127.0.0.1", bringup.DOMAIN_LOCK_PORT + first))
-        second, other = bringup.reserve_domain()
+            probe.bind(("127.0.0.1", domains.DOMAIN_LOCK_PORT + first))
+        second, other = domains.reserve_domain()
         other.close()
         assert second != first
     finally:
@@ -93,21 +93,21 @@ class _Running:
 def test_a_domain_a_robot_runs_here_in_is_never_handed_out(monkeypatch: pytest.MonkeyPatch) -> None:
     """A robot deployed here (a developer's, another suite's) holds no reservation: its containers' ROS_DOMAIN_ID
     keeps the domain from every run (two robots of one domain on one host share its ports)."""
-    monkeypatch.setattr(bringup, "DOMAINS", range(1, 4))
+    monkeypatch.setattr(domains, "DOMAINS", range(1, 4))
     running = _Running([["ROS_DOMAIN_ID=1", "PATH=/usr/bin"], ["ROS_DOMAIN_ID=3"], ["ROS_DOMAIN_ID=x"], []])
-    assert bringup.domains_in_use(running) == {1, 3}
+    assert domains.domains_in_use(running) == {1, 3}
     for _ in range(5):
-        domain, holder = bringup.reserve_domain(running)
+        domain, holder = domains.reserve_domain(running)
         holder.close()
         assert domain == 2
     with pytest.raises(bringup.BringUpError, match="used by a robot running here"):
-        held = bringup.hold_domain(2)
+        held = domains.hold_domain(2)
         try:
-            bringup.reserve_domain(running)
+            domains.reserve_domain(running)
         finally:
             assert held is not None
             held.close()
-    assert bringup.reserve_domain()[0] in {1, 2, 3}  # the control: without the daemon's word, any domain
+    assert domains.reserve_domain()[0] in {1, 2, 3}  # the control: without the daemon's word, any domain
 
 
 def test_install_trees_of_another_python_are_named(tmp_path: Path) -> None:

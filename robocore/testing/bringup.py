@@ -14,7 +14,6 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
-import random
 import secrets
 import socket
 import time
@@ -30,6 +29,8 @@ from robocore.plan.containers import ContainerSpec
 from robocore.plan.testrun import TestRun
 from robocore.project import Project
 from robocore.testing import ros_env
+from robocore.testing.domains import reserve_domain
+from robocore.testing.errors import BringUpError
 from robocore.testing.faults import Faults
 from robocore.testing.graph import Graph
 
@@ -41,20 +42,11 @@ STOP_TIMEOUT = 5
 START_GRACE = 1.0
 #: Log lines of each container shown when a component dies at start or a test fails.
 LOG_TAIL = 20
-#: ROS domains handed out to runs (safe on Linux), and the loopback TCP ports that reserve them.
-DOMAINS = range(1, 102)
-DOMAIN_LOCK_PORT = 22000
 
 
 #: What ``robot.graph`` says on a ROS 1 robot: the test process's node is an rclpy (ROS 2) node.
 ROS1_GRAPH = ("robot.graph joins ROS 2 graphs only, and {distro} is ROS 1: use robot.wait_for_log, robot.logs "
               "or robot.exec (e.g. ['rostopic', 'echo', '-n', '1', '/chatter'])")
-
-
-class BringUpError(RobocoreError):
-    """The robot could not be brought up for tests (build, Docker, a component dying at start)."""
-
-    exit_code = 6
 
 
 def _boot_id() -> str:
@@ -119,55 +111,6 @@ def reap_leftovers(client: Any) -> int:
             with contextlib.suppress(NotFound, APIError):
                 volume.remove(force=True)
     return removed
-
-
-def hold_domain(domain: int) -> socket.socket | None:
-    """The socket that holds ROS domain ``domain`` for this process until it is closed (a listening loopback port,
-    :data:`DOMAIN_LOCK_PORT` + ``domain``: the kernel lets it go when the process ends, however it ends), or None
-    when another run on this machine holds it. Whatever else deploys robots on this machine for tests can hold
-    their domains the same way, so that no run is handed one of them."""
-    holder = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    try:
-        holder.bind(("127.0.0.1", DOMAIN_LOCK_PORT + domain))
-        holder.listen(1)
-    except OSError:
-        holder.close()
-        return None
-    return holder
-
-
-def domains_in_use(client: Any) -> set[int]:
-    """The ROS domains of the robocore containers running on this machine's daemon (``ROS_DOMAIN_ID`` of each):
-    a robot deployed here, a developer's or another suite's, that holds no reservation. Two robots of one domain on
-    one host share its DDS ports, and on host networking and IPC its shared-memory ports too: one restarting can go
-    unheard by the other for seconds."""
-    from docker.errors import DockerException
-
-    found: set[int] = set()
-    try:
-        running = client.containers.list(filters={"label": naming.LABEL_ROLE}, ignore_removed=True)
-    except DockerException:
-        return found
-    for container in running:
-        for item in (container.attrs.get("Config") or {}).get("Env") or []:
-            name, _, value = str(item).partition("=")
-            if name == "ROS_DOMAIN_ID" and value.isdigit():
-                found.add(int(value))
-    return found
-
-
-def reserve_domain(client: Any = None) -> tuple[int, socket.socket]:
-    """A ROS domain no other run on this machine holds and, given the local daemon's ``client``, no robocore
-    container running on it uses (:func:`domains_in_use`), and the socket that holds it until closed."""
-    taken = domains_in_use(client) if client is not None else set()
-    candidates = [domain for domain in DOMAINS if domain not in taken]
-    random.shuffle(candidates)
-    for domain in candidates:
-        holder = hold_domain(domain)
-        if holder is not None:
-            return domain, holder
-    raise BringUpError(f"every ROS domain {DOMAINS.start}-{DOMAINS.stop - 1} is held by another test run or used by "
-                       "a robot running here")
 
 
 @contextlib.contextmanager
