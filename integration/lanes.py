@@ -81,7 +81,7 @@ BUSY = frozenset({"test_fleet_swarm.py"})
 #: and more, 18 % busy over the module): something of another module's robots reaches them, not the CPU.
 ALONE = frozenset({"test_shm_kills.py"})
 #: Held shared by every module and exclusively by a module of :data:`ALONE`, from its first test's set-up to its
-#: last test's teardown (:func:`hold_module`), before any other lock.
+#: last test's teardown (:func:`hold_alone`), before any other lock.
 MACHINE_LOCK = Path(tempfile.gettempdir()) / f"robocore-it-alone-modules-{os.getuid()}.lock"
 #: Held shared by a module with quiet tests and exclusively by a module of :data:`BUSY`, each from its first test's
 #: set-up to its last test's teardown (:func:`hold_module`).
@@ -283,7 +283,7 @@ def hold_module(module: str, timed: bool) -> int | None:
 
 
 def let_go(fd: int) -> None:
-    """Let go of a lock :func:`hold_project` took."""
+    """Let go of a lock :func:`hold_project`, :func:`hold_alone` or :func:`hold_module` took."""
     os.close(fd)
 
 

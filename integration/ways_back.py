@@ -20,6 +20,7 @@ import lanes
 
 from robocore.plan import naming
 from robocore.plan.starts import docker_epoch
+from robocore.testing.domains import domain_of
 
 #: What the template's listeners log for each greeting (rclpy and rospy alike), before the talker's number.
 HEARD = "I heard: hello from talker #"
@@ -127,8 +128,8 @@ def others_running(client: Any, talker: str) -> str:
     for container in client.containers.list(filters={"label": naming.LABEL_ROLE}, ignore_removed=True):
         if container.name.startswith(project + "-"):
             continue
-        env = dict(str(item).partition("=")[::2] for item in (container.attrs.get("Config") or {}).get("Env") or [])
-        seen.append(f"{container.name} (domain {env.get('ROS_DOMAIN_ID', '-')})")
+        domain = domain_of(container)
+        seen.append(f"{container.name} (domain {'-' if domain is None else domain})")
     return f"also running here: {', '.join(sorted(seen)) or 'nothing of robocore'}"
 
 

@@ -83,7 +83,7 @@ def _components(robot: str, observed: Observed) -> tuple[ComponentView, ...]:
 
 
 def fleet_view(fleet: FleetProject, rows: list[FleetRobotRow], observed: Observed,
-               releases: tuple[ReleaseView, ...], taken: str) -> FleetView:
+               releases: tuple[ReleaseView, ...], taken: str, older_releases: int = 0) -> FleetView:
     """The view of one look: ``fleet status``'s ``rows`` with each robot's labels and wave from fleet.yaml and
     its components from ``observed``, and the release records. Only names, labels, releases, states, reasons and
     the ROS names the last gate saw are taken: a service's environment, a host's address or a registry's
@@ -97,7 +97,7 @@ def fleet_view(fleet: FleetProject, rows: list[FleetRobotRow], observed: Observe
                              seen=row.seen)
                    for row in rows)
     return FleetView(project=fleet.name, taken=taken, robots=robots, waves=tuple(w.name for w in waves),
-                     releases=releases)
+                     releases=releases, older_releases=older_releases)
 
 
 #: The release records a look reads at most: the newest, and those a robot runs or is moving to (a look is taken
@@ -116,16 +116,15 @@ def release_views(project: Project, registry: str | None,
     folder = project.releases_dir
     if not folder.is_dir() or folder.is_symlink():
         return (), 0
-    paths = []
+    records = []  # (mtime, version)
     for path in folder.glob("*.json"):
         with contextlib.suppress(OSError):
-            paths.append((os.lstat(path).st_mtime, path))
-    paths.sort(key=lambda item: (-item[0], item[1].name))
-    chosen = [item for n, item in enumerate(paths) if n < MAX_RELEASES or item[1].name[: -len(".json")] in named]
+            records.append((os.lstat(path).st_mtime, path.name[: -len(".json")]))
+    records.sort(key=lambda item: (-item[0], item[1]))
+    chosen = [item for n, item in enumerate(records) if n < MAX_RELEASES or item[1] in named]
     found = []
-    for mtime, path in chosen:
+    for mtime, version in chosen:
         recorded = datetime.fromtimestamp(mtime, timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
-        version = path.name[: -len(".json")]
         try:
             record = load_release_record(project, version, registry)
         except RobocoreError as error:
@@ -134,7 +133,7 @@ def release_views(project: Project, registry: str | None,
         images = [(c, a, ref) for c, arches in sorted(record.components.items()) for a, ref in sorted(arches.items())]
         images += [("base", a, ref) for a, ref in sorted(record.base.items())]
         found.append(ReleaseView(record.version, recorded, tuple(images)))
-    return tuple(found), len(paths) - len(chosen)
+    return tuple(found), len(records) - len(chosen)
 
 
 def look(fleet: FleetProject) -> FleetView:
@@ -144,7 +143,7 @@ def look(fleet: FleetProject) -> FleetView:
     rows = status_rows(fleet, observed)
     named = frozenset(version for row in rows for version in (row.running, row.target))
     releases, older = release_views(fleet.project, fleet.fleet.registry_for(fleet.project.robot), named)
-    return replace(fleet_view(fleet, rows, observed, releases, taken), older_releases=older)
+    return fleet_view(fleet, rows, observed, releases, taken, older)
 
 
 class Looks:

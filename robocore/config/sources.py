@@ -91,8 +91,9 @@ def gitops_url(value: str, allow: str | None = None) -> str:
     http only when ``allow`` is ``http`` (never git://, file:// or ext::, which the controller cannot or must not
     use); ValueError that never shows the URL's userinfo."""
     protocol = git_protocol(value)
-    shown_url = shown(without_userinfo(value))
-    if protocol in ("https", "http") and without_userinfo(value) != value:
+    bare = without_userinfo(value)
+    shown_url = shown(bare)
+    if protocol in ("https", "http") and bare != value:
         # a user in an https URL is often a token (GitHub, GitLab take one there), and this URL is written into the
         # files export commits; the controllers take https credentials from a Secret of their own
         return _refuse(f"{shown_url} names a user: the URL goes into the exported files, which are committed; "

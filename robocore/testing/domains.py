@@ -43,17 +43,20 @@ def domains_in_use(client: Any) -> set[int]:
     unheard by the other for seconds."""
     from docker.errors import DockerException
 
-    found: set[int] = set()
     try:
         running = client.containers.list(filters={"label": naming.LABEL_ROLE}, ignore_removed=True)
     except DockerException:
-        return found
-    for container in running:
-        for item in (container.attrs.get("Config") or {}).get("Env") or []:
-            name, _, value = str(item).partition("=")
-            if name == "ROS_DOMAIN_ID" and value.isdigit():
-                found.add(int(value))
-    return found
+        return set()
+    return {domain for domain in map(domain_of, running) if domain is not None}
+
+
+def domain_of(container: Any) -> int | None:
+    """The ROS domain a docker-py ``container`` runs in (its ``ROS_DOMAIN_ID``), None when it sets none."""
+    for item in (container.attrs.get("Config") or {}).get("Env") or []:
+        name, _, value = str(item).partition("=")
+        if name == "ROS_DOMAIN_ID" and value.isdigit():
+            return int(value)
+    return None
 
 
 def reserve_domain(client: Any = None) -> tuple[int, socket.socket]:
